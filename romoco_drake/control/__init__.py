@@ -1,0 +1,1 @@
+"""Whole-body controllers as Drake LeafSystems."""

@@ -1,0 +1,1 @@
+"""State estimators: station measurements to the controller plant's state."""

@@ -1,0 +1,1 @@
+"""Stations (simulated plant or LCM robot) and run monitors."""

@@ -1,0 +1,89 @@
+"""Fall monitor: watches the robot state and records the first fall.
+
+A fall is any of: base below ``height_fraction`` of its nominal height; base tilt over
+``max_tilt`` (angle between the base z axis and world z); a body other than a foot
+touching the ground. Only the soles carry collision geometry in simulation, so "touching"
+is judged by body frame origins: a non-foot body origin below ``body_clearance`` (m).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.systems.framework import LeafSystem
+
+from romoco_drake.robots.model import RobotModel
+
+FALL_REASONS = ("", "base_low", "base_tilt", "body_contact")
+
+# Discrete state layout.
+FELL, FALL_TIME, REASON, MIN_HEIGHT, MAX_HEIGHT, LAST_HEIGHT = range(6)
+
+
+class FallMonitor(LeafSystem):
+    """Records falls and the base height range at ``period`` (no outputs).
+
+    | port  | dir | size    | meaning                       |
+    |-------|-----|---------|-------------------------------|
+    | state | in  | nq + nv | robot state (ground truth)    |
+    """
+
+    def __init__(self, robot: RobotModel, period: float = 0.01, height_fraction: float = 0.5,
+                 max_tilt: float = np.deg2rad(45.0), body_clearance: float = 0.02):
+        super().__init__()
+        self._robot = robot
+        self._context = robot.plant.CreateDefaultContext()
+        self._nominal_height = robot.nominal.base_height
+        self._height_fraction = height_fraction
+        self._cos_max_tilt = np.cos(max_tilt)
+        self._clearance = body_clearance
+        plant = robot.plant
+        feet = robot.foot_body_names
+        self._bodies = [
+            plant.get_body(i) for i in plant.GetBodyIndices(robot.model_instance)
+            if plant.get_body(i).name() not in feet
+        ]
+        self.state_input = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
+        h0 = self._nominal_height
+        self._state_index = self.DeclareDiscreteState([0.0, np.nan, 0.0, h0, h0, h0])
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+
+    def check(self, x: np.ndarray) -> tuple[str, float]:
+        """(fall reason or "", base height) for state ``x``."""
+        r = self._robot
+        r.plant.SetPositionsAndVelocities(self._context, x)
+        X_WB = r.plant.EvalBodyPoseInWorld(self._context, r.base_body)
+        height = X_WB.translation()[2]
+        if not np.all(np.isfinite(x)):
+            return "base_low", float("nan")
+        if height < self._height_fraction * self._nominal_height:
+            return "base_low", height
+        if X_WB.rotation().matrix()[2, 2] < self._cos_max_tilt:
+            return "base_tilt", height
+        for body in self._bodies:
+            if r.plant.EvalBodyPoseInWorld(self._context, body).translation()[2] < self._clearance:
+                return "body_contact", height
+        return "", height
+
+    def _update(self, context, discrete_state) -> None:
+        s = discrete_state.get_mutable_vector(self._state_index).get_mutable_value()
+        reason, height = self.check(self.state_input.Eval(context))
+        s[LAST_HEIGHT] = height
+        if np.isfinite(height):
+            s[MIN_HEIGHT] = min(s[MIN_HEIGHT], height)
+            s[MAX_HEIGHT] = max(s[MAX_HEIGHT], height)
+        if reason and not s[FELL]:
+            s[FELL] = 1.0
+            s[FALL_TIME] = context.get_time()
+            s[REASON] = FALL_REASONS.index(reason)
+
+    def summary(self, context) -> dict:
+        s = context.get_discrete_state(self._state_index).value()
+        h0 = self._nominal_height
+        fell = bool(s[FELL])
+        return {
+            "fell": fell,
+            "fall_time_s": float(s[FALL_TIME]) if fell else None,
+            "fall_reason": FALL_REASONS[int(s[REASON])] if fell else None,
+            "base_height_drift_m": float(max(h0 - s[MIN_HEIGHT], s[MAX_HEIGHT] - h0)),
+            "final_base_height_m": float(s[LAST_HEIGHT]),
+        }

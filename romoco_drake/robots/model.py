@@ -1,0 +1,316 @@
+"""RobotModel: one robot's simulation plant, controller plant and controller facts.
+
+The simulation plant is a discrete MultibodyPlant (SAP) with sole contact spheres on a
+flat ground and the robot's internal loops as SAP constraints. The controller plant is
+the same multibody tree with no geometry and no constraints (continuous), owned by
+controllers; the internal loops reach controllers as holonomic rows
+(:meth:`RobotModel.internal_constraints`).
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import functools
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.geometry import Box, ProximityProperties, SceneGraph, Sphere
+from pydrake.math import RigidTransform
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import (
+    AddMultibodyPlant,
+    CoulombFriction,
+    MultibodyPlant,
+    MultibodyPlantConfig,
+)
+from pydrake.multibody.tree import JacobianWrtVariable, RevoluteJoint
+from pydrake.systems.framework import DiagramBuilder
+
+from romoco_drake.config import load_typed
+from romoco_drake.errors import ConfigError, RomocoError
+from romoco_drake.robots.config import RobotConfig
+from romoco_drake.robots.source import ROBOTS_DIR, package_paths, prepare_model
+
+SOLE_SPHERE_RADIUS = 0.005
+
+
+def robot_names() -> list[str]:
+    """Names of the robots with a YAML file in ``robots/``."""
+    return sorted(p.stem for p in ROBOTS_DIR.glob("*.yaml"))
+
+
+def load_robot_config(name: str) -> RobotConfig:
+    path = ROBOTS_DIR / f"{name}.yaml"
+    if not path.exists():
+        known = ", ".join(robot_names())
+        raise RomocoError(f"unknown robot '{name}' (known: {known})")
+    cfg = load_typed(path, RobotConfig)
+    if cfg.name != name:
+        raise ConfigError(path, "name", f"'{cfg.name}' does not match the file name '{name}'")
+    return cfg
+
+
+@dataclass(frozen=True)
+class Foot:
+    """A foot: its body frame and sole contact points p_FC (3×N) in that frame."""
+
+    side: str
+    body_name: str
+    points: np.ndarray
+
+
+@dataclass(frozen=True)
+class InternalConstraints:
+    """Holonomic rows h(q) = 0 of the robot's internal loops at one state."""
+
+    h: np.ndarray  # (m,)
+    J: np.ndarray  # (m, nv)
+    Jdot_v: np.ndarray  # (m,)
+
+
+class RobotModel:
+    """Builds a robot's plants and answers what controllers need to know about it."""
+
+    def __init__(self, config: RobotConfig, yaml_path: Path | None = None):
+        self.config = config
+        self.name = config.name
+        self.yaml_path = yaml_path or ROBOTS_DIR / f"{config.name}.yaml"
+        self._prepared = prepare_model(config.model)
+
+        self.plant = MultibodyPlant(0.0)
+        self._add_model(self.plant)
+        self._add_actuators(self.plant)
+        self.plant.Finalize()
+        self._context = self.plant.CreateDefaultContext()
+        self._read_structure()
+
+    # ----------------------------------------------------------------- building
+    def _add_model(self, plant: MultibodyPlant) -> None:
+        parser = Parser(plant)
+        for pkg, path in package_paths(self.config.model).items():
+            if not parser.package_map().Contains(pkg):
+                parser.package_map().Add(pkg, str(path))
+        try:
+            (self.model_instance,) = parser.AddModelsFromString(
+                self._prepared.text, self._prepared.file_type
+            )
+        except RuntimeError as e:
+            first = str(e).strip().splitlines()[0]
+            raise RomocoError(f"{self._prepared.path}: cannot parse model ({first})") from None
+        self._check_names(plant)
+
+    def _check_names(self, plant: MultibodyPlant) -> None:
+        cfg = self.config
+        path = self.yaml_path
+        bodies = {plant.get_body(i).name() for i in plant.GetBodyIndices(self.model_instance)}
+        joints = {plant.get_joint(i).name() for i in plant.GetJointIndices(self.model_instance)}
+        checks = [("base_body", cfg.base_body, bodies)]
+        checks += [(f"feet.{s}.body", getattr(cfg.feet, s).body, bodies) for s in ("left", "right")]
+        checks += [("passive_joints", j, joints) for j in cfg.passive_joints]
+        checks += [("locked_joints", j, joints) for j in cfg.locked_joints]
+        checks += [("effort_limits", j, joints) for j in cfg.effort_limits]
+        checks += [("nominal.joint_guess", j, joints) for j in cfg.nominal.joint_guess]
+        for i, c in enumerate(cfg.distance_constraints):
+            checks += [(f"distance_constraints[{i}].body_a", c.body_a, bodies),
+                       (f"distance_constraints[{i}].body_b", c.body_b, bodies)]
+        for i, c in enumerate(cfg.coupler_constraints):
+            checks += [(f"coupler_constraints[{i}].leader", c.leader, joints),
+                       (f"coupler_constraints[{i}].follower", c.follower, joints)]
+        for key, name, known in checks:
+            if name not in known:
+                raise ConfigError(path, key, f"'{name}' is not in the model {self._prepared.path.name}")
+        for side in ("left", "right"):
+            pts = getattr(cfg.feet, side).points
+            need = 2 if cfg.feet.type == "line" else 3
+            if len(pts) < need or any(len(p) != 3 for p in pts):
+                raise ConfigError(path, f"feet.{side}.points",
+                                  f"a {cfg.feet.type} foot needs >= {need} points of 3 coordinates")
+
+    def _add_actuators(self, plant: MultibodyPlant) -> None:
+        cfg = self.config
+        for j in self._revolute_joints(plant):
+            if j.name() in cfg.passive_joints:
+                continue
+            effort = cfg.effort_limits.get(j.name(), self._prepared.effort_limits.get(j.name()))
+            if effort is None:
+                effort = cfg.default_effort_limit
+            if effort is None:
+                raise ConfigError(self.yaml_path, "effort_limits",
+                                  f"joint '{j.name()}' has no effort limit in the model or the YAML")
+            plant.AddJointActuator(j.name(), j, effort)
+
+    def _revolute_joints(self, plant: MultibodyPlant) -> list[RevoluteJoint]:
+        return [
+            plant.get_joint(i)
+            for i in plant.GetJointIndices(self.model_instance)
+            if plant.get_joint(i).num_velocities() == 1
+        ]
+
+    def _read_structure(self) -> None:
+        plant, cfg = self.plant, self.config
+        self.base_body = plant.GetBodyByName(cfg.base_body, self.model_instance)
+        if not self.base_body.is_floating_base_body():
+            raise ConfigError(self.yaml_path, "base_body", f"'{cfg.base_body}' is not the floating base")
+        self.base_q_start = self.base_body.floating_positions_start()
+        self.base_v_start = self.base_body.floating_velocities_start_in_v()
+        self.nq, self.nv, self.nu = plant.num_positions(), plant.num_velocities(), plant.num_actuators()
+        self.joints = self._revolute_joints(plant)
+        self.joint_names = [j.name() for j in self.joints]
+        self.joint_q_index = np.array([j.position_start() for j in self.joints], dtype=int)
+        self.joint_v_index = np.array([j.velocity_start() for j in self.joints], dtype=int)
+        actuators = [plant.get_joint_actuator(i) for i in plant.GetJointActuatorIndices()]
+        self.actuator_names = [a.joint().name() for a in actuators]
+        self.actuated_q_index = np.array([a.joint().position_start() for a in actuators], dtype=int)
+        self.actuated_v_index = np.array([a.joint().velocity_start() for a in actuators], dtype=int)
+        self.effort_limits = np.array([a.effort_limit() for a in actuators])
+        self.B = plant.MakeActuationMatrix()
+        self.q_lower = plant.GetPositionLowerLimits()
+        self.q_upper = plant.GetPositionUpperLimits()
+        self.total_mass = plant.CalcTotalMass(self._context)
+        self.feet = {
+            side: Foot(side, getattr(cfg.feet, side).body,
+                       np.array(getattr(cfg.feet, side).points, dtype=float).T)
+            for side in ("left", "right")
+        }
+        self.foot_frames = {s: plant.GetBodyByName(f.body_name).body_frame() for s, f in self.feet.items()}
+        self.kp, self.kd = self._actuator_gains()
+        self.locked_actuator_mask = np.array([n in cfg.locked_joints for n in self.actuator_names])
+
+    def _actuator_gains(self) -> tuple[np.ndarray, np.ndarray]:
+        kp, kd = np.zeros(self.nu), np.zeros(self.nu)
+        for i, name in enumerate(self.actuator_names):
+            match = next((g for g in self.config.gains if fnmatch.fnmatchcase(name, g.joints)), None)
+            if match is None:
+                raise ConfigError(self.yaml_path, "gains", f"no entry matches actuated joint '{name}'")
+            kp[i], kd[i] = match.kp, match.kd
+        return kp, kd
+
+    @property
+    def is_line_foot(self) -> bool:
+        return self.config.feet.type == "line"
+
+    @property
+    def foot_body_names(self) -> set[str]:
+        return {f.body_name for f in self.feet.values()}
+
+    # ----------------------------------------------------------- simulation plant
+    def add_to_builder(
+        self, builder: DiagramBuilder, time_step: float
+    ) -> tuple[MultibodyPlant, SceneGraph]:
+        """Adds the simulation plant (SAP, sole contact points, flat ground, loop constraints)."""
+        plant_config = MultibodyPlantConfig(
+            time_step=time_step,
+            discrete_contact_approximation="sap",
+            contact_model="point",
+        )
+        plant, scene_graph = AddMultibodyPlant(plant_config, builder)
+        self._add_model(plant)
+        self._add_actuators(plant)
+        self._add_contact_geometry(plant)
+        self._add_sim_constraints(plant)
+        plant.Finalize()
+        return plant, scene_graph
+
+    def _add_contact_geometry(self, plant: MultibodyPlant) -> None:
+        mu = self.config.feet.friction
+        friction = CoulombFriction(mu, mu)
+        ground = ProximityProperties()
+        ground.AddProperty("material", "coulomb_friction", friction)
+        # A large box rather than a HalfSpace: same contact, no deformable-contact warning.
+        plant.RegisterCollisionGeometry(
+            plant.world_body(), RigidTransform([0.0, 0.0, -0.5]), Box(200.0, 200.0, 1.0), "ground", ground
+        )
+        for side, foot in self.feet.items():
+            body = plant.GetBodyByName(foot.body_name, self.model_instance)
+            for k, p in enumerate(foot.points.T):
+                props = ProximityProperties()
+                props.AddProperty("material", "coulomb_friction", friction)
+                # The sphere's lowest point is the sole contact point.
+                center = p + np.array([0.0, 0.0, SOLE_SPHERE_RADIUS])
+                plant.RegisterCollisionGeometry(
+                    body, RigidTransform(center), Sphere(SOLE_SPHERE_RADIUS), f"{side}_sole_{k}", props
+                )
+
+    def _add_sim_constraints(self, plant: MultibodyPlant) -> None:
+        for c in self.config.distance_constraints:
+            plant.AddDistanceConstraint(
+                plant.GetBodyByName(c.body_a, self.model_instance), np.array(c.p_AP),
+                plant.GetBodyByName(c.body_b, self.model_instance), np.array(c.p_BQ), c.length,
+            )
+        for c in self.config.coupler_constraints:
+            # Drake: q0 = ρ q1 with joint0 the follower.
+            plant.AddCouplerConstraint(
+                plant.GetJointByName(c.follower, self.model_instance),
+                plant.GetJointByName(c.leader, self.model_instance),
+                c.ratio,
+            )
+
+    # --------------------------------------------------------- controller facts
+    def num_internal_constraints(self) -> int:
+        return len(self.config.distance_constraints) + len(self.config.coupler_constraints)
+
+    def internal_constraints(self, context) -> InternalConstraints:
+        """h, J_h and J̇_h·v of the internal loops, on the controller plant ``context``."""
+        plant = self.plant
+        m = self.num_internal_constraints()
+        h, J, Jdv = np.zeros(m), np.zeros((m, self.nv)), np.zeros(m)
+        world = plant.world_frame()
+        v = plant.GetVelocities(context)
+        for i, c in enumerate(self.config.distance_constraints):
+            fa = plant.GetBodyByName(c.body_a, self.model_instance).body_frame()
+            fb = plant.GetBodyByName(c.body_b, self.model_instance).body_frame()
+            p_P = plant.CalcPointsPositions(context, fa, np.array(c.p_AP), world).ravel()
+            p_Q = plant.CalcPointsPositions(context, fb, np.array(c.p_BQ), world).ravel()
+            J_P = plant.CalcJacobianTranslationalVelocity(
+                context, JacobianWrtVariable.kV, fa, np.array(c.p_AP), world, world)
+            J_Q = plant.CalcJacobianTranslationalVelocity(
+                context, JacobianWrtVariable.kV, fb, np.array(c.p_BQ), world, world)
+            a_P = plant.CalcBiasTranslationalAcceleration(
+                context, JacobianWrtVariable.kV, fa, np.array(c.p_AP), world, world).ravel()
+            a_Q = plant.CalcBiasTranslationalAcceleration(
+                context, JacobianWrtVariable.kV, fb, np.array(c.p_BQ), world, world).ravel()
+            d = p_P - p_Q
+            dist = np.linalg.norm(d)
+            u = d / dist
+            dv = (J_P - J_Q) @ v
+            h[i] = dist - c.length
+            J[i] = u @ (J_P - J_Q)
+            # d/dt (u·ḋ) = u̇·ḋ + u·d̈ with u̇ = (I - u uᵀ) ḋ / |d|.
+            Jdv[i] = (dv @ dv - (u @ dv) ** 2) / dist + u @ (a_P - a_Q)
+        k0 = len(self.config.distance_constraints)
+        q = plant.GetPositions(context)
+        for i, c in enumerate(self.config.coupler_constraints):
+            lead = plant.GetJointByName(c.leader, self.model_instance)
+            follow = plant.GetJointByName(c.follower, self.model_instance)
+            h[k0 + i] = q[follow.position_start()] - c.ratio * q[lead.position_start()]
+            J[k0 + i, follow.velocity_start()] = 1.0
+            J[k0 + i, lead.velocity_start()] = -c.ratio
+        return InternalConstraints(h, J, Jdv)
+
+    def foot_contact_jacobian(self, context, sides=("left", "right")) -> np.ndarray:
+        """Stacked translational Jacobians (3N × nv) of the sole points of ``sides``."""
+        rows = [
+            self.plant.CalcJacobianTranslationalVelocity(
+                context, JacobianWrtVariable.kV, self.foot_frames[s], self.feet[s].points,
+                self.plant.world_frame(), self.plant.world_frame())
+            for s in sides
+        ]
+        return np.vstack(rows)
+
+    def sole_points_in_world(self, context, side: str) -> np.ndarray:
+        return self.plant.CalcPointsPositions(
+            context, self.foot_frames[side], self.feet[side].points, self.plant.world_frame())
+
+    @functools.cached_property
+    def nominal(self):
+        """The nominal standing configuration (see :mod:`romoco_drake.robots.nominal`)."""
+        from romoco_drake.robots.nominal import solve_nominal_pose
+
+        return solve_nominal_pose(self)
+
+
+@functools.cache
+def load_robot(name: str) -> RobotModel:
+    """The RobotModel for ``robots/<name>.yaml`` (cached: building it parses the model)."""
+    return RobotModel(load_robot_config(name))

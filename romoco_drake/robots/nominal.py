@@ -1,0 +1,104 @@
+"""Nominal standing configuration by inverse kinematics.
+
+Both soles flat on the ground (every sole point at z = 0, toe-heel direction along the
+world x axis), feet ``nominal.foot_separation`` apart about the origin, base level, the
+internal loops closed, and the CoM at ``nominal.com_height`` straight above the middle of
+the support polygon; the remaining freedom goes to staying near ``nominal.joint_guess``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from pydrake.math import RotationMatrix
+from pydrake.multibody.inverse_kinematics import ComPositionConstraint, InverseKinematics
+from pydrake.solvers import Solve
+
+from romoco_drake.errors import RomocoError
+
+if TYPE_CHECKING:
+    from romoco_drake.robots.model import RobotModel
+
+
+@dataclass(frozen=True)
+class NominalPose:
+    q: np.ndarray  # controller-plant positions (nq,)
+    base_height: float  # base origin height above the ground (m)
+    p_WCoM: np.ndarray  # (3,)
+    support_center: np.ndarray  # middle of the support polygon (xy) (2,)
+
+
+def foot_forward_axis(robot: RobotModel, side: str) -> np.ndarray:
+    """Toe direction in the foot frame: first-minus-second point for line feet, else +x."""
+    pts = robot.feet[side].points
+    if robot.is_line_foot:
+        d = pts[:, 0] - pts[:, 1]
+        return d / np.linalg.norm(d)
+    return np.array([1.0, 0.0, 0.0])
+
+
+def solve_nominal_pose(robot: RobotModel) -> NominalPose:
+    plant, cfg = robot.plant, robot.config.nominal
+    context = plant.CreateDefaultContext()
+    ik = InverseKinematics(plant, with_joint_limits=True)
+    q = ik.q()
+    prog = ik.get_mutable_prog()
+    world = plant.world_frame()
+    inf = np.inf
+
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        frame = robot.foot_frames[side]
+        pts = robot.feet[side].points
+        for p in pts.T:
+            ik.AddPositionConstraint(frame, p, world, [-inf, -inf, 0.0], [inf, inf, 0.0])
+        center = pts.mean(axis=1)
+        y = sign * cfg.foot_separation / 2
+        ik.AddPositionConstraint(frame, center, world, [0.0, y, -inf], [0.0, y, inf])
+        fwd = foot_forward_axis(robot, side)
+        ik.AddAngleBetweenVectorsConstraint(world, [0, 1, 0], frame, fwd, np.pi / 2, np.pi / 2)
+        ik.AddAngleBetweenVectorsConstraint(world, [0, 0, 1], frame, fwd, np.pi / 2, np.pi / 2)
+    ik.AddOrientationConstraint(
+        world, RotationMatrix(), robot.base_body.body_frame(), RotationMatrix(), 1e-3
+    )
+    for c in robot.config.distance_constraints:
+        ik.AddPointToPointDistanceConstraint(
+            plant.GetBodyByName(c.body_a).body_frame(), c.p_AP,
+            plant.GetBodyByName(c.body_b).body_frame(), c.p_BQ, c.length, c.length)
+    for c in robot.config.coupler_constraints:
+        i_f = plant.GetJointByName(c.follower).position_start()
+        i_l = plant.GetJointByName(c.leader).position_start()
+        prog.AddLinearEqualityConstraint(q[i_f] - c.ratio * q[i_l] == 0.0)
+
+    com = prog.NewContinuousVariables(3, "com")
+    prog.AddConstraint(ComPositionConstraint(plant, None, world, context), np.concatenate([q, com]))
+    prog.AddBoundingBoxConstraint([0.0, 0.0, cfg.com_height], [0.0, 0.0, cfg.com_height], com)
+
+    q_guess = plant.GetPositions(context).copy()
+    q_guess[robot.base_q_start + 6] = cfg.com_height
+    for name, value in cfg.joint_guess.items():
+        q_guess[plant.GetJointByName(name).position_start()] = value
+    weights = np.ones(robot.nq)
+    weights[robot.base_q_start:robot.base_q_start + 7] = 0.0
+    prog.AddQuadraticErrorCost(np.diag(weights), q_guess, q)
+    prog.SetInitialGuess(q, q_guess)
+    prog.SetInitialGuess(com, [0.0, 0.0, cfg.com_height])
+    result = Solve(prog)
+    if not result.is_success():
+        raise RomocoError(
+            f"{robot.yaml_path}: nominal: no standing pose found by IK "
+            f"(com_height {cfg.com_height} m, foot_separation {cfg.foot_separation} m); "
+            "check these and joint_guess"
+        )
+    q_sol = result.GetSolution(q)
+    quat = q_sol[robot.base_q_start:robot.base_q_start + 4]
+    q_sol[robot.base_q_start:robot.base_q_start + 4] = quat / np.linalg.norm(quat)
+    plant.SetPositions(context, q_sol)
+    p_WCoM = plant.CalcCenterOfMassPositionInWorld(context)
+    return NominalPose(
+        q=q_sol,
+        base_height=float(q_sol[robot.base_q_start + 6]),
+        p_WCoM=p_WCoM,
+        support_center=np.zeros(2),
+    )

@@ -1,0 +1,146 @@
+"""Locate robot model files and prepare their XML text for Drake's parser.
+
+Cassie and G1 come from the installed ``example-robot-data`` package, found at run time
+(its files are never copied). The XML is edited in memory before parsing:
+- every ``<collision>`` is dropped: the station gives each foot its own sole contact
+  points, and Drake cannot build convex hulls of G1's ``.STL`` collision meshes;
+- joints listed in ``weld_joints`` become fixed (rigid springs);
+- bodies listed in ``remove_bodies`` go, with every joint touching them (Cassie's
+  loop-closing rods, whose ``ball`` joints would make a kinematic loop).
+Effort limits are read from the XML because Drake keeps them only for URDF
+transmissions, and these models have none.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.metadata
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+from romoco_drake.errors import RomocoError
+from romoco_drake.robots.config import ModelSource
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+ROBOTS_DIR = REPO_ROOT / "robots"
+MODELS_DIR = REPO_ROOT / "models"
+DIAGRAMS_DIR = REPO_ROOT / "diagrams"
+ERD_PACKAGE = "example-robot-data"
+
+
+@functools.cache
+def example_robot_data_root() -> Path:
+    """The installed ``share/example-robot-data`` folder (it holds package.xml)."""
+    try:
+        files = importlib.metadata.distribution(ERD_PACKAGE).files or []
+    except importlib.metadata.PackageNotFoundError:
+        raise RomocoError(
+            "the PyPI package 'example-robot-data' is not installed (pip install example-robot-data)"
+        ) from None
+    for f in files:
+        parts = Path(str(f)).parts
+        if parts[-1] == "package.xml" and len(parts) >= 2 and parts[-2] == ERD_PACKAGE:
+            return Path(f.locate()).resolve().parent
+    raise RomocoError("example-robot-data is installed but its share/example-robot-data is missing")
+
+
+def package_paths(source: ModelSource) -> dict[str, Path]:
+    """Packages to register with Drake's PackageMap for ``source``."""
+    if source.package == ERD_PACKAGE:
+        return {ERD_PACKAGE: example_robot_data_root()}
+    return {"romoco_models": MODELS_DIR}
+
+
+def model_path(source: ModelSource) -> Path:
+    return package_paths(source)[source.package] / source.file
+
+
+@dataclass(frozen=True)
+class PreparedModel:
+    """Edited model text ready for ``Parser.AddModelsFromString``."""
+
+    text: str
+    file_type: str  # "urdf" or "sdf"
+    path: Path
+    effort_limits: dict[str, float]
+    velocity_limits: dict[str, float]
+
+
+def _float_or_none(text: str | None) -> float | None:
+    try:
+        return float(text) if text is not None else None
+    except ValueError:
+        return None
+
+
+@functools.cache
+def _prepare_cached(source_key: tuple) -> PreparedModel:
+    package, file, weld_joints, remove_bodies = source_key
+    source = ModelSource(package=package, file=file, weld_joints=list(weld_joints),
+                         remove_bodies=list(remove_bodies))
+    path = model_path(source)
+    try:
+        root = ET.parse(path).getroot()
+    except OSError as e:
+        raise RomocoError(f"{path}: cannot read model file ({e.strerror})") from None
+    except ET.ParseError as e:
+        raise RomocoError(f"{path}: malformed XML ({e})") from None
+    file_type = "sdf" if root.tag == "sdf" else "urdf"
+    if file_type == "urdf" and root.tag != "robot":
+        raise RomocoError(f"{path}: not a URDF or SDFormat file (root <{root.tag}>)")
+
+    # Parent map for removals anywhere in the tree.
+    parents = {child: parent for parent in root.iter() for child in parent}
+    for collision in list(root.iter("collision")):
+        parents[collision].remove(collision)
+
+    links = {el.get("name"): el for el in root.iter("link")}
+    joints = {el.get("name"): el for el in root.iter("joint")}
+    for name in remove_bodies:
+        if name not in links:
+            raise RomocoError(f"{path}: remove_bodies names unknown link '{name}'")
+        parents[links[name]].remove(links[name])
+        for jname, joint in list(joints.items()):
+            ends = {_joint_end(joint, "parent"), _joint_end(joint, "child")}
+            if name in ends and joint in parents and joint in list(parents[joint]):
+                parents[joint].remove(joint)
+                del joints[jname]
+    for name in weld_joints:
+        if name not in joints:
+            raise RomocoError(f"{path}: weld_joints names unknown joint '{name}'")
+        joint = joints[name]
+        joint.set("type", "fixed")
+        for tag in ("axis", "limit", "dynamics"):
+            for el in list(joint.findall(tag)):
+                joint.remove(el)
+
+    efforts, velocities = {}, {}
+    for name, joint in joints.items():
+        limit = joint.find("limit") if file_type == "urdf" else joint.find("axis/limit")
+        if limit is None:
+            continue
+        if file_type == "urdf":
+            effort, velocity = limit.get("effort"), limit.get("velocity")
+        else:
+            effort = limit.findtext("effort")
+            velocity = limit.findtext("velocity")
+        if (e := _float_or_none(effort)) is not None and e > 0:
+            efforts[name] = e
+        if (v := _float_or_none(velocity)) is not None and v > 0:
+            velocities[name] = v
+    return PreparedModel(ET.tostring(root, encoding="unicode"), file_type, path, efforts, velocities)
+
+
+def _joint_end(joint: ET.Element, tag: str) -> str | None:
+    el = joint.find(tag)
+    if el is None:
+        return None
+    return el.get("link") or (el.text or "").strip()
+
+
+def prepare_model(source: ModelSource) -> PreparedModel:
+    """Reads and edits the model file of ``source`` (cached per source)."""
+    return _prepare_cached(
+        (source.package, source.file, tuple(source.weld_joints), tuple(source.remove_bodies))
+    )

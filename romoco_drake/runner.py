@@ -1,0 +1,84 @@
+"""Run a scenario: simulate, optionally show or record it in Meshcat, summarise."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from pydrake.geometry import Meshcat
+from pydrake.systems.analysis import Simulator
+
+from romoco_drake.errors import RomocoError
+from romoco_drake.scenario import Scenario, build_diagram
+
+PROGRESS_WALL_S = 2.0  # print progress lines at most this often
+
+
+def initial_positions(built, scenario: Scenario) -> np.ndarray:
+    robot = built.robot
+    q = robot.nominal.q.copy()
+    q[robot.base_q_start + 6] += scenario.initial_height_offset
+    return q
+
+
+def run_scenario(
+    scenario: Scenario,
+    duration: float | None = None,
+    meshcat: Meshcat | None = None,
+    record: Path | None = None,
+    progress=None,
+) -> dict:
+    """Simulates ``scenario`` and returns the run summary (see ``romoco run --json``)."""
+    duration = scenario.duration_s if duration is None else duration
+    if duration <= 0:
+        raise RomocoError(f"--duration must be positive, got {duration}")
+    if record is not None and meshcat is None:
+        meshcat = Meshcat()
+    built = build_diagram(scenario, meshcat)
+    simulator = Simulator(built.diagram)
+    context = simulator.get_mutable_context()
+    plant = built.station.GetSubsystemByName("plant")
+    plant.SetPositions(plant.GetMyMutableContextFromRoot(context), initial_positions(built, scenario))
+    if record is not None:
+        meshcat.StartRecording(frames_per_second=30.0)
+    wall0 = time.perf_counter()
+    simulator.Initialize()
+    last_print = wall0
+    chunk = min(0.1, duration)
+    t = 0.0
+    while t < duration - 1e-9:
+        t = min(duration, t + chunk)
+        simulator.AdvanceTo(t)
+        now = time.perf_counter()
+        if progress is not None and now - last_print > PROGRESS_WALL_S:
+            progress(f"[{scenario.name}] t = {t:.1f}/{duration:.1f} s ({100 * t / duration:.0f}%)")
+            last_print = now
+    wall = time.perf_counter() - wall0
+    if record is not None:
+        meshcat.StopRecording()
+        meshcat.PublishRecording()
+        record = Path(record)
+        try:
+            record.write_text(meshcat.StaticHtml())
+        except OSError as e:
+            raise RomocoError(f"{record}: cannot write the replay ({e.strerror})") from None
+    monitor_context = built.monitor.GetMyContextFromRoot(context)
+    summary = {
+        "scenario": scenario.name,
+        "robot": scenario.robot,
+        "controller": scenario.controller.name,
+        "estimator": scenario.estimator.name,
+        "duration_s": duration,
+        "wall_s": round(wall, 3),
+        "realtime_factor": round(duration / wall, 3) if wall > 0 else None,
+    }
+    summary.update(built.monitor.summary(monitor_context))
+    if record is not None:
+        summary["record"] = str(record)
+    return summary
+
+
+def stderr_progress(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
