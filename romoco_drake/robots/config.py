@@ -25,10 +25,15 @@ class ModelSource:
 
 @dataclasses.dataclass
 class FootConfig:
-    """One foot: the body it belongs to and its sole contact points in that body's frame."""
+    """One foot: its body, sole contact points and sole normal, in that body's frame.
+
+    ``points`` are the lowest points of the sole (toe first, then heel, for a line foot);
+    ``up`` is the sole's outward normal pointing away from the ground when standing.
+    """
 
     body: str
     points: list[list[float]]
+    up: list[float] = dataclasses.field(default_factory=lambda: [0.0, 0.0, 1.0])
 
 
 @dataclasses.dataclass

@@ -58,6 +58,7 @@ class Foot:
     side: str
     body_name: str
     points: np.ndarray
+    up: np.ndarray  # unit sole normal in the foot frame
 
 
 @dataclass(frozen=True)
@@ -126,6 +127,9 @@ class RobotModel:
             if len(pts) < need or any(len(p) != 3 for p in pts):
                 raise ConfigError(path, f"feet.{side}.points",
                                   f"a {cfg.feet.type} foot needs >= {need} points of 3 coordinates")
+            up = getattr(cfg.feet, side).up
+            if len(up) != 3 or np.linalg.norm(up) < 1e-9:
+                raise ConfigError(path, f"feet.{side}.up", "must be a nonzero 3-vector")
 
     def _add_actuators(self, plant: MultibodyPlant) -> None:
         cfg = self.config
@@ -169,9 +173,9 @@ class RobotModel:
         self.q_upper = plant.GetPositionUpperLimits()
         self.total_mass = plant.CalcTotalMass(self._context)
         self.feet = {
-            side: Foot(side, getattr(cfg.feet, side).body,
-                       np.array(getattr(cfg.feet, side).points, dtype=float).T)
-            for side in ("left", "right")
+            side: Foot(side, f.body, np.array(f.points, dtype=float).T,
+                       np.array(f.up, dtype=float) / np.linalg.norm(f.up))
+            for side, f in (("left", cfg.feet.left), ("right", cfg.feet.right))
         }
         self.foot_frames = {s: plant.GetBodyByName(f.body_name).body_frame() for s, f in self.feet.items()}
         self.kp, self.kd = self._actuator_gains()
@@ -227,7 +231,7 @@ class RobotModel:
                 props = ProximityProperties()
                 props.AddProperty("material", "coulomb_friction", friction)
                 # The sphere's lowest point is the sole contact point.
-                center = p + np.array([0.0, 0.0, SOLE_SPHERE_RADIUS])
+                center = p + SOLE_SPHERE_RADIUS * foot.up
                 plant.RegisterCollisionGeometry(
                     body, RigidTransform(center), Sphere(SOLE_SPHERE_RADIUS), f"{side}_sole_{k}", props
                 )

@@ -117,6 +117,8 @@ def _prepare_cached(source_key: tuple) -> PreparedModel:
 
     efforts, velocities = {}, {}
     for name, joint in joints.items():
+        if file_type == "sdf" and joint.find("axis") is not None and joint.find("axis/limit") is None:
+            ET.SubElement(joint.find("axis"), "limit")
         limit = joint.find("limit") if file_type == "urdf" else joint.find("axis/limit")
         if limit is None:
             continue
@@ -125,6 +127,11 @@ def _prepare_cached(source_key: tuple) -> PreparedModel:
         else:
             effort = limit.findtext("effort")
             velocity = limit.findtext("velocity")
+            # Drake's SDFormat parser makes an actuator for every joint whose effort is
+            # not 0 (absent means unlimited); RobotModel adds them itself, from these.
+            for el in list(limit.findall("effort")):
+                limit.remove(el)
+            ET.SubElement(limit, "effort").text = "0"
         if (e := _float_or_none(effort)) is not None and e > 0:
             efforts[name] = e
         if (v := _float_or_none(velocity)) is not None and v > 0:
