@@ -2,7 +2,7 @@
 
 A fall is any of: base below ``height_fraction`` of its nominal height; base tilt over
 ``max_tilt`` (angle between the base z axis and world z); a body other than a foot
-touching the ground. Only the soles carry collision geometry in simulation, so "touching"
+touching the ground; a non-finite state (the simulation diverged). Only the soles carry collision geometry in simulation, so "touching"
 is judged by body frame origins: a non-foot body origin below ``body_clearance`` (m).
 """
 
@@ -13,7 +13,7 @@ from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.robots.model import RobotModel
 
-FALL_REASONS = ("", "base_low", "base_tilt", "body_contact")
+FALL_REASONS = ("", "base_low", "base_tilt", "body_contact", "invalid_state")
 
 # Discrete state layout.
 FELL, FALL_TIME, REASON, MIN_HEIGHT, MAX_HEIGHT, LAST_HEIGHT = range(6)
@@ -50,11 +50,11 @@ class FallMonitor(LeafSystem):
     def check(self, x: np.ndarray) -> tuple[str, float]:
         """(fall reason or "", base height) for state ``x``."""
         r = self._robot
+        if not np.all(np.isfinite(x)):
+            return "invalid_state", float("nan")
         r.plant.SetPositionsAndVelocities(self._context, x)
         X_WB = r.plant.EvalBodyPoseInWorld(self._context, r.base_body)
         height = X_WB.translation()[2]
-        if not np.all(np.isfinite(x)):
-            return "base_low", float("nan")
         if height < self._height_fraction * self._nominal_height:
             return "base_low", height
         if X_WB.rotation().matrix()[2, 2] < self._cos_max_tilt:

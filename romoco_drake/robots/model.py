@@ -45,9 +45,15 @@ def load_robot_config(name: str) -> RobotConfig:
     if not path.exists():
         known = ", ".join(robot_names())
         raise RomocoError(f"unknown robot '{name}' (known: {known})")
+    return load_robot_config_file(path)
+
+
+def load_robot_config_file(path: Path) -> RobotConfig:
+    """Loads a robot YAML; its ``name`` must match the file name."""
+    path = Path(path)
     cfg = load_typed(path, RobotConfig)
-    if cfg.name != name:
-        raise ConfigError(path, "name", f"'{cfg.name}' does not match the file name '{name}'")
+    if cfg.name != path.stem:
+        raise ConfigError(path, "name", f"'{cfg.name}' does not match the file name '{path.stem}'")
     return cfg
 
 
@@ -163,6 +169,9 @@ class RobotModel:
         self.joint_names = [j.name() for j in self.joints]
         self.joint_q_index = np.array([j.position_start() for j in self.joints], dtype=int)
         self.joint_v_index = np.array([j.velocity_start() for j in self.joints], dtype=int)
+        if self.nq != 7 + len(self.joints):
+            raise RomocoError(f"{self._prepared.path}: only revolute/prismatic joints are supported "
+                              "besides the floating base")
         actuators = [plant.get_joint_actuator(i) for i in plant.GetJointActuatorIndices()]
         self.actuator_names = [a.joint().name() for a in actuators]
         self.actuated_q_index = np.array([a.joint().position_start() for a in actuators], dtype=int)
@@ -317,4 +326,4 @@ class RobotModel:
 @functools.cache
 def load_robot(name: str) -> RobotModel:
     """The RobotModel for ``robots/<name>.yaml`` (cached: building it parses the model)."""
-    return RobotModel(load_robot_config(name))
+    return RobotModel(load_robot_config(name), ROBOTS_DIR / f"{name}.yaml")

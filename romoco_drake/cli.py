@@ -1,0 +1,150 @@
+"""The ``romoco`` command: list, show and run robots and scenarios."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from romoco_drake.errors import RomocoError
+
+
+def _cmd_list(args) -> int:
+    from romoco_drake.robots.model import robot_names
+    from romoco_drake.scenario import CONTROLLERS, ESTIMATORS, scenario_names
+
+    listing = {
+        "robots": robot_names(),
+        "scenarios": scenario_names(),
+        "controllers": list(CONTROLLERS),
+        "estimators": list(ESTIMATORS),
+    }
+    if args.json:
+        print(json.dumps(listing))
+    else:
+        for key, names in listing.items():
+            print(f"{key}: {', '.join(names)}")
+    return 0
+
+
+def _robot_facts(robot) -> dict:
+    return {
+        "robot": robot.name,
+        "description": robot.config.description,
+        "mass_kg": round(robot.total_mass, 3),
+        "dof": robot.nv,
+        "joints": len(robot.joint_names),
+        "actuators": robot.nu,
+        "foot_type": robot.config.feet.type,
+        "contact_points": {s: f.points.T.round(4).tolist() for s, f in robot.feet.items()},
+        "internal_constraints": robot.num_internal_constraints(),
+        "nominal_base_height_m": round(robot.nominal.base_height, 4),
+        "nominal_com_m": robot.nominal.p_WCoM.round(4).tolist(),
+    }
+
+
+def _cmd_show(args) -> int:
+    from pydrake.geometry import Meshcat
+    from pydrake.systems.framework import DiagramBuilder
+
+    from romoco_drake.interfaces.station import make_station
+    from romoco_drake.robots.model import load_robot
+
+    robot = load_robot(args.robot)
+    facts = _robot_facts(robot)
+    meshcat = Meshcat()
+    builder = DiagramBuilder()
+    station = builder.AddSystem(make_station(robot, meshcat=meshcat))
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    plant = station.GetSubsystemByName("plant")
+    plant.SetPositions(plant.GetMyMutableContextFromRoot(context), robot.nominal.q)
+    station.GetInputPort("actuation").FixValue(station.GetMyMutableContextFromRoot(context),
+                                               [0.0] * robot.nu)
+    diagram.ForcedPublish(context)
+    if args.json:
+        print(json.dumps(facts | {"meshcat_url": meshcat.web_url()}))
+    else:
+        print(f"{robot.name}: {facts['description']}")
+        print(f"  mass {facts['mass_kg']} kg, {facts['dof']} DoF ({facts['joints']} joints + floating base), "
+              f"{facts['actuators']} actuators, {facts['internal_constraints']} internal constraints")
+        print(f"  nominal: base height {facts['nominal_base_height_m']} m, CoM {facts['nominal_com_m']} m")
+        for side, pts in facts["contact_points"].items():
+            print(f"  {side} {facts['foot_type']} foot ({robot.feet[side].body_name}): {pts}")
+        print(f"  Meshcat: {meshcat.web_url()}")
+    if not args.no_wait and sys.stdin.isatty():
+        try:
+            input("Press Enter to quit. ")
+        except (EOFError, KeyboardInterrupt):
+            pass
+    return 0
+
+
+def _cmd_run(args) -> int:
+    from pydrake.geometry import Meshcat
+
+    from romoco_drake.runner import run_scenario, stderr_progress
+    from romoco_drake.scenario import load_scenario
+
+    scenario = load_scenario(args.scenario)
+    meshcat = None
+    if args.meshcat:
+        meshcat = Meshcat()
+        print(f"Meshcat: {meshcat.web_url()}", file=sys.stderr, flush=True)
+    summary = run_scenario(scenario, duration=args.duration, meshcat=meshcat,
+                           record=args.record, progress=stderr_progress)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        state = f"FELL at {summary['fall_time_s']:.2f} s ({summary['fall_reason']})" if summary["fell"] \
+            else "stayed up"
+        print(f"{summary['scenario']} ({summary['robot']}): {summary['duration_s']} s simulated in "
+              f"{summary['wall_s']} s ({summary['realtime_factor']}x real time); {state}; "
+              f"base height drift {summary['base_height_drift_m'] * 1000:.1f} mm")
+        if args.record:
+            print(f"replay written to {args.record}")
+    if args.meshcat and not args.no_wait and sys.stdin.isatty():
+        try:
+            input("Press Enter to quit (the Meshcat page replays the run). ")
+        except (EOFError, KeyboardInterrupt):
+            pass
+    return 0
+
+
+def make_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="romoco", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("list", help="robots, scenarios and components")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=_cmd_list)
+    p = sub.add_parser("show", help="open a robot in Meshcat and print its facts")
+    p.add_argument("robot")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--no-wait", action="store_true", help="exit at once instead of serving the page")
+    p.set_defaults(func=_cmd_show)
+    p = sub.add_parser("run", help="simulate a scenario")
+    p.add_argument("scenario", help="scenario name (diagrams/NAME.yaml) or a YAML path")
+    p.add_argument("--duration", type=float, default=None, help="simulated seconds")
+    p.add_argument("--meshcat", action="store_true", help="serve a live Meshcat view")
+    p.add_argument("--record", type=Path, metavar="FILE.html", help="write an offline Meshcat replay")
+    p.add_argument("--json", action="store_true", help="print the run summary as JSON (last line)")
+    p.add_argument("--no-wait", action="store_true", help="with --meshcat, exit when the run ends")
+    p.set_defaults(func=_cmd_run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = make_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except RomocoError as e:
+        print(f"romoco: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("romoco: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,97 @@
+"""Robot models: structure against the fact sheet, nominal pose, internal constraints."""
+
+import numpy as np
+import pytest
+from conftest import ROBOT_FACTS
+from pydrake.geometry import Role
+from pydrake.systems.framework import DiagramBuilder
+
+from romoco_drake.robots.model import load_robot
+
+
+def test_structure_matches_fact_sheet(robot_name):
+    robot = load_robot(robot_name)
+    facts = ROBOT_FACTS[robot_name]
+    assert len(robot.joint_names) == facts["joints"]
+    assert robot.nv == 6 + facts["joints"]
+    assert robot.nu == facts["actuators"]
+    assert robot.total_mass == pytest.approx(facts["mass"], rel=0.05)
+    assert np.all(robot.effort_limits > 0) and np.all(np.isfinite(robot.effort_limits))
+    assert robot.kp.shape == (robot.nu,) and np.all(robot.kp > 0)
+
+
+def _convex_hull_contains(points_xy: np.ndarray, p: np.ndarray, margin: float) -> bool:
+    """True if p is inside the convex hull of points_xy (N×2) by at least ``margin``."""
+    from scipy.spatial import ConvexHull
+
+    hull = ConvexHull(points_xy)
+    # hull.equations: a·x + b <= 0 inside, with unit normals a.
+    return bool(np.all(hull.equations[:, :2] @ p + hull.equations[:, 2] <= -margin))
+
+
+def test_nominal_pose_feet_flat_and_com_over_support(robot_name):
+    robot = load_robot(robot_name)
+    nominal = robot.nominal
+    context = robot.plant.CreateDefaultContext()
+    robot.plant.SetPositions(context, nominal.q)
+    soles = np.hstack([robot.sole_points_in_world(context, s) for s in ("left", "right")])
+    assert np.all(np.abs(soles[2]) < 2e-3), soles[2]
+    com = robot.plant.CalcCenterOfMassPositionInWorld(context)
+    assert com[2] == pytest.approx(robot.config.nominal.com_height, abs=1e-3)
+    assert _convex_hull_contains(soles[:2].T, com[:2], margin=0.01)
+    middle = 0.5 * (soles[:2].min(axis=1) + soles[:2].max(axis=1))
+    assert np.linalg.norm(com[:2] - middle) < 0.01
+    lower, upper = robot.q_lower, robot.q_upper
+    assert np.all(nominal.q >= lower - 1e-6) and np.all(nominal.q <= upper + 1e-6)
+
+
+def test_internal_constraints_hold_at_nominal(robot_name):
+    robot = load_robot(robot_name)
+    context = robot.plant.CreateDefaultContext()
+    robot.plant.SetPositions(context, robot.nominal.q)
+    ic = robot.internal_constraints(context)
+    assert ic.J.shape == (robot.num_internal_constraints(), robot.nv)
+    assert np.all(np.abs(ic.h) < 1e-5)
+
+
+@pytest.mark.parametrize("name", ["cassie", "draco"])
+def test_internal_constraint_jacobian_matches_finite_differences(name):
+    robot = load_robot(name)
+    plant = robot.plant
+    context = plant.CreateDefaultContext()
+    rng = np.random.default_rng(0)
+    q = robot.nominal.q.copy()
+    q[robot.joint_q_index] += 0.05 * rng.standard_normal(len(robot.joint_names))
+    v = rng.standard_normal(robot.nv)
+    plant.SetPositions(context, q)
+    plant.SetVelocities(context, v)
+    ic = robot.internal_constraints(context)
+    eps = 1e-6
+    qdot = plant.MapVelocityToQDot(context, v)
+
+    def h_at(t):
+        plant.SetPositions(context, q + t * qdot)
+        return robot.internal_constraints(context).h
+
+    hdot_fd = (h_at(eps) - h_at(-eps)) / (2 * eps)
+    np.testing.assert_allclose(ic.J @ v, hdot_fd, atol=1e-6)
+    # J̇v: derivative of J(q(t)) v along the same motion.
+    def Jv_at(t):
+        plant.SetPositions(context, q + t * qdot)
+        return robot.internal_constraints(context).J @ v
+
+    Jdv_fd = (Jv_at(eps) - Jv_at(-eps)) / (2 * eps)
+    np.testing.assert_allclose(ic.Jdot_v, Jdv_fd, atol=1e-5)
+
+
+def test_sim_plant_has_sole_contacts_and_constraints(robot_name):
+    robot = load_robot(robot_name)
+    builder = DiagramBuilder()
+    plant, scene_graph = robot.add_to_builder(builder, time_step=0.001)
+    inspector = scene_graph.model_inspector()
+    n_points = sum(f.points.shape[1] for f in robot.feet.values())
+    # Collision geometry is exactly the sole spheres plus the ground.
+    assert len(inspector.GetAllGeometryIds(Role.kProximity)) == n_points + 1
+    assert plant.num_actuators() == robot.nu
+    assert plant.num_constraints() == robot.num_internal_constraints()
+    assert plant.num_positions() == robot.nq

@@ -1,0 +1,61 @@
+"""Closed-loop standing: every robot stands 3 s without falling or sinking."""
+
+import numpy as np
+import pytest
+
+from romoco_drake.control.gravity import contact_gravity_compensation
+from romoco_drake.interfaces.monitor import FallMonitor
+from romoco_drake.robots.model import load_robot
+from romoco_drake.runner import run_scenario
+from romoco_drake.scenario import load_scenario
+
+
+def test_stands_three_seconds(robot_name):
+    summary = run_scenario(load_scenario(f"{robot_name}_stand"), duration=3.0)
+    assert summary["fell"] is False, summary
+    assert summary["base_height_drift_m"] < 0.02, summary
+    assert abs(summary["final_base_height_m"] - load_robot(robot_name).nominal.base_height) < 0.02
+
+
+def test_drop_from_height_is_survived():
+    scenario = load_scenario("g1_stand")
+    scenario.initial_height_offset = 0.03
+    summary = run_scenario(scenario, duration=1.5)
+    assert summary["fell"] is False
+
+
+@pytest.mark.parametrize("name", ["g1", "cassie", "draco"])
+def test_gravity_compensation_balances_gravity(name):
+    """B u + J_cᵀ λ + J_hᵀ λ_h = −τ_g has a solution with these u (static balance)."""
+    robot = load_robot(name)
+    context = robot.plant.CreateDefaultContext()
+    robot.plant.SetPositions(context, robot.nominal.q)
+    u = contact_gravity_compensation(robot, context)
+    tau_g = robot.plant.CalcGravityGeneralizedForces(context)
+    Jc = robot.foot_contact_jacobian(context)
+    Jh = robot.internal_constraints(context).J
+    A = np.hstack([Jc.T, Jh.T])
+    lam, *_ = np.linalg.lstsq(A, -tau_g - robot.B @ u, rcond=None)
+    np.testing.assert_allclose(A @ lam, -tau_g - robot.B @ u, atol=1e-6)
+    # The feet push up with the robot's weight in total.
+    fz = lam[: Jc.shape[0]].reshape(-1, 3)[:, 2].sum()
+    assert fz == pytest.approx(robot.total_mass * 9.81, rel=1e-3)
+
+
+def test_fall_monitor_detects_each_kind_of_fall():
+    robot = load_robot("g1")
+    monitor = FallMonitor(robot)
+    x = np.concatenate([robot.nominal.q, np.zeros(robot.nv)])
+    assert monitor.check(x)[0] == ""
+    low = x.copy()
+    low[robot.base_q_start + 6] *= 0.4
+    assert monitor.check(low)[0] == "base_low"
+    tilted = x.copy()
+    tilted[robot.base_q_start:robot.base_q_start + 4] = [np.cos(0.45), np.sin(0.45), 0, 0]  # 51.6°
+    assert monitor.check(tilted)[0] == "base_tilt"
+    kneeling = x.copy()
+    kneeling[robot.base_q_start + 6] = 0.40  # 54% of nominal: knees reach the ground
+    assert monitor.check(kneeling)[0] == "body_contact"
+    bad = x.copy()
+    bad[0] = np.nan
+    assert monitor.check(bad)[0] == "invalid_state"
