@@ -72,7 +72,8 @@ def load_scenario(name_or_path: str) -> Scenario:
     scenario = load_typed(path, Scenario, data)
     scenario.name = path.stem
     if scenario.robot not in robot_names():
-        raise ConfigError(path, "robot", f"unknown robot '{scenario.robot}' (known: {', '.join(robot_names())})")
+        known = ", ".join(robot_names())
+        raise ConfigError(path, "robot", f"unknown robot '{scenario.robot}' (known: {known})")
     for key, value in (("duration_s", scenario.duration_s), ("time_step", scenario.time_step),
                        ("controller.rate_hz", scenario.controller.rate_hz)):
         if value <= 0:

@@ -2,8 +2,9 @@
 
 A fall is any of: base below ``height_fraction`` of its nominal height; base tilt over
 ``max_tilt`` (angle between the base z axis and world z); a body other than a foot
-touching the ground; a non-finite state (the simulation diverged). Only the soles carry collision geometry in simulation, so "touching"
-is judged by body frame origins: a non-foot body origin below ``body_clearance`` (m).
+touching the ground; a non-finite state (the simulation diverged). Only the soles carry
+collision geometry in simulation, so "touching" is judged by body frame origins: a
+non-foot body origin below ``body_clearance`` (m).
 """
 
 from __future__ import annotations

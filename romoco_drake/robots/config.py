@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Literal, Optional
+from typing import Literal
 
 
 @dataclasses.dataclass
@@ -117,4 +117,4 @@ class RobotConfig:
     # Overrides of the model file's effort limits (N·m), by joint name.
     effort_limits: dict[str, float] = dataclasses.field(default_factory=dict)
     # Default effort limit for joints whose model file gives none.
-    default_effort_limit: Optional[float] = None
+    default_effort_limit: float | None = None

@@ -1,0 +1,89 @@
+"""The romoco command as a user runs it: output, exit codes, files written."""
+
+import base64
+import json
+import re
+import subprocess
+import sys
+
+import pytest
+
+
+def romoco(*args, timeout=300):
+    return subprocess.run([sys.executable, "-m", "romoco_drake.cli", *args],
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def test_list_json():
+    out = romoco("list", "--json")
+    assert out.returncode == 0, out.stderr
+    listing = json.loads(out.stdout.strip().splitlines()[-1])
+    assert listing["robots"] == ["cassie", "draco", "g1", "h1", "xo"]
+    assert {f"{r}_stand" for r in listing["robots"]} <= set(listing["scenarios"])
+    assert "standing" in listing["controllers"]
+
+
+def test_list_text():
+    out = romoco("list")
+    assert out.returncode == 0 and "robots: cassie, draco, g1, h1, xo" in out.stdout
+
+
+def test_show_prints_facts_without_browser():
+    out = romoco("show", "draco", "--no-wait", "--json")
+    assert out.returncode == 0, out.stderr
+    facts = json.loads(out.stdout.strip().splitlines()[-1])
+    assert facts["actuators"] == 25 and facts["joints"] == 27 and facts["dof"] == 33
+    assert facts["mass_kg"] == pytest.approx(39.2, rel=0.05)
+    assert len(facts["contact_points"]["left"]) == 4
+    assert facts["meshcat_url"].startswith("http://")
+    text = romoco("show", "cassie", "--no-wait")
+    assert text.returncode == 0 and "10 actuators" in text.stdout and "line foot" in text.stdout
+
+
+def test_run_json_and_record(tmp_path):
+    replay = tmp_path / "out.html"
+    out = romoco("run", "h1_stand", "--duration", "1.0", "--json", "--record", str(replay))
+    assert out.returncode == 0, out.stderr
+    summary = json.loads(out.stdout.strip().splitlines()[-1])
+    for key in ("scenario", "robot", "duration_s", "wall_s", "realtime_factor", "fell",
+                "fall_time_s", "base_height_drift_m"):
+        assert key in summary
+    assert summary["scenario"] == "h1_stand" and summary["robot"] == "h1"
+    assert summary["duration_s"] == 1.0 and summary["fell"] is False
+    html = replay.read_text()
+    assert "<html" in html.lower() and "meshcat" in html.lower()
+    # The replay embeds its Meshcat commands (msgpack, base64): the robot's geometry and
+    # an animation of it, with no server needed.
+    blobs = re.findall(r'fetch\("data:application/octet-binary;base64,([A-Za-z0-9+/=]+)"\)', html)
+    commands = b"".join(base64.b64decode(b) for b in blobs)
+    assert b"left_foot" in commands and b"set_animation" in commands
+
+
+def test_run_text_summary():
+    out = romoco("run", "xo_stand", "--duration", "0.5")
+    assert out.returncode == 0, out.stderr
+    assert "stayed up" in out.stdout
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["run", "nope"], "unknown scenario 'nope'"),
+        (["show", "atlas", "--no-wait"], "unknown robot 'atlas'"),
+        (["run", "g1_stand", "--duration", "-1"], "--duration must be positive"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2(args, words):
+    out = romoco(*args)
+    assert out.returncode == 2
+    assert "Traceback" not in out.stderr
+    lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and words in lines[0]
+
+
+def test_bad_scenario_file_is_one_line_exit_2(tmp_path):
+    path = tmp_path / "typo.yaml"
+    path.write_text("robot: g1\ncontroller: {name: standing, rate_hzz: 100}\n")
+    out = romoco("run", str(path))
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert f"{path}: controller.rate_hzz: unknown key" in out.stderr

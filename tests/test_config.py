@@ -1,0 +1,113 @@
+"""Bad input: every config mistake is a one-line error naming the file and the key."""
+
+import shutil
+
+import pytest
+import yaml
+
+from romoco_drake.errors import ConfigError, RomocoError
+from romoco_drake.robots.model import RobotModel, load_robot_config_file
+from romoco_drake.robots.source import ROBOTS_DIR
+from romoco_drake.scenario import load_scenario
+
+
+def _write(tmp_path, name, data):
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def _scenario(**overrides):
+    data = {"robot": "g1", "duration_s": 1.0, "controller": {"name": "standing", "rate_hz": 500.0}}
+    data.update(overrides)
+    return data
+
+
+@pytest.mark.parametrize(
+    "data, key, words",
+    [
+        (_scenario(robot="atlas"), "robot", "unknown robot 'atlas'"),
+        (_scenario(duraton_s=2.0), "duraton_s", "unknown key"),
+        (_scenario(controller={"name": "standing", "rate": 1.0}), "controller.rate", "unknown key"),
+        (_scenario(controller={"name": "mpc"}), "controller.name", "not one of"),
+        (_scenario(duration_s="long"), "duration_s", "expected a number"),
+        (_scenario(duration_s=-1.0), "duration_s", "must be positive"),
+        ({"duration_s": 1.0}, "robot", "missing required key"),
+    ],
+)
+def test_bad_scenario_names_file_and_key(tmp_path, data, key, words):
+    path = _write(tmp_path, "bad", data)
+    with pytest.raises(ConfigError) as info:
+        load_scenario(str(path))
+    message = str(info.value)
+    assert "\n" not in message
+    assert message.startswith(str(path)) and f": {key}: " in message and words in message
+
+
+def test_unknown_scenario_name():
+    with pytest.raises(RomocoError, match="unknown scenario 'nope'"):
+        load_scenario("nope")
+
+
+def test_malformed_yaml(tmp_path):
+    path = tmp_path / "broken.yaml"
+    path.write_text("robot: [g1\n")
+    with pytest.raises(ConfigError, match="invalid YAML at line"):
+        load_scenario(str(path))
+
+
+def _robot_data():
+    return yaml.safe_load((ROBOTS_DIR / "g1.yaml").read_text())
+
+
+@pytest.mark.parametrize(
+    "edit, key",
+    [
+        (lambda d: d["feet"]["left"].update(bodyy="x"), "feet.left.bodyy"),
+        (lambda d: d["feet"]["left"].update(body="no_such_link"), "feet.left.body"),
+        (lambda d: d.update(locked_joints=["no_such_joint"]), "locked_joints"),
+        (lambda d: d["feet"]["left"].update(points=[[0, 0, 0]]), "feet.left.points"),
+        (lambda d: d.pop("walking"), "walking"),
+        (lambda d: d.update(gains=[{"joints": "*hip*", "kp": 1.0, "kd": 0.1}]), "gains"),
+        (lambda d: d["nominal"].update(com_height="high"), "nominal.com_height"),
+    ],
+)
+def test_bad_robot_yaml_names_file_and_key(tmp_path, edit, key):
+    data = _robot_data()
+    edit(data)
+    path = _write(tmp_path, "g1", data)
+    with pytest.raises(ConfigError) as info:
+        RobotModel(load_robot_config_file(path), path)
+    assert f"{path}: {key}" in str(info.value)
+
+
+def test_unreadable_model_file(tmp_path):
+    data = _robot_data()
+    data["model"] = {"package": "romoco_models", "file": "missing/robot.urdf"}
+    path = _write(tmp_path, "g1", data)
+    with pytest.raises(RomocoError, match="robot.urdf: cannot read model file"):
+        RobotModel(load_robot_config_file(path), path)
+
+
+def test_malformed_model_file(tmp_path, monkeypatch):
+    models = tmp_path / "models"
+    shutil.copytree(ROBOTS_DIR.parent / "models", models)
+    (models / "h1" / "h1.urdf").write_text("<robot name='h1'><link name='pelvis'>")
+    monkeypatch.setattr("romoco_drake.robots.source.MODELS_DIR", models)
+    from romoco_drake.robots.source import _prepare_cached
+
+    _prepare_cached.cache_clear()
+    data = yaml.safe_load((ROBOTS_DIR / "h1.yaml").read_text())
+    path = _write(tmp_path, "h1", data)
+    try:
+        with pytest.raises(RomocoError, match="h1.urdf: malformed XML"):
+            RobotModel(load_robot_config_file(path), path)
+    finally:
+        _prepare_cached.cache_clear()
+
+
+def test_robot_name_must_match_file(tmp_path):
+    data = _robot_data()
+    path = _write(tmp_path, "other", data)
+    with pytest.raises(ConfigError, match="does not match the file name"):
+        load_robot_config_file(path)
