@@ -22,11 +22,26 @@ def test_structure_matches_fact_sheet(robot_name):
 
 def _convex_hull_contains(points_xy: np.ndarray, p: np.ndarray, margin: float) -> bool:
     """True if p is inside the convex hull of points_xy (N×2) by at least ``margin``."""
-    from scipy.spatial import ConvexHull
+    pts = sorted(map(tuple, points_xy))
 
-    hull = ConvexHull(points_xy)
-    # hull.equations: a·x + b <= 0 inside, with unit normals a.
-    return bool(np.all(hull.equations[:, :2] @ p + hull.equations[:, 2] <= -margin))
+    def cross(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    def half(points):
+        chain = []
+        for q in points:
+            while len(chain) >= 2 and cross(chain[-2], chain[-1], q) <= 0:
+                chain.pop()
+            chain.append(q)
+        return chain[:-1]
+
+    hull = np.array(half(pts) + half(pts[::-1]))  # counter-clockwise
+    for a, b in zip(hull, np.roll(hull, -1, axis=0), strict=True):
+        edge = b - a
+        inward = np.array([-edge[1], edge[0]]) / np.linalg.norm(edge)
+        if inward @ (p - a) < margin:
+            return False
+    return True
 
 
 def test_nominal_pose_feet_flat_and_com_over_support(robot_name):
@@ -39,6 +54,7 @@ def test_nominal_pose_feet_flat_and_com_over_support(robot_name):
     com = robot.plant.CalcCenterOfMassPositionInWorld(context)
     assert com[2] == pytest.approx(robot.config.nominal.com_height, abs=1e-3)
     assert _convex_hull_contains(soles[:2].T, com[:2], margin=0.01)
+    assert not _convex_hull_contains(soles[:2].T, com[:2] + [0.3, 0.0], margin=0.0)
     middle = 0.5 * (soles[:2].min(axis=1) + soles[:2].max(axis=1))
     assert np.linalg.norm(com[:2] - middle) < 0.01
     lower, upper = robot.q_lower, robot.q_upper

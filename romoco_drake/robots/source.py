@@ -21,6 +21,7 @@ from pathlib import Path
 
 from romoco_drake.errors import RomocoError
 from romoco_drake.robots.config import ModelSource
+from romoco_drake.robots.meshes import stl_as_obj
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 ROBOTS_DIR = REPO_ROOT / "robots"
@@ -94,6 +95,11 @@ def _prepare_cached(source_key: tuple) -> PreparedModel:
     parents = {child: parent for parent in root.iter() for child in parent}
     for collision in list(root.iter("collision")):
         parents[collision].remove(collision)
+    _visual_stl_to_obj(root, package_paths(source), path)
+    # Gazebo-only elements Drake would warn about.
+    for tag in ("plugin", "self_collide"):
+        for el in list(root.iter(tag)):
+            parents[el].remove(el)
 
     links = {el.get("name"): el for el in root.iter("link")}
     joints = {el.get("name"): el for el in root.iter("joint")}
@@ -137,6 +143,34 @@ def _prepare_cached(source_key: tuple) -> PreparedModel:
         if (v := _float_or_none(velocity)) is not None and v > 0:
             velocities[name] = v
     return PreparedModel(ET.tostring(root, encoding="unicode"), file_type, path, efforts, velocities)
+
+
+def _resolve_uri(uri: str, packages: dict[str, Path], model_file: Path) -> Path:
+    for scheme in ("package://", "model://"):
+        if uri.startswith(scheme):
+            package, _, rest = uri[len(scheme):].partition("/")
+            if package in packages:
+                return packages[package] / rest
+    if uri.startswith("file://"):
+        return Path(uri[len("file://"):])
+    return model_file.parent / uri
+
+
+def _visual_stl_to_obj(root: ET.Element, packages: dict[str, Path], model_file: Path) -> None:
+    """Points STL visual meshes at cached OBJ twins Meshcat can show."""
+    for mesh in root.iter("mesh"):
+        uri_el = mesh.find("uri")  # SDFormat
+        uri = uri_el.text.strip() if uri_el is not None and uri_el.text else mesh.get("filename")
+        if not uri or not uri.lower().endswith(".stl"):
+            continue
+        stl = _resolve_uri(uri, packages, model_file)
+        if not stl.exists():
+            raise RomocoError(f"{model_file}: visual mesh {uri} not found")
+        obj = stl_as_obj(stl).as_uri()
+        if uri_el is not None:
+            uri_el.text = obj
+        else:
+            mesh.set("filename", obj)
 
 
 def _joint_end(joint: ET.Element, tag: str) -> str | None:
