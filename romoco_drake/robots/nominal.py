@@ -27,7 +27,6 @@ class NominalPose:
     q: np.ndarray  # controller-plant positions (nq,)
     base_height: float  # base origin height above the ground (m)
     p_WCoM: np.ndarray  # (3,)
-    support_center: np.ndarray  # middle of the support polygon (xy) (2,)
 
 
 def foot_forward_axis(robot: RobotModel, side: str) -> np.ndarray:
@@ -105,5 +104,4 @@ def solve_nominal_pose(robot: RobotModel) -> NominalPose:
         q=q_sol,
         base_height=float(q_sol[robot.base_q_start + 6]),
         p_WCoM=p_WCoM,
-        support_center=np.zeros(2),
     )
