@@ -1,0 +1,1 @@
+"""Benchmarks behind ``romoco bench``: they print numbers; tests never assert wall-clock times."""

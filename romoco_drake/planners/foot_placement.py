@@ -1,0 +1,56 @@
+"""FootPlacementPlanner: any foot-placement law of :mod:`romoco_drake.rom.planners` as a system."""
+
+from __future__ import annotations
+
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import LeafSystem
+
+from romoco_drake.rom.planners import FootPlacementLaw, PlannerParams, make_planner
+from romoco_drake.rom.types import (
+    COMMAND_SIZE,
+    GAIT_PHASE_SIZE,
+    ROM_STATE_SIZE,
+    PlannerOutput,
+    WalkCommand,
+    side_from_sign,
+)
+
+
+class FootPlacementPlanner(LeafSystem):
+    """Plans the swing foot's touchdown from the ROM state, every time its output is evaluated.
+
+    Stateless: the output is a function of the inputs (cached by Drake until they change).
+
+    | port | kind | size | meaning |
+    |---|---|---|---|
+    | ``rom_state`` | in | 6 | CoM rel. stance contact [m], momentum about it [kg·m²/s]; stance yaw frame |
+    | ``gait_phase`` | in | 2 | stance (+1 left, −1 right), time in step [s] |
+    | ``command`` | in | 6 | vx, vy [m/s], wz [rad/s], step width, CoM height [m], SS time [s] |
+    | ``planner_output`` | out | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` |
+    """
+
+    def __init__(self, law: FootPlacementLaw):
+        super().__init__()
+        self.law = law
+        self.rom_state_port = self.DeclareVectorInputPort("rom_state", ROM_STATE_SIZE)
+        self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
+        self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
+        self.planner_output_port = self.DeclareAbstractOutputPort(
+            "planner_output", lambda: AbstractValue.Make(self._plan_default()), self._calc_plan
+        )
+
+    def _plan_default(self) -> PlannerOutput:
+        cmd = WalkCommand()
+        state = [0.0, 0.0, cmd.com_height, 0.0, 0.0, 0.0]
+        return self.law.plan(state, "left", 0.0, cmd)
+
+    def _calc_plan(self, context, value) -> None:
+        phase = self.gait_phase_port.Eval(context)
+        cmd = WalkCommand.from_vector(self.command_port.Eval(context))
+        value.set_value(self.law.plan(self.rom_state_port.Eval(context), side_from_sign(phase[0]),
+                                      float(phase[1]), cmd))
+
+
+def make_foot_placement_planner(name: str, params: PlannerParams) -> FootPlacementPlanner:
+    """The planner system for the law called ``name`` (alip, hlip, mlip, dcm, alip_general)."""
+    return FootPlacementPlanner(make_planner(name, params))

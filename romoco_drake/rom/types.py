@@ -1,0 +1,84 @@
+"""Values exchanged between the gait scheduler, the planners and the output embedding."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+# rom_state: CoM position relative to the stance contact [m] and angular momentum about the
+# contact [kg·m²/s], both in the stance foot's yaw frame: [p_x, p_y, p_z, L_x, L_y, L_z].
+ROM_STATE_SIZE = 6
+# gait_phase: [stance (+1 left, −1 right), time since the step began (s)]; a step is single
+# support (T_SS) followed by double support (T_DS), ending at the support switch.
+GAIT_PHASE_SIZE = 2
+COMMAND_SIZE = 6
+SIDES = ("left", "right")
+
+
+def side_from_sign(sign: float) -> str:
+    return "left" if sign >= 0.0 else "right"
+
+
+def other_side(side: str) -> str:
+    return "right" if side == "left" else "left"
+
+
+@dataclass(frozen=True)
+class WalkCommand:
+    """What the user asks of the gait, in the heading frame.
+
+    Vector layout: [vx (m/s), vy (m/s), wz (rad/s), step_width (m), com_height (m), step_time (s)];
+    step_time is the single-support duration.
+    """
+
+    vx: float = 0.0
+    vy: float = 0.0
+    wz: float = 0.0
+    step_width: float = 0.2
+    com_height: float = 0.65
+    step_time: float = 0.3
+
+    @classmethod
+    def from_vector(cls, v) -> WalkCommand:
+        return cls(*(float(x) for x in v))
+
+    def to_vector(self) -> np.ndarray:
+        return np.array([self.vx, self.vy, self.wz, self.step_width, self.com_height, self.step_time])
+
+    def problem(self) -> str | None:
+        """Why this command cannot be walked, or None."""
+        if not all(math.isfinite(x) for x in self.to_vector()):
+            return "command has a non-finite entry"
+        if self.com_height <= 0.0:
+            return f"com_height must be positive, got {self.com_height}"
+        if self.step_time <= 0.0:
+            return f"step_time must be positive, got {self.step_time}"
+        if self.step_width < 0.0:
+            return f"step_width must be non-negative, got {self.step_width}"
+        return None
+
+
+@dataclass(frozen=True)
+class PlannerOutput:
+    """A foot-placement plan for the current step.
+
+    Positions are relative to the stance contact in the stance yaw frame. ROM states are one row
+    per plane (sagittal, lateral) as (p [m], L/m [m²/s]) with L the lateral-plane momentum signed
+    so that L̇ = g p (i.e. −L_x / m). ``valid`` is False when the inputs were not usable (non-finite
+    state or bad command) and the plan fell back to the nominal step.
+    """
+
+    planner: str
+    stance_side: str
+    swing_target: np.ndarray  # (3,) touchdown point of the swing foot, z = 0
+    swing_yaw: float  # touchdown yaw of the swing foot relative to the stance yaw (rad)
+    t_ss: float
+    t_ds: float
+    time_to_touchdown: float
+    com_height: float
+    pre_impact: np.ndarray  # (2, 2) predicted state at the end of this single support
+    orbit_pre_impact: np.ndarray  # (2, 2) the desired orbit's state at the same instant
+    nominal_step: np.ndarray  # (2,) the orbit's step u* for this stance side
+    valid: bool = True
