@@ -12,11 +12,13 @@ from romoco_drake.errors import RomocoError
 
 def _cmd_list(args) -> int:
     from romoco_drake.robots.model import robot_names
+    from romoco_drake.rom.planners import PLANNERS
     from romoco_drake.scenario import CONTROLLERS, ESTIMATORS, scenario_names
 
     listing = {
         "robots": robot_names(),
         "scenarios": scenario_names(),
+        "planners": list(PLANNERS),
         "controllers": list(CONTROLLERS),
         "estimators": list(ESTIMATORS),
     }
@@ -112,6 +114,38 @@ def _cmd_run(args) -> int:
     return 0
 
 
+def _cmd_bench_rom(args) -> int:
+    from romoco_drake.bench.rom import bench_rom
+    from romoco_drake.rom.planners import PLANNERS
+
+    names = list(PLANNERS) if args.planner is None else [args.planner]
+    results = []
+    for name in names:
+        summary = bench_rom(name, robot=args.robot, t_ds=args.t_ds, gain=args.gain, plot_dir=args.plot)
+        results.append(summary)
+        if not args.json:
+            _print_rom_summary(summary)
+    if args.json:
+        print(json.dumps(results[0] if len(results) == 1 else results))
+    return 0
+
+
+def _print_rom_summary(s: dict) -> None:
+    cost = s["planner_cost"]
+    print(f"{s['planner']} on the {s['robot']} template (z0 {s['com_height_m']} m, T_SS {s['t_ss_s']} s, "
+          f"T_DS {s['t_ds_s']} s, width {s['step_width_m']} m, {s['gain']}): {s['steps']} steps, "
+          f"{s['duration_s']} s in {s['wall_s']} s")
+    print("  segment        command (vx, vy)   steps to converge   settled rms err   rms err")
+    for r in s["segments"]:
+        conv = r["steps_to_converge"] if r["steps_to_converge"] is not None else "never"
+        print(f"  {r['start_s']:5.1f}-{r['end_s']:5.1f} s   ({r['command'][0]:4.2f}, {r['command'][1]:4.2f})"
+              f"         {conv!s:>5}           {r['settled_rms_error']!s:>9}       {r['rms_error']!s:>8}")
+    print(f"  planner update {cost['update_us']['median']} us median ({cost['update_us']['p99']} p99); "
+          f"system output eval {cost['system_eval_us']['median']} us median")
+    for path in s.get("plots", []):
+        print(f"  wrote {path}")
+
+
 def make_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="romoco", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -131,6 +165,16 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the run summary as JSON (last line)")
     p.add_argument("--no-wait", action="store_true", help="with --meshcat, exit when the run ends")
     p.set_defaults(func=_cmd_run)
+    bench = sub.add_parser("bench", help="benchmarks that print numbers").add_subparsers(
+        dest="bench", required=True)
+    p = bench.add_parser("rom", help="planners walking the hybrid LIP template through a command profile")
+    p.add_argument("--planner", help="planner name (default: all)")
+    p.add_argument("--robot", default="g1", help="robot whose walking config sets z0, T_SS, T_DS, width")
+    p.add_argument("--t-ds", type=float, default=None, help="override the double-support time (s)")
+    p.add_argument("--gain", default="deadbeat", help="deadbeat, converging or lqr")
+    p.add_argument("--plot", type=Path, metavar="DIR", help="write velocity and phase-portrait PNGs")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON (last line)")
+    p.set_defaults(func=_cmd_bench_rom)
     return parser
 
 

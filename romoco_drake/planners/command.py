@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 from pydrake.systems.framework import LeafSystem
 
+from romoco_drake.errors import RomocoError
 from romoco_drake.rom.types import COMMAND_SIZE, WalkCommand
 
 
@@ -29,10 +30,10 @@ class CommandSource(LeafSystem):
     def __init__(self, segments: list[CommandSegment]):
         super().__init__()
         if not segments or segments[0].start > 0.0:
-            raise ValueError("a command profile needs a segment starting at t = 0")
+            raise RomocoError("a command profile needs a segment starting at t = 0")
         starts = [s.start for s in segments]
         if starts != sorted(starts):
-            raise ValueError("command segments must be in time order")
+            raise RomocoError("command segments must be in time order")
         self.segments = list(segments)
         self._starts = starts
         self.command_port = self.DeclareVectorOutputPort(

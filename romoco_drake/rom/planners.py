@@ -17,6 +17,7 @@ from typing import Literal
 
 import numpy as np
 
+from romoco_drake.errors import RomocoError
 from romoco_drake.rom import alip, alip_general
 from romoco_drake.rom.dcm import dcm_s2s
 from romoco_drake.rom.hlip import hlip_s2s
@@ -55,12 +56,14 @@ class FootPlacementLaw(ABC):
 
     def __init__(self, params: PlannerParams):
         if params.gain not in self.supported_gains:
-            raise ValueError(f"planner '{self.name}' supports gains {list(self.supported_gains)}, "
+            raise RomocoError(f"planner '{self.name}' supports gains {list(self.supported_gains)}, "
                              f"not '{params.gain}'")
+        if params.gain == "converging" and not 0.0 <= params.alpha < 1.0:
+            raise RomocoError(f"alpha must be in [0, 1), got {params.alpha}")
         if not params.mass > 0.0:
-            raise ValueError(f"mass must be positive, got {params.mass}")
+            raise RomocoError(f"mass must be positive, got {params.mass}")
         if params.t_ds < 0.0:
-            raise ValueError(f"t_ds must be non-negative, got {params.t_ds}")
+            raise RomocoError(f"t_ds must be non-negative, got {params.t_ds}")
         self.params = params
         self.t_ds = params.t_ds if self.ds_model != "none" else 0.0
 
@@ -82,15 +85,17 @@ class FootPlacementLaw(ABC):
         lam = omega(z0, self.params.g)
         c, s = math.cosh(lam * t_left), math.sinh(lam * t_left)
         k = z0 * lam
-        pre = np.array([[c * sag[0] + s / k * sag[1], k * s * sag[0] + c * sag[1]],
-                        [c * lat[0] + s / k * lat[1], k * s * lat[0] + c * lat[1]]])
+        pre = ((c * sag[0] + s / k * sag[1], k * s * sag[0] + c * sag[1]),
+               (c * lat[0] + s / k * lat[1], k * s * lat[0] + c * lat[1]))
         u_x, u_y, orbit, nominal = self._place(pre, stance_side, cmd)
-        return self._output(stance_side, cmd, t_left, np.array([u_x, u_y, 0.0]), pre, orbit, nominal, True)
+        return self._output(stance_side, cmd, t_left, np.array([u_x, u_y, 0.0]), np.array(pre), orbit,
+                            nominal, True)
 
     @abstractmethod
-    def _place(self, pre: np.ndarray, stance_side: str, cmd: WalkCommand
-               ) -> tuple[float, float, np.ndarray, np.ndarray]:
-        """(u_x, u_y, orbit pre-impact state (2, 2), nominal steps (2,)) from the predicted state."""
+    def _place(self, pre: tuple[tuple[float, float], tuple[float, float]], stance_side: str,
+               cmd: WalkCommand) -> tuple[float, float, np.ndarray, np.ndarray]:
+        """(u_x, u_y, orbit pre-impact state (2, 2), nominal steps (2,)) from the predicted
+        end-of-SS state ((p_x, L_x/m), (p_y, L_y/m)) in LIP coordinates."""
 
     def _fallback(self, stance_side: str, cmd: WalkCommand, t_left: float) -> PlannerOutput:
         if cmd.problem() is not None:
@@ -111,20 +116,32 @@ class FootPlacementLaw(ABC):
 
 @dataclass(frozen=True)
 class _S2SMaps:
-    """Per-(z0, T_SS, T_DS) constants of an S2S law: the orbits are linear in the steps."""
+    """Per-(z0, T_SS, T_DS) constants of an S2S law, as plain floats (the update runs per tick).
 
-    coords: np.ndarray  # (n, 2): the law's state from (p, L/m)
-    gain: np.ndarray  # (n,)
-    period1: np.ndarray  # (n,) x* per unit step
-    period2_own: np.ndarray  # (n,) x*_a per unit u_a (x_a followed by u_a)
-    period2_next: np.ndarray  # (n,) x*_a per unit u_b
-    report: tuple[np.ndarray, np.ndarray, np.ndarray]  # the same three in (p, L/m)
+    The orbits are linear in the steps, so they are stored per unit step.
+    """
+
+    coords: tuple[tuple[float, float], ...]  # rows: the law's state from (p, L/m)
+    gain: tuple[float, ...]
+    period1: tuple[float, ...]  # x* per unit step
+    period2_own: tuple[float, ...]  # x*_a per unit u_a (x_a is followed by u_a)
+    period2_next: tuple[float, ...]  # x*_a per unit u_b
+    report: np.ndarray  # (3, 2): the same three orbits in (p, L/m)
 
 
-def _orbit_basis(s2s: StepToStep) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _orbit_basis(s2s: StepToStep) -> np.ndarray:
+    """Rows: period-1 orbit, period-2 orbit per unit own step, per unit next step."""
     own, _ = s2s.period2_orbit(1.0, 0.0)
     nxt, _ = s2s.period2_orbit(0.0, 1.0)
-    return s2s.period1_orbit(1.0), own, nxt
+    return np.vstack([s2s.period1_orbit(1.0), own, nxt])
+
+
+def _feedback(maps: _S2SMaps, pre: tuple[float, float], u_star: float, orbit: tuple[float, ...]) -> float:
+    """u* + K (C x̂⁻ − x*) in scalar arithmetic."""
+    u = u_star
+    for row, k, x_star in zip(maps.coords, maps.gain, orbit, strict=True):
+        u += k * (row[0] * pre[0] + row[1] * pre[1] - x_star)
+    return u
 
 
 class S2SLaw(FootPlacementLaw):
@@ -152,20 +169,26 @@ class S2SLaw(FootPlacementLaw):
             gain = lqr_gain(s2s, np.diag(p.lqr_q), p.lqr_r)
         else:
             gain = converging_gain(s2s, 0.0 if p.gain == "deadbeat" else p.alpha)
-        return _S2SMaps(self._coords(z0), gain, *_orbit_basis(s2s),
-                        _orbit_basis(self._report_s2s(z0, t_ss)))
+        basis = _orbit_basis(s2s)
+        return _S2SMaps(
+            coords=tuple(tuple(map(float, row)) for row in self._coords(z0)),
+            gain=tuple(map(float, gain)),
+            period1=tuple(map(float, basis[0])),
+            period2_own=tuple(map(float, basis[1])),
+            period2_next=tuple(map(float, basis[2])),
+            report=_orbit_basis(self._report_s2s(z0, t_ss)),
+        )
 
     def _place(self, pre, stance_side, cmd):
         maps = self._maps(cmd.com_height, cmd.step_time)
         ux_star, uy_star, uy_next = self.nominal_steps(stance_side, cmd)
-        x_sag = maps.coords @ pre[0]
-        x_lat = maps.coords @ pre[1]
-        orbit_sag = maps.period1 * ux_star
-        orbit_lat = maps.period2_own * uy_star + maps.period2_next * uy_next
-        u_x = ux_star + float(maps.gain @ (x_sag - orbit_sag))
-        u_y = uy_star + float(maps.gain @ (x_lat - orbit_lat))
-        r1, r_own, r_next = maps.report
-        orbit = np.vstack([r1 * ux_star, r_own * uy_star + r_next * uy_next])
+        orbit_sag = tuple(a * ux_star for a in maps.period1)
+        orbit_lat = tuple(a * uy_star + b * uy_next for a, b in zip(maps.period2_own, maps.period2_next,
+                                                                   strict=True))
+        u_x = _feedback(maps, pre[0], ux_star, orbit_sag)
+        u_y = _feedback(maps, pre[1], uy_star, orbit_lat)
+        r = maps.report
+        orbit = np.array([r[0] * ux_star, r[1] * uy_star + r[2] * uy_next])
         return u_x, u_y, orbit, np.array([ux_star, uy_star])
 
 
@@ -219,7 +242,7 @@ class AlipLaw(FootPlacementLaw):
         self._alpha = 0.0 if params.gain == "deadbeat" else params.alpha
         self._orbit = functools.lru_cache(maxsize=64)(self._build_orbit)
 
-    def _build_orbit(self, z0: float, t_ss: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _build_orbit(self, z0: float, t_ss: float) -> np.ndarray:
         return _orbit_basis(hlip_s2s(z0, t_ss, 0.0, self.params.g))
 
     def _place(self, pre, stance_side, cmd):
@@ -229,10 +252,10 @@ class AlipLaw(FootPlacementLaw):
         orbit_lat = own * uy_star + nxt * uy_next
         orbit_lat_next = own * uy_next + nxt * uy_star
         l_sag = alip.symmetric_orbit_momentum(cmd.vx, t, z0, g)
-        l_x = alip.target_momentum(pre[0, 1], l_sag, l_sag, self._alpha)
-        l_y = alip.target_momentum(pre[1, 1], orbit_lat[1], orbit_lat_next[1], self._alpha)
-        u_x = alip.alip_step(pre[0, 0], pre[0, 1], t, z0, l_x, g)
-        u_y = alip.alip_step(pre[1, 0], pre[1, 1], t, z0, l_y, g)
+        l_x = alip.target_momentum(pre[0][1], l_sag, l_sag, self._alpha)
+        l_y = alip.target_momentum(pre[1][1], orbit_lat[1], orbit_lat_next[1], self._alpha)
+        u_x = alip.alip_step(pre[0][0], pre[0][1], t, z0, l_x, g)
+        u_y = alip.alip_step(pre[1][0], pre[1][1], t, z0, l_y, g)
         orbit = np.vstack([p1 * ux_star, orbit_lat])
         return u_x, u_y, orbit, np.array([ux_star, uy_star])
 
@@ -250,13 +273,13 @@ class AlipGeneralLaw(FootPlacementLaw):
 
     def _place(self, pre, stance_side, cmd):
         m, z0, t, g = self.params.mass, cmd.com_height, cmd.step_time, self.params.g
-        l_cy_pre = m * pre[0, 1]
-        l_cx_pre = -m * pre[1, 1]
+        l_cy_pre = m * pre[0][1]
+        l_cx_pre = -m * pre[1][1]
         l_cy_d = alip_general.desired_momentum_y(cmd.vx, t, m, z0, g)
         p_star = alip_general.lateral_offset(cmd.vy, t, cmd.step_width, stance_side)
         l_cx_d = alip_general.desired_momentum_x(p_star, cmd.vy, t, m, z0, g)
-        u_x = pre[0, 0] - alip_general.post_impact_com_x(l_cy_d, l_cy_pre, t, m, z0, g)
-        u_y = pre[1, 0] - alip_general.post_impact_com_y(l_cx_d, l_cx_pre, t, m, z0, g)
+        u_x = pre[0][0] - alip_general.post_impact_com_x(l_cy_d, l_cy_pre, t, m, z0, g)
+        u_y = pre[1][0] - alip_general.post_impact_com_y(l_cx_d, l_cx_pre, t, m, z0, g)
         # The current step's orbit: it began at the offset planned in the other stance.
         p_start = alip_general.lateral_offset(cmd.vy, t, cmd.step_width, other_side(stance_side))
         l_cx_orbit = alip_general.desired_momentum_x(p_start, cmd.vy, t, m, z0, g)
@@ -273,5 +296,5 @@ PLANNERS: dict[str, type[FootPlacementLaw]] = {
 def make_planner(name: str, params: PlannerParams) -> FootPlacementLaw:
     """The law called ``name`` (one of :data:`PLANNERS`)."""
     if name not in PLANNERS:
-        raise ValueError(f"unknown planner '{name}'; choose from {sorted(PLANNERS)}")
+        raise RomocoError(f"unknown planner '{name}'; choose from {', '.join(PLANNERS)}")
     return PLANNERS[name](params)

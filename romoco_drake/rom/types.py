@@ -49,7 +49,8 @@ class WalkCommand:
 
     def problem(self) -> str | None:
         """Why this command cannot be walked, or None."""
-        if not all(math.isfinite(x) for x in self.to_vector()):
+        if not all(map(math.isfinite, (self.vx, self.vy, self.wz, self.step_width, self.com_height,
+                                       self.step_time))):
             return "command has a non-finite entry"
         if self.com_height <= 0.0:
             return f"com_height must be positive, got {self.com_height}"

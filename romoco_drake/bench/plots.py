@@ -1,0 +1,56 @@
+"""PNG figures of template walks: stride velocity against the command, and phase portraits."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def plot_template_run(out_dir: Path, name: str, run, segments, stride_times: np.ndarray,
+                      stride_vel: np.ndarray, mass: float) -> list[Path]:
+    """Writes ``rom_<name>_velocity.png`` and ``rom_<name>_phase.png``; returns their paths."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    ends = [s.start for s in segments[1:]] + [run.times[-1]]
+
+    fig, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 5))
+    for axis, (ax, label) in enumerate(zip(axes, ("forward", "lateral"), strict=True)):
+        cmd_t = np.array([[s.start, e] for s, e in zip(segments, ends, strict=True)]).ravel()
+        cmd_v = np.repeat([[s.command.vx, s.command.vy][axis] for s in segments], 2)
+        ax.plot(cmd_t, cmd_v, "k--", lw=1.2, label="command")
+        ax.plot(run.times, run.com[2 + axis], color="0.75", lw=0.8, label="CoM velocity")
+        ax.plot(stride_times, stride_vel[:, axis], "o-", ms=3, label="stride average")
+        ax.set_ylabel(f"{label} velocity [m/s]")
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="upper left", fontsize=8)
+    axes[-1].set_xlabel("time [s]")
+    fig.suptitle(f"{name}: velocity tracking on the hybrid LIP template")
+    fig.tight_layout()
+    velocity = out_dir / f"rom_{name}_velocity.png"
+    fig.savefig(velocity, dpi=120)
+    plt.close(fig)
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.5))
+    planes = (("sagittal", run.rom_state[0], run.rom_state[4] / mass),
+              ("lateral", run.rom_state[1], -run.rom_state[3] / mass))
+    for ax, (label, p, ell) in zip(axes, planes, strict=True):
+        for seg, end in zip(segments, ends, strict=True):
+            mask = (run.times >= seg.start) & (run.times < end)
+            ax.plot(p[mask], ell[mask], lw=0.9,
+                    label=f"{seg.start:g}-{end:g} s: v=({seg.command.vx:g}, {seg.command.vy:g})")
+        ax.set_xlabel(f"{label} CoM rel. stance pivot p [m]")
+        ax.set_ylabel("L / m [m²/s]")
+        ax.set_title(label)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"{name}: phase portraits (jumps are support switches)")
+    fig.tight_layout()
+    phase = out_dir / f"rom_{name}_phase.png"
+    fig.savefig(phase, dpi=120)
+    plt.close(fig)
+    return [velocity, phase]

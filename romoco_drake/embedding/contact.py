@@ -1,0 +1,210 @@
+"""Foot contact: holonomic contact rows, point-force → wrench map, friction and CoP limits.
+
+A foot in contact is held by a few representative sole points (paper Fig. 5): toe and
+heel for a line foot; front-left (LF), front-right (RF) and mid-back (MB) for a plane
+foot. Their stacked world-frame translational constraints (3 rows a point) fix 5 (line)
+or 6 (plane) foot DoF; the rows are redundant (rank 5 of 6, rank 6 of 9), as in the paper.
+
+The multipliers of those rows are point forces f (3 a point, expressed in world). They
+act on the robot only through their resultant wrench about the sole centroid,
+Σ J_iᵀ f_i = J_footᵀ [m; f], so the friction and CoP limits are imposed on that wrench
+(net friction pyramid, net normal force, CoP inside the whole sole polygon) and mapped
+back to the point forces: the split among the points (internal forces) is free, and the
+CoP may use the whole sole, not only the triangle of the representative points.
+
+Limits are expressed in the foot's sole frame S (:func:`~romoco_drake.embedding.outputs.sole_frame`:
+origin at the sole-point centroid, z_S the sole normal, x_S forward), so they hold when the
+foot is not level.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.multibody.tree import Frame, JacobianWrtVariable
+
+from romoco_drake.embedding.outputs import Output, sole_frame
+from romoco_drake.errors import RomocoError
+from romoco_drake.robots.model import RobotModel
+
+SIDES = ("left", "right")
+# Contact domain -> feet in contact.
+DOMAINS = {"left": ("left",), "right": ("right",), "double": ("left", "right"), "none": ()}
+
+
+def select_contact_points(robot: RobotModel, side: str) -> tuple[tuple[str, ...], np.ndarray]:
+    """Names and positions p_FC (3×k, foot frame) of the representative contact points.
+
+    Line foot: the toe and heel points. Plane foot: LF and RF are the left- and right-most of
+    the front points, MB the mean of the back points ("front"/"back": within 10% of the sole
+    length from the front-/back-most point along the forward axis).
+    """
+    pts = robot.feet[side].points
+    if robot.is_line_foot:
+        return ("toe", "heel"), pts[:, :2].copy()
+    R_FS, p_FS = sole_frame(robot, side)
+    x, y = (R_FS.T @ (pts - p_FS[:, None]))[:2]
+    tol = 0.1 * (x.max() - x.min())
+    front = np.flatnonzero(x >= x.max() - tol)
+    back = x <= x.min() + tol
+    lf, rf = front[np.argmax(y[front])], front[np.argmin(y[front])]
+    chosen = np.column_stack([pts[:, lf], pts[:, rf], pts[:, back].mean(axis=1)])
+    a, b, c = (R_FS.T @ chosen)[:2].T
+    area = 0.5 * abs((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+    if area < 1e-6:
+        raise RomocoError(f"{robot.yaml_path}: feet.{side}.points: no non-collinear front-left, "
+                          "front-right and mid-back points (a plane foot needs two front corners)")
+    return ("lf", "rf", "mb"), chosen
+
+
+def _skew(p: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -p[2], p[1]], [p[2], 0.0, -p[0]], [-p[1], p[0], 0.0]])
+
+
+def wrench_map(points: np.ndarray) -> np.ndarray:
+    """G (6 × 3k) with [f; m] = G [f_1; …; f_k]: f = Σ f_i, m = Σ p_i × f_i.
+
+    ``points`` (3×k) are the force application points relative to the moment reference
+    point, in the frame the forces and the wrench are expressed in. Rank 6 for three
+    non-collinear points; rank 5 for points on a line through the reference point (no
+    moment about the line), the line-foot case.
+    """
+    k = points.shape[1]
+    return np.vstack([np.tile(np.eye(3), k), np.hstack([_skew(p) for p in points.T])])
+
+
+def _convex_hull(xy: np.ndarray) -> np.ndarray:
+    """Counter-clockwise convex hull vertices (m×2) of 2D points xy (n×2), monotone chain."""
+    pts = sorted(map(tuple, np.round(xy, 12)))
+
+    def half(points: list) -> list:
+        chain: list = []
+        for p in points:
+            while len(chain) >= 2 and ((chain[-1][0] - chain[-2][0]) * (p[1] - chain[-2][1])
+                                       - (chain[-1][1] - chain[-2][1]) * (p[0] - chain[-2][0])) <= 0:
+                chain.pop()
+            chain.append(p)
+        return chain[:-1]
+
+    return np.array(half(pts) + half(pts[::-1]))
+
+
+def support_halfplanes(robot: RobotModel, side: str) -> tuple[np.ndarray, np.ndarray]:
+    """Outward normals N (e×2) and offsets d (e,) with the sole region {c : N c ≤ d} in S (x, y).
+
+    Plane foot: the edges of the convex hull of all sole points. Line foot: the segment
+    from heel to toe along x_S (its lateral CoP is zero by construction).
+    """
+    R_FS, p_FS = sole_frame(robot, side)
+    xy = (R_FS.T @ (robot.feet[side].points - p_FS[:, None]))[:2].T
+    if robot.is_line_foot:
+        toe, heel = xy[0, 0], xy[1, 0]
+        return np.array([[1.0, 0.0], [-1.0, 0.0]]), np.array([toe, -heel])
+    hull = _convex_hull(xy)
+    edges = np.roll(hull, -1, axis=0) - hull
+    normals = np.column_stack([edges[:, 1], -edges[:, 0]]) / np.linalg.norm(edges, axis=1)[:, None]
+    return normals, np.einsum("ij,ij->i", normals, hull)
+
+
+@dataclass(frozen=True)
+class FootContact:
+    """One foot's contact model, all constant in the foot's sole frame S.
+
+    ``wrench_map`` maps the stacked point forces (in S) to the wrench [f; m] in S about the
+    sole centroid; ``A_S f_S ≤ b`` are its friction/CoP limits on point forces in S.
+    """
+
+    side: str
+    frame: Frame
+    point_names: tuple[str, ...]
+    points_F: np.ndarray  # 3×k representative contact points in the foot frame
+    R_FS: np.ndarray
+    p_FS: np.ndarray
+    wrench_map: np.ndarray  # 6 × 3k
+    A_S: np.ndarray
+    b: np.ndarray
+
+
+class ContactModel:
+    """Holonomic constraints per contact domain and each foot's force limits, for one robot.
+
+    Domains: ``left``/``right`` (single support), ``double``, ``none`` (in the air: internal
+    loops only). Rows: contact points of the feet in contact (left first), 3 a point, then the
+    robot's internal constraints. For contact rows, h is the current world position of the
+    point (held constant while in contact); for internal rows, the loop residual.
+
+    Force limits on one foot's wrench [f; m] in S: f_z ≥ ``min_normal_force``;
+    |f_x|, |f_y| ≤ μ (1 − ``friction_margin``) f_z with μ = ``feet.friction``; and the CoP
+    (−m_y, m_x)/f_z at least ``cop_margin`` (m) inside the sole region.
+    """
+
+    def __init__(self, robot: RobotModel, *, friction_margin: float = 0.0, cop_margin: float = 0.0,
+                 min_normal_force: float = 0.0):
+        self.robot = robot
+        plant = robot.plant
+        mu = robot.config.feet.friction * (1.0 - friction_margin)
+        limits = np.array([
+            [0.0, 0.0, -1.0, 0.0, 0.0, 0.0],
+            [1.0, 0.0, -mu, 0.0, 0.0, 0.0],
+            [-1.0, 0.0, -mu, 0.0, 0.0, 0.0],
+            [0.0, 1.0, -mu, 0.0, 0.0, 0.0],
+            [0.0, -1.0, -mu, 0.0, 0.0, 0.0],
+        ])
+        self.feet: dict[str, FootContact] = {}
+        for side in SIDES:
+            names, points_F = select_contact_points(robot, side)
+            R_FS, p_FS = sole_frame(robot, side)
+            sole_z = R_FS[:, 2] @ (robot.feet[side].points - p_FS[:, None])
+            if np.max(np.abs(sole_z)) > 1e-3:
+                raise RomocoError(f"{robot.yaml_path}: feet.{side}.points: not in one plane normal to "
+                                  f"'up' (offsets {np.round(sole_z, 4).tolist()} m)")
+            G = wrench_map(R_FS.T @ (points_F - p_FS[:, None]))
+            N, d = support_halfplanes(robot, side)
+            # N·(−m_y, m_x) ≤ (d − margin) f_z, valid for f_z ≥ 0.
+            cop = np.zeros((len(d), 6))
+            cop[:, 2] = -(d - cop_margin)
+            cop[:, 3] = N[:, 1]
+            cop[:, 4] = -N[:, 0]
+            A_w = np.vstack([limits, cop])
+            b = np.zeros(len(A_w))
+            b[0] = -min_normal_force
+            self.feet[side] = FootContact(side, robot.foot_frames[side], names, points_F, R_FS, p_FS,
+                                          G, A_w @ G, b)
+        self._names = {
+            domain: tuple(f"{s}_{p}_{a}" for s in sides for p in self.feet[s].point_names for a in "xyz")
+            + tuple(f"internal_{i}" for i in range(robot.num_internal_constraints()))
+            for domain, sides in DOMAINS.items()
+        }
+        self._world = plant.world_frame()
+
+    def constraints(self, context, domain: str) -> Output:
+        """h, J_h, J̇_h·v of ``domain`` on the controller-plant ``context``."""
+        if domain not in DOMAINS:
+            raise ValueError(f"unknown contact domain '{domain}' (one of {', '.join(DOMAINS)})")
+        plant, W = self.robot.plant, self._world
+        h, J, Jdv = [], [], []
+        for side in DOMAINS[domain]:
+            foot = self.feet[side]
+            h.append(plant.CalcPointsPositions(context, foot.frame, foot.points_F, W).ravel(order="F"))
+            J.append(plant.CalcJacobianTranslationalVelocity(
+                context, JacobianWrtVariable.kV, foot.frame, foot.points_F, W, W))
+            Jdv.append(plant.CalcBiasTranslationalAcceleration(
+                context, JacobianWrtVariable.kV, foot.frame, foot.points_F, W, W).ravel(order="F"))
+        internal = self.robot.internal_constraints(context)
+        return Output(self._names[domain], np.concatenate([*h, internal.h]), np.vstack([*J, internal.J]),
+                      np.concatenate([*Jdv, internal.Jdot_v]))
+
+    def sole_rotation(self, context, side: str) -> np.ndarray:
+        """R_WS of the foot's sole frame at ``context``."""
+        foot = self.feet[side]
+        return foot.frame.CalcRotationMatrixInWorld(context).matrix() @ foot.R_FS
+
+    def friction_constraints(self, context, side: str) -> tuple[np.ndarray, np.ndarray]:
+        """A, b with A f ≤ b on the foot's stacked point forces f expressed in world."""
+        foot = self.feet[side]
+        R_WS = self.sole_rotation(context, side)
+        rows, cols = foot.A_S.shape
+        # Per point: A_S,i f_S,i = A_S,i R_SW f_W,i.
+        A = (foot.A_S.reshape(rows, cols // 3, 3) @ R_WS.T).reshape(rows, cols)
+        return A, foot.b
