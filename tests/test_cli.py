@@ -21,6 +21,7 @@ def test_list_json():
     assert listing["robots"] == ["cassie", "draco", "g1", "h1", "xo"]
     assert {f"{r}_stand" for r in listing["robots"]} <= set(listing["scenarios"])
     assert "standing" in listing["controllers"]
+    assert listing["planners"] == ["alip", "hlip", "mlip", "dcm", "alip_general"]
 
 
 def test_list_text():
@@ -71,6 +72,9 @@ def test_run_text_summary():
         (["run", "nope"], "unknown scenario 'nope'"),
         (["show", "atlas", "--no-wait"], "unknown robot 'atlas'"),
         (["run", "g1_stand", "--duration", "-1"], "--duration must be positive"),
+        (["bench", "rom", "--planner", "lipp"], "unknown planner 'lipp'"),
+        (["bench", "rom", "--planner", "alip", "--gain", "lqr"], "supports gains"),
+        (["bench", "rom", "--planner", "hlip", "--t-ds", "-0.1"], "t_ds must be non-negative"),
     ],
 )
 def test_bad_input_is_one_line_exit_2(args, words):
@@ -87,3 +91,17 @@ def test_bad_scenario_file_is_one_line_exit_2(tmp_path):
     out = romoco("run", str(path))
     assert out.returncode == 2 and "Traceback" not in out.stderr
     assert f"{path}: controller.rate_hzz: unknown key" in out.stderr
+
+
+def test_bench_rom_json_and_plots(tmp_path):
+    """The H-LIP bench settles every segment of the profile and writes its two figures."""
+    out = romoco("bench", "rom", "--planner", "hlip", "--robot", "cassie", "--json", "--plot", str(tmp_path))
+    assert out.returncode == 0, out.stderr
+    summary = json.loads(out.stdout.strip().splitlines()[-1])
+    assert summary["planner"] == "hlip" and summary["t_ds_s"] == 0.05
+    assert len(summary["segments"]) == 6
+    assert all(n is not None and n <= 5 for n in summary["steps_to_converge"])
+    assert all(row["settled_rms_error"] < 1e-3 for row in summary["segments"])
+    assert summary["planner_cost"]["update_us"]["median"] > 0
+    for path in summary["plots"]:
+        assert open(path, "rb").read(8) == b"\x89PNG\r\n\x1a\n"
