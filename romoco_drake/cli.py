@@ -130,6 +130,21 @@ def _cmd_bench_rom(args) -> int:
     return 0
 
 
+def _cmd_bench_embedding(args) -> int:
+    from romoco_drake.bench.embedding import bench_embedding
+
+    s = bench_embedding(args.robot, ticks=args.ticks)
+    if args.json:
+        print(json.dumps(s))
+    else:
+        print(f"OutputEmbedding on {s['robot']}, {s['ticks']} ticks per mode:")
+        for mode in ("walking", "standing"):
+            r, u = s[mode]["references_ms"], s[mode]["swing_update_ms"]
+            print(f"  {mode:8s} references {r['median']} ms median ({r['p99']} p99); "
+                  f"swing update {u['median']} ms median ({u['p99']} p99)")
+    return 0
+
+
 def _print_rom_summary(s: dict) -> None:
     cost = s["planner_cost"]
     print(f"{s['planner']} on the {s['robot']} template (z0 {s['com_height_m']} m, T_SS {s['t_ss_s']} s, "
@@ -175,6 +190,11 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", type=Path, metavar="DIR", help="write velocity and phase-portrait PNGs")
     p.add_argument("--json", action="store_true", help="print the summary as JSON (last line)")
     p.set_defaults(func=_cmd_bench_rom)
+    p = bench.add_parser("embedding", help="per-tick cost of the output embedding")
+    p.add_argument("--robot", default="g1")
+    p.add_argument("--ticks", type=int, default=2000)
+    p.add_argument("--json", action="store_true", help="print the result as JSON (last line)")
+    p.set_defaults(func=_cmd_bench_embedding)
     return parser
 
 

@@ -67,7 +67,7 @@ class HybridLipTemplate(LeafSystem):
         super().__init__()
         self.mass, self.ds_model, self.g = mass, ds_model, g
         self.planner_output_port = self.DeclareAbstractInputPort(
-            "planner_output", AbstractValue.Make(_placeholder_plan()))
+            "planner_output", AbstractValue.Make(PlannerOutput.placeholder()))
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
         self._xc = self.DeclareContinuousState(BasicVector(np.asarray(com0, dtype=float)), 2, 2, 0)
         self._gait = self.DeclareAbstractState(AbstractValue.Make(initial))
@@ -146,7 +146,3 @@ class HybridLipTemplate(LeafSystem):
         gait = self.gait(context)
         out.SetFromVector([*gait.stance, gait.heading, gait.steps, 1.0 if gait.side == "left" else -1.0])
 
-
-def _placeholder_plan() -> PlannerOutput:
-    nan = np.full((2, 2), np.nan)
-    return PlannerOutput("none", "left", np.zeros(3), 0.0, 0.3, 0.0, 0.0, 0.65, nan, nan, np.zeros(2), False)

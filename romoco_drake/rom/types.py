@@ -83,3 +83,11 @@ class PlannerOutput:
     orbit_pre_impact: np.ndarray  # (2, 2) the desired orbit's state at the same instant
     nominal_step: np.ndarray  # (2,) the orbit's step u* for this stance side
     valid: bool = True
+
+    @classmethod
+    def placeholder(cls) -> PlannerOutput:
+        """An invalid plan for ports that have not received one yet."""
+        nan = np.full((2, 2), np.nan)
+        cmd = WalkCommand()
+        return cls("none", "left", np.zeros(3), 0.0, cmd.step_time, 0.0, 0.0, cmd.com_height, nan, nan,
+                   np.zeros(2), False)

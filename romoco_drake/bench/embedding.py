@@ -1,0 +1,68 @@
+"""``romoco bench embedding``: per-tick cost of the OutputEmbedding system on a robot."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from pydrake.systems.analysis import Simulator
+
+from romoco_drake.bench.rom import _percentiles
+from romoco_drake.embedding.references import MODES
+from romoco_drake.embedding.system import OutputEmbedding
+from romoco_drake.robots.model import load_robot
+from romoco_drake.rom.planners import PlannerParams, make_planner
+from romoco_drake.rom.types import WalkCommand
+
+
+def bench_embedding(robot_name: str = "g1", ticks: int = 2000, period: float = 0.002, seed: int = 0) -> dict:
+    """Times ``task_references`` evaluations (state changed every tick) and swing updates.
+
+    The state wanders around the nominal pose (joint noise 0.05 rad, velocity noise 0.5) through
+    a stepping cycle: left and right single support, then double support.
+    """
+    robot = load_robot(robot_name)
+    walk = robot.config.walking
+    cmd = WalkCommand(vx=0.3, step_width=walk.step_width, com_height=walk.z0, step_time=walk.t_ss)
+    law = make_planner("hlip", PlannerParams(mass=robot.total_mass, t_ds=walk.t_ds))
+    system = OutputEmbedding(robot, period)
+    context = system.CreateDefaultContext()
+    rng = np.random.default_rng(seed)
+    x0 = np.concatenate([robot.nominal.q, np.zeros(robot.nv)])
+    system.state_port.FixValue(context, x0)
+    system.mode_port.FixValue(context, [MODES.index("walking")])
+    system.gait_phase_port.FixValue(context, [1.0, 0.0])
+    system.planner_output_port.FixValue(context, law.plan([0, 0, walk.z0, 0, 0, 0], "left", 0.0, cmd))
+    simulator = Simulator(system, context)
+    simulator.Initialize()
+    results = {}
+    t = 0.0
+    for mode in ("walking", "standing"):
+        system.mode_port.FixValue(context, [MODES.index(mode)])
+        eval_ns, update_ns = [], []
+        for _ in range(ticks):
+            t += period
+            step_time = walk.t_ss + walk.t_ds
+            k, tau = divmod(t, step_time)
+            side = 1.0 if int(k) % 2 == 0 else -1.0
+            x = x0.copy()
+            x[robot.joint_q_index] += 0.05 * rng.standard_normal(len(robot.joint_q_index))
+            x[robot.nq:] = 0.5 * rng.standard_normal(robot.nv)
+            system.state_port.FixValue(context, x)
+            system.gait_phase_port.FixValue(context, [side, tau])
+            system.planner_output_port.FixValue(
+                context, law.plan([0.02, -0.1 * side, walk.z0, 0, 0, 0], "left" if side > 0 else "right",
+                                  tau, cmd))
+            t0 = time.perf_counter_ns()
+            simulator.AdvanceTo(t)  # the swing update of the previous tick
+            update_ns.append(time.perf_counter_ns() - t0)
+            t0 = time.perf_counter_ns()
+            system.task_references_port.Eval(context)
+            eval_ns.append(time.perf_counter_ns() - t0)
+        results[mode] = {"references_ms": _ms(eval_ns), "swing_update_ms": _ms(update_ns)}
+    return {"robot": robot_name, "ticks": ticks, "period_s": period, **results}
+
+
+def _ms(ns: list[int]) -> dict:
+    us = _percentiles(ns)
+    return {k: round(v / 1e3, 4) for k, v in us.items()}

@@ -1,0 +1,208 @@
+"""From a mode, gait phase and plan to task references: outputs, desired trajectories, constraints.
+
+This is the output embedding's math (paper §IV); :class:`~romoco_drake.embedding.system.OutputEmbedding`
+wraps it as a system. Desired values per mode:
+
+- walking, single support: CoM height = the plan's z0; stance hip yaw turns the pelvis half of
+  the planned yaw change and the swing hip yaw the other half (linear in the step), so at
+  touchdown the feet differ by the planned yaw and the pelvis bisects them; pelvis and swing-sole
+  tilt zero; the swing sole follows a Bezier trajectory from lift-off to the plan's target
+  (apex ``swing_height``, zero touchdown velocity), replanned each tick from its own state.
+  Double support keeps CoM height, pelvis tilt and the stance hip yaw.
+- standing: CoM over the middle of the two soles at the nominal CoM height, pelvis level and
+  facing the mean heading of the feet.
+- in air: the nominal joint positions.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from romoco_drake.embedding.bezier import SwingTrajectory, plan_swing
+from romoco_drake.embedding.contact import DOMAINS, ContactModel
+from romoco_drake.embedding.outputs import InAirOutputs, Output, StandingOutputs, WalkingOutputs
+from romoco_drake.robots.model import RobotModel
+from romoco_drake.rom.types import PlannerOutput, other_side
+
+MODES = ("in_air", "standing", "walking")
+# The swing target is frozen once this fraction of single support has passed: late target
+# moves would need large swing accelerations just before touchdown.
+FREEZE_FRACTION = 0.85
+
+
+@dataclass(frozen=True)
+class TaskReferences:
+    """Everything a whole-body controller needs for one tick.
+
+    Outputs (``names``, k of them): actual y, J (k×nv, ẏ = J v), J̇·v; desired y_d, ẏ_d, ÿ_d;
+    ``active`` marks the outputs regulated in this domain. Holonomic constraints of the domain:
+    h, J_h, J̇_h·v (rows: 3 per contact point of the feet in contact, then internal loops).
+    Contact forces: ``num_contact_forces`` = 3 × contact points (the first rows of J_h), limited
+    by A_f f ≤ b_f (friction pyramid, unilateral normal force, CoP inside each sole).
+    """
+
+    mode: str
+    domain: str
+    stance_side: str
+    names: tuple[str, ...]
+    y: np.ndarray
+    J: np.ndarray
+    Jdot_v: np.ndarray
+    y_des: np.ndarray
+    ydot_des: np.ndarray
+    yddot_des: np.ndarray
+    active: np.ndarray
+    holonomic: Output
+    num_contact_forces: int
+    A_f: np.ndarray
+    b_f: np.ndarray
+
+    @property
+    def error(self) -> np.ndarray:
+        """y − y_d (angles wrapped to (−π, π])."""
+        e = self.y - self.y_des
+        return np.where(self._angular, np.remainder(e + math.pi, 2 * math.pi) - math.pi, e)
+
+    @property
+    def _angular(self) -> np.ndarray:
+        return np.array(["yaw" in n or "pitch" in n or "roll" in n for n in self.names])
+
+
+@dataclass(frozen=True)
+class SwingState:
+    """What the embedding remembers across ticks of one step."""
+
+    stance_side: str
+    step_start: float  # controller time at which this step began
+    liftoff_hip_yaw: tuple[float, float]  # (stance, swing) hip yaw angles at the step start
+    trajectory: SwingTrajectory | None  # swing sole rel. stance sole, stance yaw frame
+
+
+class EmbeddingCore:
+    """Evaluates task references for a robot on the controller plant (no AutoDiff)."""
+
+    def __init__(self, robot: RobotModel, contact: ContactModel | None = None):
+        self.robot = robot
+        self.walking = WalkingOutputs(robot)
+        self.standing = StandingOutputs(robot)
+        self.in_air = InAirOutputs(robot)
+        self.contact = contact or ContactModel(robot)
+        self.swing_height = robot.config.walking.swing_height
+        self.nominal_com_height = float(robot.nominal.p_WCoM[2])
+        self.nominal_joints = robot.nominal.q[robot.actuated_q_index]
+        plant = robot.plant
+        self._hip_yaw_q = {s: plant.GetJointByName(leg.hip_yaw).position_start()
+                           for s, leg in self.walking.legs.items()}
+        self._hip_yaw_sign = {s: self._yaw_axis_sign(leg.hip_yaw) for s, leg in self.walking.legs.items()}
+        self._swing_index = self.walking.names.index("swing_foot_x")
+        ss = np.ones(len(self.walking.names), dtype=bool)
+        ds = np.zeros_like(ss)
+        for name in ("com_z", "stance_hip_yaw", "pelvis_pitch", "pelvis_roll"):
+            ds[self.walking.names.index(name)] = True
+        self._walking_active = {"single": ss, "double": ds}
+
+    def _yaw_axis_sign(self, joint_name: str) -> float:
+        """+1 if the hip yaw joint turns the leg about +z at the nominal pose, else −1."""
+        plant = self.robot.plant
+        context = plant.CreateDefaultContext()
+        plant.SetPositions(context, self.robot.nominal.q)
+        joint = plant.GetJointByName(joint_name)
+        axis = joint.frame_on_parent().CalcRotationMatrixInWorld(context).matrix() @ joint.revolute_axis()
+        return 1.0 if axis[2] > 0.0 else -1.0
+
+    def start_step(self, context, stance_side: str, t: float, plan: PlannerOutput) -> SwingState:
+        """Latches lift-off: the swing sole's pose and both hip yaws at the start of a step."""
+        out = self.walking.evaluate(context, stance_side)
+        q = self.robot.plant.GetPositions(context)
+        i = self._swing_index
+        start = out.y[i:i + 3]
+        trajectory = plan_swing(start, self._target(plan), plan.t_ss, self.swing_height)
+        hips = (float(q[self._hip_yaw_q[stance_side]]), float(q[self._hip_yaw_q[other_side(stance_side)]]))
+        return SwingState(stance_side, t, hips, trajectory)
+
+    def update_swing(self, swing: SwingState, tau: float, plan: PlannerOutput) -> SwingState:
+        """Replans the swing toward the plan's latest target, from the trajectory's own state at
+        ``tau`` seconds into the step."""
+        if swing.trajectory is None or tau >= FREEZE_FRACTION * plan.t_ss:
+            return swing
+        trajectory = swing.trajectory.replan(tau, self._target(plan))
+        return SwingState(swing.stance_side, swing.step_start, swing.liftoff_hip_yaw, trajectory)
+
+    @staticmethod
+    def _target(plan: PlannerOutput) -> np.ndarray:
+        return np.array([plan.swing_target[0], plan.swing_target[1], 0.0])
+
+    def evaluate(self, context, mode: str, tau: float, plan: PlannerOutput | None,
+                 swing: SwingState | None) -> TaskReferences:
+        """References ``tau`` seconds into the step on the controller-plant ``context`` (state set).
+
+        Walking without a plan or a latched step falls back to standing references.
+        """
+        if mode == "walking" and plan is not None and swing is not None:
+            return self._walking(context, tau, plan, swing)
+        if mode == "in_air":
+            return self._in_air(context)
+        return self._standing(context)
+
+    def _walking(self, context, tau: float, plan: PlannerOutput, swing: SwingState) -> TaskReferences:
+        stance = swing.stance_side
+        out = self.walking.evaluate(context, stance)
+        single = tau < plan.t_ss
+        k = len(out.names)
+        y_d, yd_d, ydd_d = np.zeros(k), np.zeros(k), np.zeros(k)
+        y_d[0] = plan.com_height
+        # Hip yaws: the pelvis turns half the planned yaw change relative to each foot.
+        s = min(max(tau / plan.t_ss, 0.0), 1.0)
+        rate = 0.0 if not single else 1.0 / plan.t_ss
+        half = 0.5 * plan.swing_yaw
+        st0, sw0 = swing.liftoff_hip_yaw
+        st_goal = -self._hip_yaw_sign[stance] * half
+        sw_goal = self._hip_yaw_sign[other_side(stance)] * half
+        y_d[1], yd_d[1] = st0 + s * (st_goal - st0), rate * (st_goal - st0)
+        i_sw_yaw = out.names.index("swing_hip_yaw")
+        y_d[i_sw_yaw], yd_d[i_sw_yaw] = sw0 + s * (sw_goal - sw0), rate * (sw_goal - sw0)
+        if swing.trajectory is not None:
+            i = self._swing_index
+            y_d[i:i + 3], yd_d[i:i + 3], ydd_d[i:i + 3] = swing.trajectory.evaluate(tau)
+        active = self._walking_active["single" if single else "double"]
+        return self._pack("walking", stance if single else "double", stance, out, y_d, yd_d, ydd_d, active,
+                          context)
+
+    def _standing(self, context) -> TaskReferences:
+        out = self.standing.evaluate(context)
+        plant = self.robot.plant
+        world = plant.world_frame()
+        centers, headings = [], []
+        for side in ("left", "right"):
+            R_WS = self.contact.sole_rotation(context, side)
+            foot = self.contact.feet[side]
+            centers.append(plant.CalcPointsPositions(context, foot.frame, foot.p_FS, world).ravel())
+            headings.append(math.atan2(R_WS[1, 0], R_WS[0, 0]))
+        y_d = np.zeros(6)
+        y_d[:2] = 0.5 * (centers[0][:2] + centers[1][:2])
+        y_d[2] = 0.5 * (centers[0][2] + centers[1][2]) + self.nominal_com_height
+        y_d[5] = math.atan2(sum(math.sin(h) for h in headings), sum(math.cos(h) for h in headings))
+        return self._pack("standing", "double", "left", out, y_d, np.zeros(6), np.zeros(6),
+                          np.ones(6, dtype=bool), context)
+
+    def _in_air(self, context) -> TaskReferences:
+        out = self.in_air.evaluate(context)
+        k = len(out.names)
+        return self._pack("in_air", "none", "left", out, self.nominal_joints.copy(), np.zeros(k), np.zeros(k),
+                          np.ones(k, dtype=bool), context)
+
+    def _pack(self, mode, domain, stance, out: Output, y_d, yd_d, ydd_d, active, context) -> TaskReferences:
+        holonomic = self.contact.constraints(context, domain)
+        blocks = [self.contact.friction_constraints(context, side) for side in DOMAINS[domain]]
+        n_f = sum(A.shape[1] for A, _ in blocks)
+        A_f = np.zeros((sum(A.shape[0] for A, _ in blocks), n_f))
+        r = c = 0
+        for A, _ in blocks:
+            A_f[r:r + A.shape[0], c:c + A.shape[1]] = A
+            r, c = r + A.shape[0], c + A.shape[1]
+        b_f = np.concatenate([b for _, b in blocks]) if blocks else np.zeros(0)
+        return TaskReferences(mode, domain, stance, out.names, out.y, out.J, out.Jdot_v, y_d, yd_d, ydd_d,
+                              active, holonomic, n_f, A_f, b_f)

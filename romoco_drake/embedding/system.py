@@ -1,0 +1,91 @@
+"""OutputEmbedding: planner output + gait phase + mode + state → TaskReferences."""
+
+from __future__ import annotations
+
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import LeafSystem
+
+from romoco_drake.embedding.references import MODES, EmbeddingCore, SwingState, TaskReferences
+from romoco_drake.robots.model import RobotModel
+from romoco_drake.rom.types import GAIT_PHASE_SIZE, PlannerOutput, side_from_sign
+
+
+class OutputEmbedding(LeafSystem):
+    """Turns the planner's discrete foot placement into continuous whole-body task references.
+
+    The output is evaluated on demand from the current state (Jacobians and biases from the
+    system's own controller-plant context); the swing trajectory is latched at each step start
+    and replanned toward the latest target every ``period`` seconds.
+
+    | port | kind | size | meaning |
+    |---|---|---|---|
+    | ``state`` | in | nq+nv | robot state [q; v] (controller plant order) |
+    | ``planner_output`` | in | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` |
+    | ``gait_phase`` | in | 2 | stance (+1 left, −1 right), time in step [s] |
+    | ``mode`` | in | 1 | index into ``MODES``: 0 in-air, 1 standing, 2 walking |
+    | ``task_references`` | out | abstract | :class:`~romoco_drake.embedding.references.TaskReferences` |
+
+    Abstract state: the current step's :class:`SwingState` (None outside walking).
+    """
+
+    def __init__(self, robot: RobotModel, period: float, core: EmbeddingCore | None = None):
+        super().__init__()
+        self.robot = robot
+        self.core = core or EmbeddingCore(robot)
+        self._plant_context = robot.plant.CreateDefaultContext()
+        self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
+        self.planner_output_port = self.DeclareAbstractInputPort(
+            "planner_output", AbstractValue.Make(PlannerOutput.placeholder()))
+        self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
+        self.mode_port = self.DeclareVectorInputPort("mode", 1)
+        self._swing = self.DeclareAbstractState(AbstractValue.Make(_NoSwing()))
+        self.task_references_port = self.DeclareAbstractOutputPort(
+            "task_references", self._default_references, self._calc_references)
+        self.DeclareInitializationUnrestrictedUpdateEvent(self._update_swing)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update_swing)
+
+    def _default_references(self) -> AbstractValue:
+        self.robot.plant.SetPositions(self._plant_context, self.robot.nominal.q)
+        return AbstractValue.Make(self.core.evaluate(self._plant_context, "standing", 0.0, None, None))
+
+    def _set_plant_state(self, context) -> None:
+        self.robot.plant.SetPositionsAndVelocities(self._plant_context, self.state_port.Eval(context))
+
+    def _mode(self, context) -> str:
+        index = int(round(float(self.mode_port.Eval(context)[0])))
+        return MODES[min(max(index, 0), len(MODES) - 1)]
+
+    def swing_state(self, context) -> SwingState | None:
+        value = context.get_abstract_state(self._swing).get_value()
+        return None if isinstance(value, _NoSwing) else value
+
+    def _update_swing(self, context, state) -> None:
+        swing = self.swing_state(context)
+        if self._mode(context) != "walking":
+            new = _NoSwing()
+        else:
+            phase = self.gait_phase_port.Eval(context)
+            plan: PlannerOutput = self.planner_output_port.Eval(context)
+            side, tau = side_from_sign(phase[0]), float(phase[1])
+            step_start = context.get_time() - tau
+            same_step = (swing is not None and swing.stance_side == side
+                         and abs(swing.step_start - step_start) < 1e-6)
+            if same_step:
+                new = self.core.update_swing(swing, tau, plan)
+            else:
+                self._set_plant_state(context)
+                new = self.core.start_step(self._plant_context, side, step_start, plan)
+        state.get_mutable_abstract_state(int(self._swing)).set_value(new)
+
+    def _calc_references(self, context, value) -> None:
+        self._set_plant_state(context)
+        phase = self.gait_phase_port.Eval(context)
+        refs: TaskReferences = self.core.evaluate(
+            self._plant_context, self._mode(context), float(phase[1]),
+            self.planner_output_port.Eval(context), self.swing_state(context))
+        value.set_value(refs)
+
+
+class _NoSwing:
+    """Marker for 'no step latched' (abstract state needs one concrete value type)."""
+
