@@ -1,0 +1,163 @@
+"""Task-space control QP (RoMoCo paper §V-A): output accelerations under whole-body dynamics.
+
+    min_{v̇, τ, λ}  Σ_i w_i ‖J_i v̇ + J̇_i v − ÿ_i^cmd‖² + ε (‖v̇‖² + ‖τ‖² + ‖λ‖²)
+    s.t.  M v̇ + C(q, v) = B τ + J_hᵀ λ          (dynamics, C = Coriolis − gravity)
+          J_h v̇ + J̇_h v = −k_h J_h v            (holonomic: contacts and internal loops)
+          A_f λ_c ≤ b_f                           (friction pyramid, CoP, unilateral contact)
+          |τ| ≤ τ_max                             (torque limits)
+
+with ÿ^cmd = ÿ_d − K_p (y − y_d) − K_d (ẏ − ẏ_d). The ε terms keep the QP strictly convex
+(it has a unique solution even when tasks are redundant). One program per contact domain
+is built once; each tick only its coefficients change and Clarabel solves it. The small
+k_h damps constraint drift, since the controller plant's contacts are only held in velocity.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.solvers import ClarabelSolver, MathematicalProgram, SolverOptions
+
+from romoco_drake.embedding.contact import ContactModel
+from romoco_drake.embedding.references import TaskReferences
+from romoco_drake.robots.model import RobotModel
+
+
+@dataclass(frozen=True)
+class TaskGain:
+    """Gains and weight for the outputs whose names match ``outputs`` (a glob)."""
+
+    outputs: str
+    kp: float
+    kd: float
+    weight: float
+
+
+DEFAULT_TASK_GAINS = (
+    TaskGain("com_*", 100.0, 20.0, 10.0),
+    TaskGain("pelvis_*", 200.0, 30.0, 10.0),
+    TaskGain("*hip_yaw", 100.0, 20.0, 1.0),
+    TaskGain("swing_foot_[xyz]", 400.0, 40.0, 10.0),
+    TaskGain("swing_foot_*", 200.0, 30.0, 1.0),
+    TaskGain("*", 100.0, 20.0, 1.0),
+)
+# Locked joints (arms, waist) are held by a joint task in every mode.
+LOCKED_GAIN = TaskGain("locked", 200.0, 30.0, 1.0)
+
+
+def task_gains(names, gains=DEFAULT_TASK_GAINS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(kp, kd, weight) arrays for output ``names``: the first matching entry wins."""
+    rows = [next(g for g in gains if fnmatch.fnmatchcase(n, g.outputs)) for n in names]
+    return (np.array([g.kp for g in rows]), np.array([g.kd for g in rows]),
+            np.array([g.weight for g in rows]))
+
+
+@dataclass(frozen=True)
+class QpSolution:
+    """One tick's result; ``success`` False means τ is not usable."""
+
+    tau: np.ndarray
+    vdot: np.ndarray
+    forces: np.ndarray
+    success: bool
+
+
+class _DomainProgram:
+    """The QP of one contact domain, built once; :meth:`solve` updates its coefficients."""
+
+    def __init__(self, robot: RobotModel, n_h: int, n_f: int, n_ineq: int):
+        nv, nu = robot.nv, robot.nu
+        self.n = nv + nu + n_h
+        self.prog = MathematicalProgram()
+        self.x = self.prog.NewContinuousVariables(self.n, "x")
+        self.cost = self.prog.AddQuadraticCost(np.eye(self.n), np.zeros(self.n), self.x, is_convex=True)
+        self.dynamics = self.prog.AddLinearEqualityConstraint(np.zeros((nv, self.n)), np.zeros(nv), self.x)
+        self.holonomic = None
+        if n_h:
+            self.holonomic = self.prog.AddLinearEqualityConstraint(
+                np.zeros((n_h, self.n)), np.zeros(n_h), self.x)
+        lam_c = self.x[nv + nu:nv + nu + n_f]
+        self.friction = (self.prog.AddLinearConstraint(np.zeros((n_ineq, n_f)), np.full(n_ineq, -np.inf),
+                                                       np.zeros(n_ineq), lam_c) if n_ineq else None)
+        self.prog.AddBoundingBoxConstraint(-robot.effort_limits, robot.effort_limits, self.x[nv:nv + nu])
+
+
+class TscQp:
+    """The TSC-QP for one robot. ``solve`` takes the controller-plant context (state set)."""
+
+    def __init__(self, robot: RobotModel, contact: ContactModel, gains=DEFAULT_TASK_GAINS,
+                 regularization: float = 1e-4, constraint_damping: float = 20.0):
+        self.robot, self.contact = robot, contact
+        self.gains, self.eps, self.k_h = gains, regularization, constraint_damping
+        self.solver = ClarabelSolver()
+        self.options = SolverOptions()
+        self._programs: dict[str, _DomainProgram] = {}
+        self._locked_v = robot.actuated_v_index[robot.locked_actuator_mask]
+        self._locked_q = robot.actuated_q_index[robot.locked_actuator_mask]
+        self._locked_q0 = robot.nominal.q[self._locked_q]
+        self._gain_cache: dict[tuple[str, ...], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+    def _program(self, refs: TaskReferences) -> _DomainProgram:
+        if refs.domain not in self._programs:
+            self._programs[refs.domain] = _DomainProgram(
+                self.robot, refs.holonomic.J.shape[0], refs.num_contact_forces, refs.A_f.shape[0])
+        return self._programs[refs.domain]
+
+    def _gains(self, names: tuple[str, ...]):
+        if names not in self._gain_cache:
+            self._gain_cache[names] = task_gains(names, self.gains)
+        return self._gain_cache[names]
+
+    def commanded_accelerations(self, refs: TaskReferences, v: np.ndarray) -> np.ndarray:
+        """ÿ^cmd = ÿ_d − K_p (y − y_d) − K_d (ẏ − ẏ_d) for every output."""
+        kp, kd, _ = self._gains(refs.names)
+        return refs.yddot_des - kp * refs.error - kd * (refs.J @ v - refs.ydot_des)
+
+    def solve(self, context, refs: TaskReferences) -> QpSolution:
+        r, plant = self.robot, self.robot.plant
+        nv, nu = r.nv, r.nu
+        v = plant.GetVelocities(context)
+        q = plant.GetPositions(context)
+        prog = self._program(refs)
+        n = prog.n
+        # Task rows: active outputs, then locked joints.
+        _, _, w = self._gains(refs.names)
+        act = refs.active
+        a_cmd = self.commanded_accelerations(refs, v)[act]
+        J = refs.J[act]
+        bias = refs.Jdot_v[act]
+        w = w[act]
+        if len(self._locked_v):
+            kp, kd, wl = LOCKED_GAIN.kp, LOCKED_GAIN.kd, LOCKED_GAIN.weight
+            J_l = np.zeros((len(self._locked_v), nv))
+            J_l[np.arange(len(self._locked_v)), self._locked_v] = 1.0
+            a_l = kp * (self._locked_q0 - q[self._locked_q]) - kd * v[self._locked_v]
+            J, bias = np.vstack([J, J_l]), np.concatenate([bias, np.zeros(len(a_l))])
+            a_cmd, w = np.concatenate([a_cmd, a_l]), np.concatenate([w, np.full(len(a_l), wl)])
+        WJ = J * w[:, None]
+        Q = np.zeros((n, n))
+        Q[:nv, :nv] = 2.0 * J.T @ WJ
+        Q[np.diag_indices(n)] += 2.0 * self.eps
+        b = np.zeros(n)
+        b[:nv] = 2.0 * WJ.T @ (bias - a_cmd)
+        prog.cost.evaluator().UpdateCoefficients(Q, b)
+
+        M = plant.CalcMassMatrix(context)
+        C = plant.CalcBiasTerm(context) - plant.CalcGravityGeneralizedForces(context)
+        Jh = refs.holonomic.J
+        A_dyn = np.hstack([M, -r.B, -Jh.T])
+        prog.dynamics.evaluator().UpdateCoefficients(A_dyn, -C)
+        if prog.holonomic is not None:
+            A_h = np.zeros((Jh.shape[0], n))
+            A_h[:, :nv] = Jh
+            prog.holonomic.evaluator().UpdateCoefficients(A_h, -refs.holonomic.Jdot_v - self.k_h * (Jh @ v))
+        if prog.friction is not None:
+            prog.friction.evaluator().UpdateCoefficients(refs.A_f, np.full(len(refs.b_f), -np.inf), refs.b_f)
+        result = self.solver.Solve(prog.prog, None, self.options)
+        if not result.is_success():
+            return QpSolution(np.zeros(nu), np.zeros(nv), np.zeros(n - nv - nu), False)
+        x = result.GetSolution(prog.x)
+        return QpSolution(x[nv:nv + nu], x[:nv], x[nv + nu:], True)
+
