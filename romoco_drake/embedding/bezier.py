@@ -2,17 +2,25 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from math import comb
 
 import numpy as np
 
 
-def _bernstein(degree: int, s: np.ndarray) -> np.ndarray:
-    """Bernstein basis of ``degree`` at s (m,) → (m, degree + 1)."""
-    i = np.arange(degree + 1)
-    coeffs = np.array([comb(degree, k) for k in i], dtype=float)
-    return coeffs * s[:, None] ** i * (1.0 - s[:, None]) ** (degree - i)
+@functools.cache
+def _power_basis(degree: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Exponents 0..n, M with B_i^n(s) = Σ_k M[k, i] s^k, and the factors k and k(k − 1) of s^k's
+    first and second derivatives (from k = 1 and k = 2). M[k, i] = (−1)^(k−i) C(n, k) C(k, i), k ≥ i."""
+    n = degree
+    M = np.array([[(-1) ** (k - i) * comb(n, k) * comb(k, i) if k >= i else 0 for i in range(n + 1)]
+                  for k in range(n + 1)], dtype=float)
+    k = np.arange(n + 1)
+    arrays = (k, M, k[1:, None].astype(float), (k * (k - 1))[2:, None].astype(float))
+    for a in arrays:
+        a.setflags(write=False)
+    return arrays
 
 
 class BezierCurve:
@@ -20,6 +28,8 @@ class BezierCurve:
 
     ``control_points`` is (n + 1, d): degree n, dimension d. ``evaluate`` returns the value
     and the first and second time derivatives; each is (d,) for a scalar t, (m, d) for m times.
+    The curve is converted once to power-basis coefficients in s = t/T, so evaluating is a
+    few small matrix products.
     """
 
     def __init__(self, control_points: np.ndarray, duration: float):
@@ -29,34 +39,45 @@ class BezierCurve:
         self.control_points = P.reshape(len(P), -1)
         self.duration = float(duration)
         self.degree = len(P) - 1
-        n, d = self.degree, self.control_points.shape[1]
-        # Derivative control points: n ΔP / T, then (n - 1) Δ(that) / T.
-        self._d1 = n * np.diff(self.control_points, axis=0) / duration if n >= 1 else np.zeros((1, d))
-        self._d2 = (n - 1) * np.diff(self._d1, axis=0) / duration if n >= 2 else np.zeros((1, d))
+        self._exponents, M, k1, k2 = _power_basis(self.degree)
+        c = M @ self.control_points
+        self._c, self._c1, self._c2 = c, k1 * c[1:] / duration, k2 * c[2:] / duration**2
 
     def evaluate(self, t: float | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        scalar = np.ndim(t) == 0
-        s = np.clip(np.atleast_1d(np.asarray(t, dtype=float)) / self.duration, 0.0, 1.0)
-        out = tuple(_bernstein(len(P) - 1, s) @ P for P in (self.control_points, self._d1, self._d2))
-        return tuple(x[0] for x in out) if scalar else out
+        n = self.degree
+        if np.ndim(t) == 0:
+            powers = min(max(t / self.duration, 0.0), 1.0) ** self._exponents
+        else:
+            powers = np.clip(np.asarray(t, dtype=float) / self.duration, 0.0, 1.0)[:, None] ** self._exponents
+        return powers @ self._c, powers[..., :n] @ self._c1, powers[..., :max(n - 1, 0)] @ self._c2
+
+
+# Quintic control points from [p0, v0 T, a0 T², p1, v1 T, a1 T²]: the end derivatives of a
+# degree-5 Bezier are 5 (P1 − P0)/T and 20 (P2 − 2 P1 + P0)/T² (mirrored at the end).
+_QUINTIC = np.array([
+    [1.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [1.0, 1 / 5, 0.0, 0.0, 0.0, 0.0],
+    [1.0, 2 / 5, 1 / 20, 0.0, 0.0, 0.0],
+    [0.0, 0.0, 0.0, 1.0, -2 / 5, 1 / 20],
+    [0.0, 0.0, 0.0, 1.0, -1 / 5, 0.0],
+    [0.0, 0.0, 0.0, 1.0, 0.0, 0.0],
+])
 
 
 def quintic_bezier(p0, v0, a0, p1, v1, a1, duration: float) -> BezierCurve:
-    """The degree-5 curve with value, velocity and acceleration (p0, v0, a0) at 0 and (p1, v1, a1) at T."""
-    p0, v0, a0, p1, v1, a1 = (np.asarray(x, dtype=float) for x in (p0, v0, a0, p1, v1, a1))
+    """The degree-5 curve with value, velocity and acceleration (p0, v0, a0) at 0 and (p1, v1, a1) at T.
+
+    All six are arrays of the same shape (d,).
+    """
     T = duration
-    return BezierCurve(np.array([
-        p0,
-        p0 + v0 * T / 5,
-        p0 + 2 * v0 * T / 5 + a0 * T**2 / 20,
-        p1 - 2 * v1 * T / 5 + a1 * T**2 / 20,
-        p1 - v1 * T / 5,
-        p1,
-    ]), T)
+    boundary = np.array([p0, v0, a0, p1, v1, a1], dtype=float)
+    return BezierCurve((_QUINTIC * [1.0, T, T * T, 1.0, T, T * T]) @ boundary, T)
 
 
 # A remaining swing time below this is treated as over: the trajectory holds its position.
 _MIN_DURATION = 1e-6
+_ZERO3 = np.zeros(3)
+_ZERO3.setflags(write=False)
 
 
 @dataclass(frozen=True)
@@ -67,7 +88,8 @@ class SwingTrajectory:
     follow one quintic to the target; z rises to the apex ``apex_height`` above the higher of
     the lift-off and target heights, reached with zero vertical velocity and acceleration at
     mid-swing (``duration``/2), then descends to the target. Velocity and acceleration are zero
-    at touchdown. Each piece is a quintic, so the reference is C² and its halves monotone in z.
+    at touchdown. Each piece is a quintic, so the reference is C²; planned from rest, z rises
+    and falls monotonically (no overshoot of the apex).
 
     :meth:`replan` starts a new trajectory from this one's own state at t, so the reference
     stays continuous in position, velocity and acceleration when the target moves. Replanning
@@ -107,20 +129,21 @@ def plan_swing(p_start, target, duration: float, apex_height: float, *, t: float
     """
     p0 = np.asarray(p_start, dtype=float)
     p1 = np.asarray(target, dtype=float)
-    v0 = np.zeros(3) if v_start is None else np.asarray(v_start, dtype=float)
-    a0 = np.zeros(3) if a_start is None else np.asarray(a_start, dtype=float)
-    z_lift = p0[2] if liftoff_z is None else float(liftoff_z)
+    v0 = _ZERO3 if v_start is None else np.asarray(v_start, dtype=float)
+    a0 = _ZERO3 if a_start is None else np.asarray(a_start, dtype=float)
+    z0, z1 = float(p0[2]), float(p1[2])
+    z_lift = z0 if liftoff_z is None else float(liftoff_z)
     remaining = duration - t
     if remaining < _MIN_DURATION:
         return SwingTrajectory(duration, apex_height, z_lift, p1, t, BezierCurve(p0[None, :2], 1.0),
-                               ((t, BezierCurve(p0[None, 2:], 1.0)),))
-    zero = np.zeros(1)
-    horizontal = quintic_bezier(p0[:2], v0[:2], a0[:2], p1[:2], np.zeros(2), np.zeros(2), remaining)
+                               ((t, BezierCurve([[z0]], 1.0)),))
+    horizontal = quintic_bezier(p0[:2], v0[:2], a0[:2], p1[:2], _ZERO3[:2], _ZERO3[:2], remaining)
+    start = ([z0], [float(v0[2])], [float(a0[2])])
     t_apex = duration / 2
     if t_apex - t > _MIN_DURATION:
-        apex = np.array([max(z_lift, p1[2]) + apex_height])
-        vertical = ((t, quintic_bezier(p0[2:], v0[2:], a0[2:], apex, zero, zero, t_apex - t)),
-                    (t_apex, quintic_bezier(apex, zero, zero, p1[2:], zero, zero, duration - t_apex)))
+        apex = [max(z_lift, z1) + apex_height]
+        vertical = ((t, quintic_bezier(*start, apex, [0.0], [0.0], t_apex - t)),
+                    (t_apex, quintic_bezier(apex, [0.0], [0.0], [z1], [0.0], [0.0], duration - t_apex)))
     else:
-        vertical = ((t, quintic_bezier(p0[2:], v0[2:], a0[2:], p1[2:], zero, zero, remaining)),)
+        vertical = ((t, quintic_bezier(*start, [z1], [0.0], [0.0], remaining)),)
     return SwingTrajectory(duration, apex_height, z_lift, p1, t, horizontal, vertical)

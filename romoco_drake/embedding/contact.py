@@ -10,7 +10,8 @@ act on the robot only through their resultant wrench about the sole centroid,
 Σ J_iᵀ f_i = J_footᵀ [m; f], so the friction and CoP limits are imposed on that wrench
 (net friction pyramid, net normal force, CoP inside the whole sole polygon) and mapped
 back to the point forces: the split among the points (internal forces) is free, and the
-CoP may use the whole sole, not only the triangle of the representative points.
+CoP may use the whole sole, not only the triangle of the representative points. There is
+no limit on the yaw moment (torsional friction).
 
 Limits are expressed in the foot's sole frame S (:func:`~romoco_drake.embedding.outputs.sole_frame`:
 origin at the sole-point centroid, z_S the sole normal, x_S forward), so they hold when the
@@ -169,8 +170,10 @@ class ContactModel:
             A_w = np.vstack([limits, cop])
             b = np.zeros(len(A_w))
             b[0] = -min_normal_force
-            self.feet[side] = FootContact(side, robot.foot_frames[side], names, points_F, R_FS, p_FS,
-                                          G, A_w @ G, b)
+            arrays = (np.asfortranarray(points_F), R_FS, p_FS, G, A_w @ G, b)
+            for a in arrays:
+                a.setflags(write=False)
+            self.feet[side] = FootContact(side, robot.foot_frames[side], names, *arrays)
         self._names = {
             domain: tuple(f"{s}_{p}_{a}" for s in sides for p in self.feet[s].point_names for a in "xyz")
             + tuple(f"internal_{i}" for i in range(robot.num_internal_constraints()))
@@ -179,7 +182,7 @@ class ContactModel:
         self._world = plant.world_frame()
 
     def constraints(self, context, domain: str) -> Output:
-        """h, J_h, J̇_h·v of ``domain`` on the controller-plant ``context``."""
+        """h (as ``y``), J_h and J̇_h·v of ``domain`` on the controller-plant ``context``."""
         if domain not in DOMAINS:
             raise ValueError(f"unknown contact domain '{domain}' (one of {', '.join(DOMAINS)})")
         plant, W = self.robot.plant, self._world

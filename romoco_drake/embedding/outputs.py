@@ -14,6 +14,7 @@ torso or swing foot does not mix pitch into roll.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from math import atan2, cos, sin
 
 import numpy as np
 from pydrake.multibody.tree import Frame, JacobianWrtVariable, Joint
@@ -22,7 +23,8 @@ from romoco_drake.errors import RomocoError
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.robots.nominal import foot_forward_axis
 
-_EX, _EY = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
+_OTHER = {"left": "right", "right": "left"}
+_ORIGIN = np.zeros(3)
 
 
 @dataclass(frozen=True)
@@ -101,66 +103,93 @@ def find_leg_joints(robot: RobotModel, side: str) -> LegJoints:
     return LegJoints(chain[i_yaw].name(), rolls[-1] if rolls else None)
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+def _motion(plant, context, frame: Frame, p_FP: np.ndarray, W: Frame):
+    """R_WF, p_WP, the spatial Jacobian [J_ω; J_v] (6×nv) of a point P fixed in F and its bias [α; a]."""
+    X = frame.CalcPoseInWorld(context).GetAsMatrix34()
+    J = plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kV, frame, p_FP, W, W)
+    bias = plant.CalcBiasSpatialAcceleration(context, JacobianWrtVariable.kV, frame, p_FP, W, W)
+    return X[:, :3], X[:, :3] @ p_FP + X[:, 3], J, bias.get_coeffs()
 
 
-class _FrameMotion:
-    """Pose, spatial Jacobian [J_ω; J_v] and bias acceleration of a point Bp fixed in frame B."""
-
-    def __init__(self, plant, context, frame: Frame, p_BBp: np.ndarray, v: np.ndarray):
-        W = plant.world_frame()
-        X = frame.CalcPoseInWorld(context)
-        self.R = X.rotation().matrix()
-        self.p = X.translation() + self.R @ p_BBp
-        J = plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kV, frame, p_BBp, W, W)
-        bias = plant.CalcBiasSpatialAcceleration(context, JacobianWrtVariable.kV, frame, p_BBp, W, W)
-        self.Jw, self.Jv = J[:3], J[3:]
-        self.w = self.Jw @ v
-        self.aw_bias, self.av_bias = bias.rotational(), bias.translational()
-
-    def axis_z(self, a_B: np.ndarray) -> tuple[float, np.ndarray, float]:
-        """z of the world vector a = R a_B (fixed in B), its Jacobian row and bias: ȧ = ω × a."""
-        a = self.R @ a_B
-        adot = _cross(self.w, a)
-        bias = _cross(self.aw_bias, a)[2] + _cross(self.w, adot)[2]
-        return a[2], a[1] * self.Jw[0] - a[0] * self.Jw[1], bias
-
-    def heading(self, a_B: np.ndarray) -> tuple[float, np.ndarray, float, float]:
-        """ψ = atan2(a_y, a_x) of a = R a_B: ψ, J_ψ, ψ̇ and the bias of ψ̈.
-
-        With u = (a_x, a_y): ψ̇ = (u × u̇)/|u|², ψ̈ = (u × ü)/|u|² − 2 (u·u̇) ψ̇/|u|².
-        """
-        a = self.R @ a_B
-        ux, uy = a[0], a[1]
-        rho2 = ux * ux + uy * uy
-        Ja = np.array([[0.0, a[2], -a[1]], [-a[2], 0.0, a[0]]]) @ self.Jw  # rows x, y of ω × a
-        adot = _cross(self.w, a)
-        abias = _cross(self.aw_bias, a) + _cross(self.w, adot)
-        J = (ux * Ja[1] - uy * Ja[0]) / rho2
-        psidot = (ux * adot[1] - uy * adot[0]) / rho2
-        bias = (ux * abias[1] - uy * abias[0]) / rho2 - 2.0 * (ux * adot[0] + uy * adot[1]) * psidot / rho2
-        return float(np.arctan2(uy, ux)), J, psidot, bias
+# The outputs below are scalar functions of a few kinematic quantities. They are computed with
+# Python floats and their Jacobians assembled as J = C S: S stacks plant Jacobians (angular and
+# translational rows of a few frames, CoM rows) and C holds each output's coefficients on them.
+# This keeps numpy calls, about a microsecond each, to a handful per tick.
 
 
-def _perp(x: np.ndarray) -> np.ndarray:
-    """−e_z × x."""
-    return np.array([x[1], -x[0], 0.0])
+def _tilt(a: list[float], w: list[float], alpha: list[float]) -> tuple[float, tuple, float]:
+    """z of a world axis a fixed in a body: a_z, coefficients of ȧ_z on ω, bias of ä_z.
 
-
-def _in_yaw_frame(d, J_d, ddot, d_bias, psi, J_psi, psidot, psi_bias):
-    """r = R_z(ψ)ᵀ d with its Jacobian and bias, including the terms from ψ̇ and ψ̈.
-
-    ṙ = R_zᵀ ḋ − ψ̇ e_z × r;  r̈ = R_zᵀ d̈ − ψ̈ e_z × r − ψ̇ e_z × (R_zᵀ ḋ + ṙ).
+    ȧ = ω × a, so ȧ_z = a_y ω_x − a_x ω_y and ä_z = (α × a)_z + ω_z (ω·a) − a_z |ω|² with α the
+    body's angular acceleration (its bias part here).
     """
-    c, s = np.cos(psi), np.sin(psi)
-    Rt = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-    r = Rt @ d
-    rdot_d = Rt @ ddot
-    rdot = rdot_d + psidot * _perp(r)
-    J = Rt @ J_d + np.outer(_perp(r), J_psi)
-    bias = Rt @ d_bias + psi_bias * _perp(r) + psidot * _perp(rdot_d + rdot)
-    return r, J, bias
+    ax, ay, az = a
+    wx, wy, wz = w
+    w_dot_a, w2 = wx * ax + wy * ay + wz * az, wx * wx + wy * wy + wz * wz
+    return az, (ay, -ax, 0.0), alpha[0] * ay - alpha[1] * ax + wz * w_dot_a - az * w2
+
+
+def _heading(a: list[float], w: list[float], alpha: list[float]) -> tuple[float, tuple, float, float]:
+    """ψ = atan2(a_y, a_x) of a world axis a fixed in a body: ψ, coefficients of ψ̇ on ω, ψ̇, ψ̈ bias.
+
+    With u = (a_x, a_y) and ȧ = ω × a: ψ̇ = (u × u̇)/|u|² = ω_z − a_z (u·ω_xy)/|u|², and
+    ψ̈ = (u × ü)/|u|² − 2 (u·u̇) ψ̇/|u|² with u·u̇ = a_z (u × ω_xy). Exact for a tilted axis.
+    """
+    ax, ay, az = a
+    wx, wy, wz = w
+    rho2 = ax * ax + ay * ay
+    k = az / rho2
+    u_cross_w = ax * wy - ay * wx
+    psidot = wz - k * (ax * wx + ay * wy)
+    bias = (alpha[2] - k * (ax * alpha[0] + ay * alpha[1]) + (wx * ax + wy * ay + wz * az) * u_cross_w / rho2
+            - 2.0 * k * u_cross_w * psidot)
+    return atan2(ay, ax), (-k * ax, -k * ay, 1.0), psidot, bias
+
+
+class _FloatingBase:
+    """Base rotation and angular-velocity Jacobian, and CoM kinematics, via the floating joint.
+
+    Drake's floating-joint velocities are the base's angular velocity ω_WB and translational
+    velocity v_WB, both in world. So J_ω of the base selects ω_WB (zero bias), and since
+    translation changes no kinetic energy, the v_WB rows of M v and of the equations of motion
+    are the linear momentum m v_CoM and its rate: J_CoM = M_t / m and J̇_CoM v = (C v)_t / m.
+    Both are a few times cheaper than Drake's general functions (its CoM bias loops over the
+    bodies) and are checked against them once, here.
+    """
+
+    def __init__(self, robot: RobotModel):
+        self._plant, self._body = robot.plant, robot.base_body
+        s = robot.base_v_start
+        self._rows = slice(s + 3, s + 6)
+        self._mass = robot.total_mass
+        self.Jw = np.zeros((3, robot.nv))
+        self.Jw[:, s:s + 3] = np.eye(3)
+        self.Jw.setflags(write=False)
+        plant, W, kV = robot.plant, robot.plant.world_frame(), JacobianWrtVariable.kV
+        frame = robot.base_body.body_frame()
+        context = plant.CreateDefaultContext()
+        plant.SetPositions(context, robot.nominal.q)
+        plant.SetVelocities(context, np.linspace(-1.0, 1.0, robot.nv))
+        _, J, bias = self.com(context)
+        checks = (
+            (J, plant.CalcJacobianCenterOfMassTranslationalVelocity(context, kV, W, W)),
+            (bias, plant.CalcBiasCenterOfMassTranslationalAcceleration(context, kV, W, W)),
+            (self.Jw, plant.CalcJacobianAngularVelocity(context, kV, frame, W, W)),
+            (np.zeros(3), plant.CalcBiasSpatialAcceleration(context, kV, frame, _ORIGIN, W, W).rotational()),
+        )
+        if not all(np.allclose(a, b, atol=1e-9) for a, b in checks):
+            raise RomocoError(f"{robot.yaml_path}: base or CoM kinematics from the floating joint do not "
+                              "match Drake's (is all mass on the floating base's tree?)")
+
+    def rotation(self, context) -> np.ndarray:
+        return self._plant.EvalBodyPoseInWorld(context, self._body).rotation().matrix()
+
+    def com(self, context) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """p_WCoM (3,), J_CoM (3×nv) and J̇_CoM·v (3,)."""
+        plant = self._plant
+        return (plant.CalcCenterOfMassPositionInWorld(context),
+                plant.CalcMassMatrix(context)[self._rows] / self._mass,
+                plant.CalcBiasTerm(context)[self._rows] / self._mass)
 
 
 class WalkingOutputs:
@@ -172,9 +201,10 @@ class WalkingOutputs:
     - com_z: CoM height above the stance sole centroid (yaw-independent);
     - hip yaws: joint angles (see :func:`find_leg_joints`);
     - pelvis pitch/roll: tilt of the base body (module docstring);
-    - swing_foot_{x,y,z}: swing minus stance sole centroid in the stance yaw frame, whose
-      yaw ψ is the heading of the stance foot's forward axis (exact, not assuming a level
-      foot; the ψ̇ and ψ̈ terms are in J and J̇·v);
+    - swing_foot_{x,y,z}: r = R_z(ψ)ᵀ d, d the swing minus the stance sole centroid and ψ the
+      heading of the stance foot's forward axis (exact, not assuming a level foot). The yaw
+      frame turns with the stance foot, so ṙ = R_zᵀ ḋ − ψ̇ e_z × r and
+      r̈ = R_zᵀ d̈ − ψ̈ e_z × r − ψ̇ e_z × (R_zᵀ ḋ + ṙ): J and J̇·v include the ψ terms;
     - swing foot roll (only with an ankle roll joint) and pitch: tilt of the swing sole frame.
     """
 
@@ -186,47 +216,73 @@ class WalkingOutputs:
         self._hip_yaw = {side: (plant.GetJointByName(leg.hip_yaw).position_start(),
                                 plant.GetJointByName(leg.hip_yaw).velocity_start())
                          for side, leg in self.legs.items()}
-        self._sole = {side: sole_frame(robot, side) for side in ("left", "right")}
-        self._base = robot.base_body.body_frame()
+        soles = {side: sole_frame(robot, side) for side in ("left", "right")}
+        self._centroid = {side: p_FS for side, (_, p_FS) in soles.items()}
+        self._forward = {side: R_FS[:, 0] for side, (R_FS, _) in soles.items()}
+        # Swing-foot tilt axes in the foot frame, as rows: roll = y_S,z; pitch = −x_S,z.
+        self._tilt_axes = {side: (np.vstack([R_FS[:, 1], -R_FS[:, 0]]) if self.has_ankle_roll
+                                  else -R_FS[:, :1].T) for side, (R_FS, _) in soles.items()}
+        self._W = plant.world_frame()
+        self._base = _FloatingBase(robot)
         self.names = ("com_z", "stance_hip_yaw", "pelvis_pitch", "pelvis_roll", "swing_foot_x",
                       "swing_foot_y", "swing_foot_z", "swing_hip_yaw") + (
             ("swing_foot_roll", "swing_foot_pitch") if self.has_ankle_roll else ("swing_foot_pitch",))
+        # Output coefficients C on the rows of S = [stance ω (0:3); stance v (3:6); swing ω (6:9);
+        # swing v (9:12); base ω (12:15); CoM z (15)]. Constant ones: com_z = CoM z − stance z,
+        # swing_foot_z = swing z − stance z.
+        self._C0 = np.zeros((len(self.names), 16))
+        self._C0[0, [15, 5]] = 1.0, -1.0
+        self._C0[6, [11, 5]] = 1.0, -1.0
 
     def evaluate(self, context, stance: str) -> Output:
         """Outputs with ``stance`` ('left'/'right') the stance foot, on the controller-plant context."""
-        swing = {"left": "right", "right": "left"}[stance]
-        plant, robot = self.robot.plant, self.robot
+        swing = _OTHER[stance]
+        plant, W = self.robot.plant, self._W
         q, v = plant.GetPositions(context), plant.GetVelocities(context)
-        nv = robot.nv
-        R_st, p_st = self._sole[stance]
-        R_sw, p_sw = self._sole[swing]
-        st = _FrameMotion(plant, context, robot.foot_frames[stance], p_st, v)
-        sw = _FrameMotion(plant, context, robot.foot_frames[swing], p_sw, v)
-        base = _FrameMotion(plant, context, self._base, np.zeros(3), v)
-        W = plant.world_frame()
-        com = plant.CalcCenterOfMassPositionInWorld(context)
-        J_com = plant.CalcJacobianCenterOfMassTranslationalVelocity(context, JacobianWrtVariable.kV, W, W)
-        com_bias = plant.CalcBiasCenterOfMassTranslationalAcceleration(context, JacobianWrtVariable.kV, W, W)
+        R_st, p_st, J_st, bias_st = _motion(plant, context, self.robot.foot_frames[stance],
+                                            self._centroid[stance], W)
+        R_sw, p_sw, J_sw, bias_sw = _motion(plant, context, self.robot.foot_frames[swing],
+                                            self._centroid[swing], W)
+        R_b = self._base.rotation(context)
+        com, J_com, com_bias = self._base.com(context)
+        S = np.concatenate((J_st, J_sw, self._base.Jw, J_com[2:]))
+        V = (S @ v).tolist()
+        B = [*bias_st.tolist(), *bias_sw.tolist(), 0.0, 0.0, 0.0, float(com_bias[2])]
+        w_st, w_sw, w_b = V[0:3], V[6:9], V[12:15]
+        a_st, a_sw, a_b = B[0:3], B[6:9], B[12:15]
 
-        k = len(self.names)
-        y, J, Jdv = np.empty(k), np.zeros((k, nv)), np.zeros(k)
-        y[0], J[0], Jdv[0] = com[2] - st.p[2], J_com[2] - st.Jv[2], com_bias[2] - st.av_bias[2]
-        iq, iv = self._hip_yaw[stance]
-        y[1], J[1, iv] = q[iq], 1.0
-        a_z, J_a, bias_a = base.axis_z(_EX)
-        y[2], J[2], Jdv[2] = -a_z, -J_a, -bias_a
-        y[3], J[3], Jdv[3] = base.axis_z(_EY)
-        psi, J_psi, psidot, psi_bias = st.heading(R_st[:, 0])
-        y[4:7], J[4:7], Jdv[4:7] = _in_yaw_frame(
-            sw.p - st.p, sw.Jv - st.Jv, sw.Jv @ v - st.Jv @ v, sw.av_bias - st.av_bias,
-            psi, J_psi, psidot, psi_bias)
-        iq, iv = self._hip_yaw[swing]
-        y[7], J[7, iv] = q[iq], 1.0
-        if self.has_ankle_roll:
-            y[8], J[8], Jdv[8] = sw.axis_z(R_sw[:, 1])
-        a_z, J_a, bias_a = sw.axis_z(R_sw[:, 0])
-        y[-1], J[-1], Jdv[-1] = -a_z, -J_a, -bias_a
-        return Output(self.names, y, J, Jdv)
+        C = self._C0.copy()
+        y = [0.0] * len(self.names)
+        Jdv = [0.0] * len(self.names)
+        y[0], Jdv[0] = com[2] - p_st[2], B[15] - B[5]
+        y[1] = q[self._hip_yaw[stance][0]]
+        x_b, y_b, _ = R_b.T.tolist()
+        y[2], C[2, 12:15], Jdv[2] = _tilt([-x_b[0], -x_b[1], -x_b[2]], w_b, a_b)
+        y[3], C[3, 12:15], Jdv[3] = _tilt(y_b, w_b, a_b)
+
+        psi, c_psi, psidot, psi_bias = _heading((R_st @ self._forward[stance]).tolist(), w_st, a_st)
+        c, s = cos(psi), sin(psi)
+        dx, dy, dz = (p_sw - p_st).tolist()
+        vx, vy = V[9] - V[3], V[10] - V[4]
+        bx, by = B[9] - B[3], B[10] - B[4]
+        rx, ry = c * dx + s * dy, c * dy - s * dx
+        vx, vy = c * vx + s * vy, c * vy - s * vx  # R_zᵀ ḋ
+        sx, sy = 2.0 * vx + psidot * ry, 2.0 * vy - psidot * rx  # R_zᵀ ḋ + ṙ
+        C[4, 9:11], C[4, 3:5], C[4, 0:3] = (c, s), (-c, -s), (ry * c_psi[0], ry * c_psi[1], ry)
+        C[5, 9:11], C[5, 3:5], C[5, 0:3] = (-s, c), (s, -c), (-rx * c_psi[0], -rx * c_psi[1], -rx)
+        y[4:7] = rx, ry, dz
+        Jdv[4:7] = (c * bx + s * by + psi_bias * ry + psidot * sy,
+                    c * by - s * bx - psi_bias * rx - psidot * sx,
+                    B[11] - B[5])
+
+        y[7] = q[self._hip_yaw[swing][0]]
+        for i, axis in enumerate((self._tilt_axes[swing] @ R_sw.T).tolist(), start=8):
+            y[i], C[i, 6:9], Jdv[i] = _tilt(axis, w_sw, a_sw)
+
+        J = C @ S
+        J[1, self._hip_yaw[stance][1]] = 1.0
+        J[7, self._hip_yaw[swing][1]] = 1.0
+        return Output(self.names, np.array(y), J, np.array(Jdv))
 
 
 class StandingOutputs:
@@ -241,22 +297,20 @@ class StandingOutputs:
 
     def __init__(self, robot: RobotModel):
         self.robot = robot
-        self._base = robot.base_body.body_frame()
+        self._base = _FloatingBase(robot)
 
     def evaluate(self, context) -> Output:
-        plant = self.robot.plant
-        W = plant.world_frame()
-        v = plant.GetVelocities(context)
-        base = _FrameMotion(plant, context, self._base, np.zeros(3), v)
-        y, J, Jdv = np.empty(6), np.empty((6, self.robot.nv)), np.empty(6)
-        y[:3] = plant.CalcCenterOfMassPositionInWorld(context)
-        J[:3] = plant.CalcJacobianCenterOfMassTranslationalVelocity(context, JacobianWrtVariable.kV, W, W)
-        Jdv[:3] = plant.CalcBiasCenterOfMassTranslationalAcceleration(context, JacobianWrtVariable.kV, W, W)
-        y[3], J[3], Jdv[3] = base.axis_z(_EY)
-        a_z, J_a, bias_a = base.axis_z(_EX)
-        y[4], J[4], Jdv[4] = -a_z, -J_a, -bias_a
-        y[5], J[5], _, Jdv[5] = base.heading(_EX)
-        return Output(self.names, y, J, Jdv)
+        v = self.robot.plant.GetVelocities(context)
+        Jw = self._base.Jw
+        w, alpha = (Jw @ v).tolist(), [0.0, 0.0, 0.0]
+        x_b, y_b, _ = self._base.rotation(context).T.tolist()
+        roll, c_roll, roll_bias = _tilt(y_b, w, alpha)
+        pitch, c_pitch, pitch_bias = _tilt([-x_b[0], -x_b[1], -x_b[2]], w, alpha)
+        yaw, c_yaw, _, yaw_bias = _heading(x_b, w, alpha)
+        com, J_com, com_bias = self._base.com(context)
+        return Output(self.names, np.array([*com, roll, pitch, yaw]),
+                      np.vstack([J_com, np.array([c_roll, c_pitch, c_yaw]) @ Jw]),
+                      np.array([*com_bias, roll_bias, pitch_bias, yaw_bias]))
 
 
 class InAirOutputs:
