@@ -8,6 +8,8 @@ from math import comb
 
 import numpy as np
 
+from romoco_drake.values import SharedValue
+
 
 @functools.cache
 def _power_basis(degree: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -81,7 +83,7 @@ _ZERO3.setflags(write=False)
 
 
 @dataclass(frozen=True)
-class SwingTrajectory:
+class SwingTrajectory(SharedValue):
     """Swing-foot reference over the swing phase t in [0, ``duration``] (time since lift-off).
 
     Planned at time ``t_start`` from a start state (position, velocity, acceleration): x and y

@@ -194,9 +194,14 @@ class ContactModel:
                 context, JacobianWrtVariable.kV, foot.frame, foot.points_F, W, W))
             Jdv.append(plant.CalcBiasTranslationalAcceleration(
                 context, JacobianWrtVariable.kV, foot.frame, foot.points_F, W, W).ravel(order="F"))
-        internal = self.robot.internal_constraints(context)
-        return Output(self._names[domain], np.concatenate([*h, internal.h]), np.vstack([*J, internal.J]),
-                      np.concatenate([*Jdv, internal.Jdot_v]))
+        if self.robot.num_internal_constraints():
+            internal = self.robot.internal_constraints(context)
+            h.append(internal.h)
+            J.append(internal.J)
+            Jdv.append(internal.Jdot_v)
+        if not J:
+            return Output(self._names[domain], np.zeros(0), np.zeros((0, self.robot.nv)), np.zeros(0))
+        return Output(self._names[domain], np.concatenate(h), np.vstack(J), np.concatenate(Jdv))
 
     def sole_rotation(self, context, side: str) -> np.ndarray:
         """R_WS of the foot's sole frame at ``context``."""

@@ -22,13 +22,14 @@ from pydrake.multibody.tree import Frame, JacobianWrtVariable, Joint
 from romoco_drake.errors import RomocoError
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.robots.nominal import foot_forward_axis
+from romoco_drake.values import SharedValue
 
 _OTHER = {"left": "right", "right": "left"}
 _ORIGIN = np.zeros(3)
 
 
 @dataclass(frozen=True)
-class Output:
+class Output(SharedValue):
     """Stacked outputs: y (k,), J (k×nv) with ẏ = J v, and J̇·v (k,)."""
 
     names: tuple[str, ...]

@@ -26,6 +26,7 @@ from romoco_drake.embedding.contact import DOMAINS, ContactModel
 from romoco_drake.embedding.outputs import InAirOutputs, Output, StandingOutputs, WalkingOutputs
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.types import PlannerOutput, other_side
+from romoco_drake.values import SharedValue
 
 MODES = ("in_air", "standing", "walking")
 # The swing target is frozen once this fraction of single support has passed: late target
@@ -34,7 +35,7 @@ FREEZE_FRACTION = 0.85
 
 
 @dataclass(frozen=True)
-class TaskReferences:
+class TaskReferences(SharedValue):
     """Everything a whole-body controller needs for one tick.
 
     Outputs (``names``, k of them): actual y, J (k×nv, ẏ = J v), J̇·v; desired y_d, ẏ_d, ÿ_d;
@@ -72,7 +73,7 @@ class TaskReferences:
 
 
 @dataclass(frozen=True)
-class SwingState:
+class SwingState(SharedValue):
     """What the embedding remembers across ticks of one step."""
 
     stance_side: str
@@ -98,6 +99,7 @@ class EmbeddingCore:
                            for s, leg in self.walking.legs.items()}
         self._hip_yaw_sign = {s: self._yaw_axis_sign(leg.hip_yaw) for s, leg in self.walking.legs.items()}
         self._swing_index = self.walking.names.index("swing_foot_x")
+        self._swing_yaw_index = self.walking.names.index("swing_hip_yaw")
         ss = np.ones(len(self.walking.names), dtype=bool)
         ds = np.zeros_like(ss)
         for name in ("com_z", "stance_hip_yaw", "pelvis_pitch", "pelvis_roll"):
@@ -162,7 +164,7 @@ class EmbeddingCore:
         st_goal = -self._hip_yaw_sign[stance] * half
         sw_goal = self._hip_yaw_sign[other_side(stance)] * half
         y_d[1], yd_d[1] = st0 + s * (st_goal - st0), rate * (st_goal - st0)
-        i_sw_yaw = out.names.index("swing_hip_yaw")
+        i_sw_yaw = self._swing_yaw_index
         y_d[i_sw_yaw], yd_d[i_sw_yaw] = sw0 + s * (sw_goal - sw0), rate * (sw_goal - sw0)
         if swing.trajectory is not None:
             i = self._swing_index
@@ -197,12 +199,15 @@ class EmbeddingCore:
     def _pack(self, mode, domain, stance, out: Output, y_d, yd_d, ydd_d, active, context) -> TaskReferences:
         holonomic = self.contact.constraints(context, domain)
         blocks = [self.contact.friction_constraints(context, side) for side in DOMAINS[domain]]
-        n_f = sum(A.shape[1] for A, _ in blocks)
-        A_f = np.zeros((sum(A.shape[0] for A, _ in blocks), n_f))
-        r = c = 0
-        for A, _ in blocks:
-            A_f[r:r + A.shape[0], c:c + A.shape[1]] = A
-            r, c = r + A.shape[0], c + A.shape[1]
-        b_f = np.concatenate([b for _, b in blocks]) if blocks else np.zeros(0)
+        if len(blocks) == 1:
+            A_f, b_f = blocks[0]
+        else:
+            A_f = np.zeros((sum(A.shape[0] for A, _ in blocks), sum(A.shape[1] for A, _ in blocks)))
+            r = c = 0
+            for A, _ in blocks:
+                A_f[r:r + A.shape[0], c:c + A.shape[1]] = A
+                r, c = r + A.shape[0], c + A.shape[1]
+            b_f = np.concatenate([b for _, b in blocks]) if blocks else np.zeros(0)
+        n_f = A_f.shape[1]
         return TaskReferences(mode, domain, stance, out.names, out.y, out.J, out.Jdot_v, y_d, yd_d, ydd_d,
                               active, holonomic, n_f, A_f, b_f)

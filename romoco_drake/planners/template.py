@@ -19,13 +19,14 @@ from romoco_drake.rom.types import (
     WalkCommand,
     other_side,
 )
+from romoco_drake.values import SharedValue
 
 # Switching times are compared with this slack so that T_SS on the tick grid switches on time.
 _TIME_SLACK = 1e-9
 
 
 @dataclass(frozen=True)
-class GaitState:
+class GaitState(SharedValue):
     """The template's discrete state: which foot supports, where, and since when."""
 
     side: str
@@ -120,7 +121,7 @@ class HybridLipTemplate(LeafSystem):
                 cmd = replace(cmd, step_time=gait.t_ss, com_height=gait.z0)
             gait = GaitState(
                 side=other_side(gait.side), stance=gait.landed[:2], heading=gait.landed[2],
-                step_start=context.get_time(), t_ss=cmd.step_time, t_ds=gait.t_ds, z0=gait.z0,
+                step_start=context.get_time(), t_ss=cmd.step_time, t_ds=gait.t_ds, z0=cmd.com_height,
                 landed=None, steps=gait.steps + 1,
             )
         state.get_mutable_abstract_state(int(self._gait)).set_value(gait)

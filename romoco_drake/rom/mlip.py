@@ -28,14 +28,24 @@ def mlip_domain_flow(t: float, z0: float, g: float = GRAVITY) -> tuple[np.ndarra
     With ζ(t) = ζ0 + r t the CoM solves p − ζ = (p0 − ζ0) cosh λt + (L0 / z0 − r) sinh(λt) / λ.
     """
     lam = omega(z0, g)
-    c, s = math.cosh(lam * t), math.sinh(lam * t)
+    x = lam * t
+    c, s = math.cosh(x), math.sinh(x)
+    one_minus_c = -2.0 * math.sinh(0.5 * x) ** 2  # 1 − cosh x without cancellation
     phi = np.array([
-        [c, s / (z0 * lam), 1.0 - c],
+        [c, s / (z0 * lam), one_minus_c],
         [z0 * lam * s, c, -z0 * lam * s],
         [0.0, 0.0, 1.0],
     ])
-    gamma = np.array([t - s / lam, z0 * (1.0 - c), t])
+    gamma = np.array([_x_minus_sinh(x) / lam, z0 * one_minus_c, t])
     return phi, gamma
+
+
+def _x_minus_sinh(x: float) -> float:
+    """x − sinh x, by its series where the difference would cancel."""
+    if abs(x) < 1e-2:
+        x2 = x * x
+        return -x * x2 / 6.0 * (1.0 + x2 / 20.0 * (1.0 + x2 / 42.0))
+    return x - math.sinh(x)
 
 
 def mlip_s2s(z0: float, t_ss: float, t_ds: float, g: float = GRAVITY) -> StepToStep:
@@ -47,9 +57,11 @@ def mlip_s2s(z0: float, t_ss: float, t_ds: float, g: float = GRAVITY) -> StepToS
     H-LIP's Φ_SS(T_SS) [−1, 0]ᵀ as T_DS → 0.
     """
     phi_ss, _ = mlip_domain_flow(t_ss, z0, g)
-    phi_ds, gamma_ds = mlip_domain_flow(t_ds, z0, g)
+    phi_ds, _ = mlip_domain_flow(t_ds, z0, g)
     if t_ds > 0.0:
-        b_ds = gamma_ds[:2] / t_ds - np.array([1.0, 0.0])
+        # Γ(T_DS)[:2] / T_DS − (1, 0), written without cancellation for short double support.
+        x = omega(z0, g) * t_ds
+        b_ds = np.array([-math.sinh(x) / x, -2.0 * z0 * math.sinh(0.5 * x) ** 2 / t_ds])
     else:
         b_ds = np.array([-1.0, 0.0])
     return StepToStep(A=phi_ss[:2, :2] @ phi_ds[:2, :2], B=phi_ss[:2, :2] @ b_ds)

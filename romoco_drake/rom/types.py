@@ -7,6 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from romoco_drake.values import SharedValue
+
 # rom_state: CoM position relative to the stance contact [m] and angular momentum about the
 # contact [kg·m²/s], both in the stance foot's yaw frame: [p_x, p_y, p_z, L_x, L_y, L_z].
 ROM_STATE_SIZE = 6
@@ -62,7 +64,7 @@ class WalkCommand:
 
 
 @dataclass(frozen=True)
-class PlannerOutput:
+class PlannerOutput(SharedValue):
     """A foot-placement plan for the current step.
 
     Positions are relative to the stance contact in the stance yaw frame. ROM states are one row
