@@ -16,21 +16,49 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from romoco_drake.config import load_typed, load_yaml_file
 from romoco_drake.control.standing import StandingController
+from romoco_drake.control.tscqp import TscQp, TscQpController
+from romoco_drake.embedding.references import EmbeddingCore
+from romoco_drake.embedding.system import OutputEmbedding
 from romoco_drake.errors import ConfigError, RomocoError
 from romoco_drake.estimation.ground_truth import GroundTruthEstimator
+from romoco_drake.estimation.rom_state import RomStateFromRobot
 from romoco_drake.interfaces.monitor import FallMonitor
 from romoco_drake.interfaces.station import make_station
+from romoco_drake.planners.command import CommandSegment, CommandSource
+from romoco_drake.planners.foot_placement import FootPlacementPlanner
+from romoco_drake.planners.state_machine import GaitStateMachine
 from romoco_drake.robots.model import RobotModel, load_robot, robot_names
 from romoco_drake.robots.source import DIAGRAMS_DIR
+from romoco_drake.rom.planners import PlannerParams, make_planner
+from romoco_drake.rom.types import WalkCommand
 
-CONTROLLERS = ("standing",)
+CONTROLLERS = ("standing", "tscqp")
 ESTIMATORS = ("ground_truth",)
 
 
 @dataclass
 class ControllerConfig:
-    name: Literal["standing"] = "standing"
+    name: Literal["standing", "tscqp"] = "standing"
     rate_hz: float = 1000.0
+
+
+@dataclass
+class PlannerConfig:
+    """A foot-placement planner (see ``romoco list``) and its feedback gain."""
+
+    name: Literal["alip", "hlip", "mlip", "dcm", "alip_general"] = "hlip"
+    gain: Literal["deadbeat", "converging", "lqr"] = "deadbeat"
+    alpha: float = 0.5
+
+
+@dataclass
+class CommandPoint:
+    """From time ``t`` (s) on, walk at (vx, vy) m/s and turn at wz rad/s (heading frame)."""
+
+    t: float
+    vx: float = 0.0
+    vy: float = 0.0
+    wz: float = 0.0
 
 
 @dataclass
@@ -48,6 +76,9 @@ class Scenario:
     time_step: float = 0.001
     estimator: EstimatorConfig = dataclasses.field(default_factory=EstimatorConfig)
     controller: ControllerConfig = dataclasses.field(default_factory=ControllerConfig)
+    planner: PlannerConfig = dataclasses.field(default_factory=PlannerConfig)
+    # Piecewise-constant velocity command; empty means stand.
+    command: list[CommandPoint] = dataclasses.field(default_factory=list)
     # Extra height of the base above the nominal pose at t = 0 (m): a drop test.
     initial_height_offset: float = 0.0
     # Filled in by load_scenario, not read from YAML.
@@ -89,6 +120,15 @@ class BuiltDiagram:
     monitor: FallMonitor
 
 
+def command_segments(scenario: Scenario, robot: RobotModel) -> list[CommandSegment]:
+    """The scenario's command points as full walking commands (gait timing from the robot)."""
+    w = robot.config.walking
+    points = scenario.command or [CommandPoint(0.0)]
+    if points[0].t > 0.0:
+        points = [CommandPoint(0.0), *points]
+    return [CommandSegment(p.t, WalkCommand(p.vx, p.vy, p.wz, w.step_width, w.z0, w.t_ss)) for p in points]
+
+
 def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None) -> BuiltDiagram:
     """Wires the closed loop of ``scenario``."""
     robot = load_robot(scenario.robot)
@@ -97,12 +137,48 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None) -> BuiltDi
     estimator = builder.AddNamedSystem("estimator", GroundTruthEstimator(robot))
     for port in ("joint_state", "base_pose", "base_velocity"):
         builder.Connect(station.GetOutputPort(port), estimator.GetInputPort(port))
-    controller = builder.AddNamedSystem(
-        "controller", StandingController(robot, period=1.0 / scenario.controller.rate_hz))
-    builder.Connect(estimator.state_output, controller.state_input)
-    builder.Connect(controller.actuation_output, station.GetInputPort("actuation"))
+    period = 1.0 / scenario.controller.rate_hz
+    if scenario.controller.name == "standing":
+        controller = builder.AddNamedSystem("controller", StandingController(robot, period=period))
+        builder.Connect(estimator.state_output, controller.state_input)
+        builder.Connect(controller.actuation_output, station.GetInputPort("actuation"))
+    else:
+        _add_walking_loop(builder, scenario, robot, estimator.state_output, station.GetInputPort("actuation"),
+                          period)
     monitor = builder.AddNamedSystem("monitor", FallMonitor(robot))
     builder.Connect(estimator.state_output, monitor.state_input)
     diagram = builder.Build()
     diagram.set_name(scenario.name or scenario.robot)
     return BuiltDiagram(diagram, robot, station, monitor)
+
+
+def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, state, actuation,
+                      period: float) -> None:
+    """State machine → planner → output embedding → whole-body controller, all at ``period``."""
+    w = robot.config.walking
+    cfg = scenario.planner
+    law = make_planner(cfg.name, PlannerParams(mass=robot.total_mass, t_ds=w.t_ds, gain=cfg.gain,
+                                               alpha=cfg.alpha))
+    command = builder.AddNamedSystem("command", CommandSource(command_segments(scenario, robot)))
+    machine = builder.AddNamedSystem("state_machine", GaitStateMachine(robot, period, law.t_ds))
+    rom_state = builder.AddNamedSystem("rom_state", RomStateFromRobot(robot))
+    planner = builder.AddNamedSystem("planner", FootPlacementPlanner(law))
+    core = EmbeddingCore(robot)
+    embedding = builder.AddNamedSystem("embedding", OutputEmbedding(robot, period, core))
+    controller = builder.AddNamedSystem(
+        "controller", TscQpController(robot, period, TscQp(robot, core.contact)))
+    builder.Connect(state, machine.state_port)
+    builder.Connect(command.command_port, machine.command_port)
+    builder.Connect(state, rom_state.state_port)
+    builder.Connect(machine.gait_phase_port, rom_state.gait_phase_port)
+    builder.Connect(rom_state.rom_state_port, planner.rom_state_port)
+    builder.Connect(machine.gait_phase_port, planner.gait_phase_port)
+    builder.Connect(command.command_port, planner.command_port)
+    builder.Connect(state, embedding.state_port)
+    builder.Connect(planner.planner_output_port, embedding.planner_output_port)
+    builder.Connect(machine.gait_phase_port, embedding.gait_phase_port)
+    builder.Connect(machine.mode_port, embedding.mode_port)
+    builder.Connect(state, controller.state_port)
+    builder.Connect(embedding.task_references_port, controller.task_references_port)
+    builder.Connect(machine.mode_port, controller.mode_port)
+    builder.Connect(controller.actuation_port, actuation)

@@ -128,7 +128,7 @@ def test_converging_laws_contract_by_alpha(name, cmd, start, side, mass, t_ds, a
 def test_alip_deadbeat_step_is_hlip_deadbeat_step_without_ds(cmd, start, side, mass):
     """A 2-state single-input map has one deadbeat gain, and ALIP's target L⁻ is H-LIP's orbit."""
     planes, t_in = _start(cmd, start)
-    state = [planes[0, 0], planes[1, 0], 0.0, -mass * planes[1, 1], mass * planes[0, 1], 0.0]
+    state = [planes[0, 0], planes[1, 0], cmd.com_height, -mass * planes[1, 1], mass * planes[0, 1], 0.0]
     a = make_planner("alip", PlannerParams(mass=mass)).plan(state, side, t_in, cmd)
     h = make_planner("hlip", PlannerParams(mass=mass, t_ds=0.0)).plan(state, side, t_in, cmd)
     np.testing.assert_allclose(a.swing_target, h.swing_target, atol=ATOL)

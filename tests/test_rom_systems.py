@@ -17,7 +17,7 @@ from romoco_drake.rom.hlip import hlip_s2s
 from romoco_drake.rom.lip import ss_flow
 from romoco_drake.rom.mlip import mlip_s2s
 from romoco_drake.rom.planners import PLANNERS, PlannerParams, make_planner
-from romoco_drake.rom.types import SIDES, PlannerOutput, WalkCommand
+from romoco_drake.rom.types import PlannerOutput, WalkCommand
 
 MASS = 30.0
 T_DS = 0.1
@@ -45,13 +45,14 @@ def test_planner_system_output_is_the_law(name):
     cmd = WalkCommand(vx=0.35, vy=-0.1, wz=0.2, com_height=0.7, step_time=0.35)
     system.command_port.FixValue(context, cmd.to_vector())
     state = np.array([0.03, -0.06, 0.7, -2.5, 6.0, 0.2])
-    for side_sign, t_in, rom_state in ((1.0, 0.1, state), (-1.0, 0.27, state),
-                                       (1.0, 0.1, np.where(np.arange(6) == 4, np.nan, state))):
+    nan_state = np.where(np.arange(6) == 4, np.nan, state)
+    for sign, side, t_in, rom_state in ((1.0, "left", 0.1, state), (-1.0, "right", 0.27, state),
+                                        (1.0, "left", 0.1, nan_state)):
         system.rom_state_port.FixValue(context, rom_state)
-        system.gait_phase_port.FixValue(context, [side_sign, t_in])
+        system.gait_phase_port.FixValue(context, [sign, t_in])
         plan = system.planner_output_port.Eval(context)
         assert plan.valid == bool(np.isfinite(rom_state).all())
-        _assert_same_plan(plan, law.plan(rom_state, SIDES[side_sign < 0], t_in, cmd))
+        _assert_same_plan(plan, law.plan(rom_state, side, t_in, cmd))
 
 
 def _template(ds_model: str, stance=(0.3, -0.1), heading=0.4, z0=0.7, t_ss=0.3, t_ds=0.0):
@@ -140,8 +141,8 @@ def test_template_walk_converges_to_the_command(walk):
 def test_template_walk_stays_over_its_feet(walk):
     _, _, run, _, _ = walk
     offset = run.com[:2] - run.support[:2]
-    assert np.max(np.linalg.norm(offset, axis=0)) < 0.4
-    assert np.max(np.abs(run.com[2:])) < 1.5
+    assert np.max(np.linalg.norm(offset, axis=0)) < 0.35  # observed ≤ 0.24 m
+    assert np.max(np.abs(run.com[2:])) < 1.0  # observed ≤ 0.63 m/s
 
 
 def test_template_walk_alternates_sides(walk):

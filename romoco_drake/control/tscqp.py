@@ -18,10 +18,12 @@ import fnmatch
 from dataclasses import dataclass
 
 import numpy as np
+from pydrake.common.value import AbstractValue
 from pydrake.solvers import ClarabelSolver, MathematicalProgram, SolverOptions
+from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.embedding.contact import ContactModel
-from romoco_drake.embedding.references import TaskReferences
+from romoco_drake.embedding.references import MODES, EmbeddingCore, TaskReferences
 from romoco_drake.robots.model import RobotModel
 
 
@@ -67,17 +69,18 @@ class QpSolution:
 class _DomainProgram:
     """The QP of one contact domain, built once; :meth:`solve` updates its coefficients."""
 
-    def __init__(self, robot: RobotModel, n_h: int, n_f: int, n_ineq: int):
+    def __init__(self, robot: RobotModel, n_h: int, rank_h: int, n_f: int, n_ineq: int):
         nv, nu = robot.nv, robot.nu
         self.n = nv + nu + n_h
+        self.rank_h = rank_h
         self.prog = MathematicalProgram()
         self.x = self.prog.NewContinuousVariables(self.n, "x")
         self.cost = self.prog.AddQuadraticCost(np.eye(self.n), np.zeros(self.n), self.x, is_convex=True)
         self.dynamics = self.prog.AddLinearEqualityConstraint(np.zeros((nv, self.n)), np.zeros(nv), self.x)
         self.holonomic = None
-        if n_h:
+        if rank_h:
             self.holonomic = self.prog.AddLinearEqualityConstraint(
-                np.zeros((n_h, self.n)), np.zeros(n_h), self.x)
+                np.zeros((rank_h, self.n)), np.zeros(rank_h), self.x)
         lam_c = self.x[nv + nu:nv + nu + n_f]
         self.friction = (self.prog.AddLinearConstraint(np.zeros((n_ineq, n_f)), np.full(n_ineq, -np.inf),
                                                        np.zeros(n_ineq), lam_c) if n_ineq else None)
@@ -101,8 +104,10 @@ class TscQp:
 
     def _program(self, refs: TaskReferences) -> _DomainProgram:
         if refs.domain not in self._programs:
+            Jh = refs.holonomic.J
+            rank = int(np.linalg.matrix_rank(Jh)) if Jh.size else 0
             self._programs[refs.domain] = _DomainProgram(
-                self.robot, refs.holonomic.J.shape[0], refs.num_contact_forces, refs.A_f.shape[0])
+                self.robot, Jh.shape[0], rank, refs.num_contact_forces, refs.A_f.shape[0])
         return self._programs[refs.domain]
 
     def _gains(self, names: tuple[str, ...]):
@@ -150,9 +155,15 @@ class TscQp:
         A_dyn = np.hstack([M, -r.B, -Jh.T])
         prog.dynamics.evaluator().UpdateCoefficients(A_dyn, -C)
         if prog.holonomic is not None:
-            A_h = np.zeros((Jh.shape[0], n))
-            A_h[:, :nv] = Jh
-            prog.holonomic.evaluator().UpdateCoefficients(A_h, -refs.holonomic.Jdot_v - self.k_h * (Jh @ v))
+            # The multi-point contact rows are redundant (rank 6 of 9 for a plane foot); an
+            # interior-point solver reads the round-off in redundant rows as infeasibility, so
+            # the constraint is imposed on an orthonormal basis of J_h's row space instead.
+            U, _, _ = np.linalg.svd(Jh, full_matrices=False)
+            U = U[:, :prog.rank_h]
+            A_h = np.zeros((prog.rank_h, n))
+            A_h[:, :nv] = U.T @ Jh
+            prog.holonomic.evaluator().UpdateCoefficients(
+                A_h, U.T @ (-refs.holonomic.Jdot_v - self.k_h * (Jh @ v)))
         if prog.friction is not None:
             prog.friction.evaluator().UpdateCoefficients(refs.A_f, np.full(len(refs.b_f), -np.inf), refs.b_f)
         result = self.solver.Solve(prog.prog, None, self.options)
@@ -161,3 +172,65 @@ class TscQp:
         x = result.GetSolution(prog.x)
         return QpSolution(x[nv:nv + nu], x[:nv], x[nv + nu:], True)
 
+
+
+class TscQpController(LeafSystem):
+    """The TSC-QP as a system: task references and state in, joint torques out (ZOH).
+
+    Damping mode (``mode`` = damping), a non-finite state or a failed solve give a safe command:
+    joint damping −k_d v for the first two, the last good torque for a failed solve (damping
+    again after ``max_stale_ticks`` failures in a row). Failures are counted.
+
+    | port | kind | size | meaning |
+    |---|---|---|---|
+    | ``state`` | in | nq+nv | robot state |
+    | ``task_references`` | in | abstract | :class:`TaskReferences` |
+    | ``mode`` | in | 1 | index into ``MODES`` |
+    | ``actuation`` | out | nu | joint torques [N·m], held between ticks |
+    | ``stats`` | out | 3 | QP failures, safe (damping) ticks, consecutive failures |
+    """
+
+    def __init__(self, robot: RobotModel, period: float, qp: TscQp, max_stale_ticks: int = 20):
+        super().__init__()
+        self.robot, self.qp, self.max_stale_ticks = robot, qp, max_stale_ticks
+        self._context = robot.plant.CreateDefaultContext()
+        self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
+        self.task_references_port = self.DeclareAbstractInputPort(
+            "task_references", AbstractValue.Make(_placeholder_references(robot)))
+        self.mode_port = self.DeclareVectorInputPort("mode", 1)
+        self._tau = self.DeclareDiscreteState(robot.nu)
+        self._stats = self.DeclareDiscreteState(3)
+        self.actuation_port = self.DeclareStateOutputPort("actuation", self._tau)
+        self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+
+    def _damping(self, v: np.ndarray) -> np.ndarray:
+        r = self.robot
+        tau = -r.kd * np.nan_to_num(v[r.actuated_v_index])
+        return np.clip(tau, -r.effort_limits, r.effort_limits)
+
+    def _update(self, context, discrete_state) -> None:
+        r = self.robot
+        x = self.state_port.Eval(context)
+        failures, safe, streak = context.get_discrete_state(self._stats).value()
+        mode = MODES[int(self.mode_port.Eval(context)[0])]
+        if mode == "damping" or not np.all(np.isfinite(x)):
+            tau, safe = self._damping(x[r.nq:]), safe + 1
+        else:
+            r.plant.SetPositionsAndVelocities(self._context, x)
+            solution = self.qp.solve(self._context, self.task_references_port.Eval(context))
+            if solution.success and np.all(np.isfinite(solution.tau)):
+                tau, streak = np.clip(solution.tau, -r.effort_limits, r.effort_limits), 0.0
+            else:
+                failures, streak = failures + 1, streak + 1
+                tau = (context.get_discrete_state(self._tau).value() if streak <= self.max_stale_ticks
+                       else self._damping(x[r.nq:]))
+        discrete_state.get_mutable_vector(self._tau).SetFromVector(tau)
+        discrete_state.get_mutable_vector(self._stats).SetFromVector([failures, safe, streak])
+
+
+def _placeholder_references(robot: RobotModel) -> TaskReferences:
+    core = EmbeddingCore(robot)
+    context = robot.plant.CreateDefaultContext()
+    robot.plant.SetPositions(context, robot.nominal.q)
+    return core.evaluate(context, "standing", 0.0, None, None)

@@ -28,7 +28,9 @@ from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.types import PlannerOutput, other_side
 from romoco_drake.values import SharedValue
 
-MODES = ("in_air", "standing", "walking")
+# Control modes, as indices on ``mode`` ports. In damping (the safe mode after a fall or bad
+# state) controllers ignore the references; the embedding evaluates it like standing.
+MODES = ("in_air", "standing", "walking", "damping")
 # The swing target is frozen once this fraction of single support has passed: late target
 # moves would need large swing accelerations just before touchdown.
 FREEZE_FRACTION = 0.85

@@ -22,7 +22,7 @@ class OutputEmbedding(LeafSystem):
     | ``state`` | in | nq+nv | robot state [q; v] (controller plant order) |
     | ``planner_output`` | in | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` |
     | ``gait_phase`` | in | 2 | stance (+1 left, −1 right), time in step [s] |
-    | ``mode`` | in | 1 | index into ``MODES``: 0 in-air, 1 standing, 2 walking |
+    | ``mode`` | in | 1 | index into ``MODES``: in-air, standing, walking, damping |
     | ``task_references`` | out | abstract | :class:`~romoco_drake.embedding.references.TaskReferences` |
 
     Abstract state: the current step's :class:`SwingState` (None outside walking).

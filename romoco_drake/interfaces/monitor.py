@@ -13,6 +13,7 @@ import numpy as np
 from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.robots.model import RobotModel
+from romoco_drake.robots.posture import base_fault
 
 FALL_REASONS = ("", "base_low", "base_tilt", "body_contact", "invalid_state")
 
@@ -51,15 +52,10 @@ class FallMonitor(LeafSystem):
     def check(self, x: np.ndarray) -> tuple[str, float]:
         """(fall reason or "", base height) for state ``x``."""
         r = self._robot
-        if not np.all(np.isfinite(x)):
-            return "invalid_state", float("nan")
+        reason, height = base_fault(r, x, self._height_fraction * self._nominal_height, self._cos_max_tilt)
+        if reason:
+            return reason, height
         r.plant.SetPositionsAndVelocities(self._context, x)
-        X_WB = r.plant.EvalBodyPoseInWorld(self._context, r.base_body)
-        height = X_WB.translation()[2]
-        if height < self._height_fraction * self._nominal_height:
-            return "base_low", height
-        if X_WB.rotation().matrix()[2, 2] < self._cos_max_tilt:
-            return "base_tilt", height
         for body in self._bodies:
             if r.plant.EvalBodyPoseInWorld(self._context, body).translation()[2] < self._clearance:
                 return "body_contact", height

@@ -1,0 +1,54 @@
+"""The planners' ROM state measured on the robot: CoM and angular momentum about the stance contact."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from pydrake.systems.framework import LeafSystem
+
+from romoco_drake.embedding.outputs import sole_frame
+from romoco_drake.robots.model import RobotModel
+from romoco_drake.rom.types import GAIT_PHASE_SIZE, ROM_STATE_SIZE, side_from_sign
+
+
+class RomStateFromRobot(LeafSystem):
+    """p = CoM − pivot and L = angular momentum about the pivot, in the stance foot's yaw frame.
+
+    The pivot is the stance sole's centroid. L is the robot's total angular momentum about that
+    point (centroidal plus m p × v_CoM), which is what ALIP-type planners predict with; it is
+    continuous across impacts, unlike the CoM velocity.
+
+    | port | kind | size | meaning |
+    |---|---|---|---|
+    | ``state`` | in | nq+nv | robot state [q; v] |
+    | ``gait_phase`` | in | 2 | stance (+1 left, −1 right), time in step [s] |
+    | ``rom_state`` | out | 6 | [p (m), L (kg·m²/s)] in the stance yaw frame |
+    """
+
+    def __init__(self, robot: RobotModel):
+        super().__init__()
+        self.robot = robot
+        self._context = robot.plant.CreateDefaultContext()
+        self._soles = {side: sole_frame(robot, side) for side in ("left", "right")}
+        self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
+        self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
+        self.rom_state_port = self.DeclareVectorOutputPort("rom_state", ROM_STATE_SIZE, self._calc)
+
+    def compute(self, x: np.ndarray, side: str) -> np.ndarray:
+        plant, ctx = self.robot.plant, self._context
+        plant.SetPositionsAndVelocities(ctx, x)
+        R_FS, p_FS = self._soles[side]
+        X_WF = self.robot.foot_frames[side].CalcPoseInWorld(ctx)
+        pivot = X_WF.multiply(p_FS)
+        forward = X_WF.rotation().matrix() @ R_FS[:, 0]
+        psi = math.atan2(forward[1], forward[0])
+        c, s = math.cos(psi), math.sin(psi)
+        R_T = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        p = R_T @ (plant.CalcCenterOfMassPositionInWorld(ctx) - pivot)
+        L = R_T @ plant.CalcSpatialMomentumInWorldAboutPoint(ctx, pivot).rotational()
+        return np.concatenate([p, L])
+
+    def _calc(self, context, out) -> None:
+        phase = self.gait_phase_port.Eval(context)
+        out.SetFromVector(self.compute(self.state_port.Eval(context), side_from_sign(phase[0])))

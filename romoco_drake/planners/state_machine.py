@@ -1,0 +1,119 @@
+"""The gait state machine: mode (standing, walking, damping), stance side and step clock."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import LeafSystem
+
+from romoco_drake.embedding.references import MODES
+from romoco_drake.robots.model import RobotModel
+from romoco_drake.robots.posture import base_fault
+from romoco_drake.rom.types import COMMAND_SIZE, GAIT_PHASE_SIZE, WalkCommand, other_side
+from romoco_drake.values import SharedValue
+
+# A command component below these counts as zero (m/s, m/s, rad/s).
+_ZERO_COMMAND = (1e-3, 1e-3, 1e-3)
+
+
+@dataclass(frozen=True)
+class GaitSchedule(SharedValue):
+    """The state machine's state."""
+
+    mode: str
+    side: str  # stance side of the current step
+    step_start: float
+    t_ss: float
+    steps: int
+    idle_steps: int  # consecutive steps taken with a zero command
+    safe_mode_entries: int
+    fall_reason: str
+
+
+def is_zero(cmd: WalkCommand) -> bool:
+    return all(abs(v) < tol for v, tol in zip((cmd.vx, cmd.vy, cmd.wz), _ZERO_COMMAND, strict=True))
+
+
+class GaitStateMachine(LeafSystem):
+    """Stand → walk → stand, with a time-based step clock and a damping safe mode.
+
+    - standing → walking when the command is non-zero and the CoM is nearly still
+      (|v_CoM| < ``balance_speed``); the first stance is the foot away from the lateral command.
+    - walking: each step is T_SS (from the command, latched at the step start) plus ``t_ds``;
+      then the stance switches.
+    - walking → standing after ``stop_steps`` steps in a row under a zero command.
+    - any mode → damping (latched) on a non-finite state, the base below ``fall_height`` of its
+      nominal height, or a base tilt above ``fall_tilt`` rad; counted in ``safe_mode_entries``.
+
+    | port | kind | size | meaning |
+    |---|---|---|---|
+    | ``state`` | in | nq+nv | robot state |
+    | ``command`` | in | 6 | :class:`WalkCommand` vector |
+    | ``mode`` | out | 1 | index into :data:`~romoco_drake.embedding.references.MODES` |
+    | ``gait_phase`` | out | 2 | stance (+1 left, −1 right), time in step [s] |
+    | ``schedule`` | out | abstract | :class:`GaitSchedule` |
+    """
+
+    def __init__(self, robot: RobotModel, period: float, t_ds: float, balance_speed: float = 0.1,
+                 stop_steps: int = 2, fall_height: float = 0.5, fall_tilt: float = math.pi / 4):
+        super().__init__()
+        self.robot, self.t_ds = robot, t_ds
+        self.balance_speed, self.stop_steps = balance_speed, stop_steps
+        self._min_base_z = fall_height * robot.nominal.base_height
+        self._cos_tilt = math.cos(fall_tilt)
+        self._context = robot.plant.CreateDefaultContext()
+        self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
+        self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
+        initial = GaitSchedule("standing", "left", 0.0, robot.config.walking.t_ss, 0, 0, 0, "")
+        self._schedule = self.DeclareAbstractState(AbstractValue.Make(initial))
+        self.mode_port = self.DeclareVectorOutputPort(
+            "mode", 1, lambda c, out: out.SetFromVector([MODES.index(self.schedule(c).mode)]),
+            prerequisites_of_calc={self.abstract_state_ticket(self._schedule)})
+        self.gait_phase_port = self.DeclareVectorOutputPort(
+            "gait_phase", GAIT_PHASE_SIZE, self._calc_phase,
+            prerequisites_of_calc={self.abstract_state_ticket(self._schedule), self.time_ticket()})
+        self.schedule_port = self.DeclareAbstractOutputPort(
+            "schedule", lambda: AbstractValue.Make(initial),
+            lambda c, v: v.set_value(self.schedule(c)),
+            prerequisites_of_calc={self.abstract_state_ticket(self._schedule)})
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
+
+    def schedule(self, context) -> GaitSchedule:
+        return context.get_abstract_state(self._schedule).get_value()
+
+    def _calc_phase(self, context, out) -> None:
+        s = self.schedule(context)
+        tau = context.get_time() - s.step_start if s.mode == "walking" else 0.0
+        out.SetFromVector([1.0 if s.side == "left" else -1.0, tau])
+
+    def _update(self, context, state) -> None:
+        s = self.schedule(context)
+        t = context.get_time()
+        x = self.state_port.Eval(context)
+        cmd = WalkCommand.from_vector(self.command_port.Eval(context))
+        if cmd.problem() is not None:
+            cmd = WalkCommand(step_width=cmd.step_width, com_height=cmd.com_height, step_time=s.t_ss)
+        if s.mode != "damping":
+            reason, _ = base_fault(self.robot, x, self._min_base_z, self._cos_tilt)
+            if reason:
+                s = replace(s, mode="damping", fall_reason=reason, safe_mode_entries=s.safe_mode_entries + 1)
+        if s.mode == "standing" and not is_zero(cmd) and self._balanced(x):
+            side = "right" if cmd.vy > 0.0 else "left"
+            s = replace(s, mode="walking", side=side, step_start=t, t_ss=cmd.step_time, idle_steps=0)
+        elif s.mode == "walking" and t - s.step_start >= s.t_ss + self.t_ds - 1e-9:
+            idle = s.idle_steps + 1 if is_zero(cmd) else 0
+            if idle >= self.stop_steps:
+                s = replace(s, mode="standing", idle_steps=0, steps=s.steps + 1)
+            else:
+                s = replace(s, side=other_side(s.side), step_start=t, t_ss=cmd.step_time, steps=s.steps + 1,
+                            idle_steps=idle)
+        state.get_mutable_abstract_state(int(self._schedule)).set_value(s)
+
+    def _balanced(self, x: np.ndarray) -> bool:
+        plant = self.robot.plant
+        plant.SetPositionsAndVelocities(self._context, x)
+        v = plant.CalcCenterOfMassTranslationalVelocityInWorld(self._context)
+        return float(np.linalg.norm(v)) < self.balance_speed
