@@ -190,12 +190,13 @@ BAD_COMMANDS = [WalkCommand(com_height=0.0), WalkCommand(step_time=-0.3), WalkCo
 
 
 def _assert_fallback(law, plan: PlannerOutput, side: str, cmd: WalkCommand) -> None:
-    """An invalid plan that takes the nominal step of ``cmd``."""
-    nominal = law.nominal_steps(side, cmd)[:2]
+    """An invalid plan that takes the law's own orbit step for ``cmd`` (as a valid plan reports it)."""
+    reference = law.plan(GOOD_STATE, side, 0.1, cmd)
     assert not plan.valid and plan.planner == law.name and plan.stance_side == side
-    np.testing.assert_array_equal(plan.swing_target, [*nominal, 0.0])
-    np.testing.assert_array_equal(plan.nominal_step, nominal)
-    assert np.isnan(plan.pre_impact).all() and np.isnan(plan.orbit_pre_impact).all()
+    np.testing.assert_allclose(plan.swing_target, [*reference.nominal_step, 0.0], atol=1e-12)
+    np.testing.assert_allclose(plan.nominal_step, reference.nominal_step, atol=1e-12)
+    np.testing.assert_allclose(plan.orbit_pre_impact, reference.orbit_pre_impact, atol=1e-12)
+    assert np.isnan(plan.pre_impact).all()
     assert (plan.t_ss, plan.com_height) == (cmd.step_time, cmd.com_height)
 
 

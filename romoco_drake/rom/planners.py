@@ -98,12 +98,12 @@ class FootPlacementLaw(ABC):
         end-of-SS state ((p_x, L_x/m), (p_y, L_y/m)) in LIP coordinates."""
 
     def _fallback(self, stance_side: str, cmd: WalkCommand, t_left: float) -> PlannerOutput:
+        """The law's own orbit step (its nominal step), flagged invalid."""
         if cmd.problem() is not None:
             cmd = WalkCommand()
-        u_x, u_y, _ = self.nominal_steps(stance_side, cmd)
-        nan = np.full((2, 2), np.nan)
-        return self._output(stance_side, cmd, t_left, np.array([u_x, u_y, 0.0]), nan, nan,
-                            np.array([u_x, u_y]), False)
+        _, _, orbit, nominal = self._place(((0.0, 0.0), (0.0, 0.0)), stance_side, cmd)
+        return self._output(stance_side, cmd, t_left, np.array([nominal[0], nominal[1], 0.0]),
+                            np.full((2, 2), np.nan), orbit, nominal, False)
 
     def _output(self, stance_side, cmd, t_left, target, pre, orbit, nominal, valid) -> PlannerOutput:
         return PlannerOutput(
