@@ -11,6 +11,7 @@ from pydrake.geometry import Meshcat
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.errors import RomocoError
+from romoco_drake.metrics import velocity_tracking
 from romoco_drake.scenario import Scenario, build_diagram
 
 PROGRESS_WALL_S = 2.0  # print progress lines at most this often
@@ -75,6 +76,8 @@ def run_scenario(
         "realtime_factor": round(duration / wall, 3) if wall > 0 else None,
     }
     summary.update(built.monitor.summary(monitor_context))
+    if built.walking is not None:
+        summary.update(_walking_summary(built, context, scenario))
     if record is not None:
         summary["record"] = str(record)
     return summary
@@ -82,3 +85,20 @@ def run_scenario(
 
 def stderr_progress(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
+
+
+def _walking_summary(built, context, scenario: Scenario) -> dict:
+    log = built.state_log.FindLog(context)
+    tracking = velocity_tracking(built.robot, built.command, log.sample_times(), log.data())
+    loop = built.walking
+    schedule = loop.state_machine.schedule(loop.state_machine.GetMyContextFromRoot(context))
+    failures, safe_ticks, _ = loop.controller.stats_port.Eval(loop.controller.GetMyContextFromRoot(context))
+    return {
+        "planner": scenario.planner.name,
+        "velocity_rms_error": tracking["velocity_rms_error"],
+        "mean_velocity": tracking["mean_velocity"],
+        "steps": schedule.steps,
+        "qp_failures": int(failures),
+        "safe_mode_entries": schedule.safe_mode_entries,
+        "safe_mode_ticks": int(safe_ticks),
+    }

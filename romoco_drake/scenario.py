@@ -13,6 +13,7 @@ from typing import Literal
 
 from pydrake.geometry import Meshcat
 from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
 from romoco_drake.config import load_typed, load_yaml_file
 from romoco_drake.control.standing import StandingController
@@ -33,6 +34,7 @@ from romoco_drake.rom.planners import PlannerParams, make_planner
 from romoco_drake.rom.types import WalkCommand
 
 CONTROLLERS = ("standing", "tscqp")
+STATE_LOG_PERIOD = 0.01  # s, the state samples summaries and plots are computed from
 ESTIMATORS = ("ground_truth",)
 
 
@@ -118,6 +120,19 @@ class BuiltDiagram:
     robot: RobotModel
     station: Diagram
     monitor: FallMonitor
+    state_log: VectorLogSink
+    command: CommandSource | None = None
+    walking: WalkingLoop | None = None
+
+
+@dataclass
+class WalkingLoop:
+    """Handles on the walking loop's systems, for summaries and plots."""
+
+    state_machine: GaitStateMachine
+    planner: FootPlacementPlanner
+    embedding: OutputEmbedding
+    controller: TscQpController
 
 
 def command_segments(scenario: Scenario, robot: RobotModel) -> list[CommandSegment]:
@@ -138,28 +153,30 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None) -> BuiltDi
     for port in ("joint_state", "base_pose", "base_velocity"):
         builder.Connect(station.GetOutputPort(port), estimator.GetInputPort(port))
     period = 1.0 / scenario.controller.rate_hz
+    walking = command = None
     if scenario.controller.name == "standing":
         controller = builder.AddNamedSystem("controller", StandingController(robot, period=period))
         builder.Connect(estimator.state_output, controller.state_input)
         builder.Connect(controller.actuation_output, station.GetInputPort("actuation"))
     else:
-        _add_walking_loop(builder, scenario, robot, estimator.state_output, station.GetInputPort("actuation"),
-                          period)
+        command = builder.AddNamedSystem("command", CommandSource(command_segments(scenario, robot)))
+        walking = _add_walking_loop(builder, scenario, robot, estimator.state_output, command,
+                                    station.GetInputPort("actuation"), period)
+    state_log = LogVectorOutput(estimator.state_output, builder, STATE_LOG_PERIOD)
     monitor = builder.AddNamedSystem("monitor", FallMonitor(robot))
     builder.Connect(estimator.state_output, monitor.state_input)
     diagram = builder.Build()
     diagram.set_name(scenario.name or scenario.robot)
-    return BuiltDiagram(diagram, robot, station, monitor)
+    return BuiltDiagram(diagram, robot, station, monitor, state_log, command, walking)
 
 
-def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, state, actuation,
-                      period: float) -> None:
+def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, state,
+                      command: CommandSource, actuation, period: float) -> WalkingLoop:
     """State machine → planner → output embedding → whole-body controller, all at ``period``."""
     w = robot.config.walking
     cfg = scenario.planner
     law = make_planner(cfg.name, PlannerParams(mass=robot.total_mass, t_ds=w.t_ds, gain=cfg.gain,
                                                alpha=cfg.alpha))
-    command = builder.AddNamedSystem("command", CommandSource(command_segments(scenario, robot)))
     machine = builder.AddNamedSystem("state_machine", GaitStateMachine(robot, period, law.t_ds))
     rom_state = builder.AddNamedSystem("rom_state", RomStateFromRobot(robot))
     planner = builder.AddNamedSystem("planner", FootPlacementPlanner(law))
@@ -182,3 +199,4 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     builder.Connect(embedding.task_references_port, controller.task_references_port)
     builder.Connect(machine.mode_port, controller.mode_port)
     builder.Connect(controller.actuation_port, actuation)
+    return WalkingLoop(machine, planner, embedding, controller)
