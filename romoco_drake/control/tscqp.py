@@ -91,9 +91,11 @@ class TscQp:
     """The TSC-QP for one robot. ``solve`` takes the controller-plant context (state set)."""
 
     def __init__(self, robot: RobotModel, contact: ContactModel, gains=DEFAULT_TASK_GAINS,
-                 regularization: float = 1e-4, constraint_damping: float = 20.0):
+                 regularization: float = 1e-4, constraint_damping: float = 20.0,
+                 pivot_moment_weight: float = 1.0):
         self.robot, self.contact = robot, contact
         self.gains, self.eps, self.k_h = gains, regularization, constraint_damping
+        self.w_pivot = pivot_moment_weight
         self.solver = ClarabelSolver()
         self.options = SolverOptions()
         self._programs: dict[str, _DomainProgram] = {}
@@ -114,6 +116,23 @@ class TscQp:
         if names not in self._gain_cache:
             self._gain_cache[names] = task_gains(names, self.gains)
         return self._gain_cache[names]
+
+    def _pivot_moment_map(self, context, refs: TaskReferences) -> np.ndarray:
+        """G (2 × n_f): horizontal moment of the stance contact forces about the sole centroid.
+
+        The ROM planners assume the stance foot is a pivot (no ankle torque about the sole
+        centroid, LIP eq. 1); penalising G λ keeps the centre of pressure near that point in
+        single support, so the robot's momentum evolves as the planner predicts.
+        """
+        foot = self.contact.feet[refs.domain]
+        plant = self.robot.plant
+        pivot = plant.CalcPointsPositions(context, foot.frame, foot.p_FS, plant.world_frame()).ravel()
+        r = refs.holonomic.y[:refs.num_contact_forces].reshape(-1, 3) - pivot
+        G = np.zeros((2, refs.num_contact_forces))
+        # (r × f)_x = r_y f_z − r_z f_y ; (r × f)_y = r_z f_x − r_x f_z
+        G[0, 1::3], G[0, 2::3] = -r[:, 2], r[:, 1]
+        G[1, 0::3], G[1, 2::3] = r[:, 2], -r[:, 0]
+        return G
 
     def commanded_accelerations(self, refs: TaskReferences, v: np.ndarray) -> np.ndarray:
         """ÿ^cmd = ÿ_d − K_p (y − y_d) − K_d (ẏ − ẏ_d) for every output."""
@@ -145,6 +164,10 @@ class TscQp:
         Q = np.zeros((n, n))
         Q[:nv, :nv] = 2.0 * J.T @ WJ
         Q[np.diag_indices(n)] += 2.0 * self.eps
+        if refs.domain in ("left", "right") and self.w_pivot > 0.0:
+            G = self._pivot_moment_map(context, refs)
+            f = slice(nv + nu, nv + nu + refs.num_contact_forces)
+            Q[f, f] += 2.0 * self.w_pivot * G.T @ G
         b = np.zeros(n)
         b[:nv] = 2.0 * WJ.T @ (bias - a_cmd)
         prog.cost.evaluator().UpdateCoefficients(Q, b)
