@@ -1,12 +1,12 @@
 """Task-space control QP (RoMoCo paper §V-A): output accelerations under whole-body dynamics.
 
-    min_{v̇, τ, λ}  Σ_i w_i ‖J_i v̇ + J̇_i v − ÿ_i^cmd‖² + ε (‖v̇‖² + ‖τ‖² + ‖λ‖²)
+    min_{v̇, τ, λ}  Σ_i w_i ‖J_i v̇ + J̇_i v − ÿ_i^cmd‖² + ε_v‖v̇‖² + ε_τ‖τ‖² + ε_λ‖λ‖²
     s.t.  M v̇ + C(q, v) = B τ + J_hᵀ λ          (dynamics, C = Coriolis − gravity)
           J_h v̇ + J̇_h v = −k_h J_h v            (holonomic: contacts and internal loops)
           A_f λ_c ≤ b_f                           (friction pyramid, CoP, unilateral contact)
           |τ| ≤ τ_max                             (torque limits)
 
-with ÿ^cmd = ÿ_d − K_p (y − y_d) − K_d (ẏ − ẏ_d). The ε terms keep the QP strictly convex
+with ÿ^cmd = ÿ_d − K_p (y − y_d) − K_d (ẏ − ẏ_d). The small ε terms keep the QP strictly convex
 (it has a unique solution even when tasks are redundant). One program per contact domain
 is built once; each tick only its coefficients change and Clarabel solves it. The small
 k_h damps constraint drift, since the controller plant's contacts are only held in velocity.
@@ -38,6 +38,7 @@ class TaskGain:
 
 
 DEFAULT_TASK_GAINS = (
+    TaskGain("com_[xy]", 30.0, 12.0, 10.0),  # standing: gentle, the support polygon is small
     TaskGain("com_*", 100.0, 20.0, 10.0),
     TaskGain("pelvis_*", 200.0, 30.0, 10.0),
     TaskGain("*hip_yaw", 100.0, 20.0, 1.0),
@@ -91,10 +92,16 @@ class TscQp:
     """The TSC-QP for one robot. ``solve`` takes the controller-plant context (state set)."""
 
     def __init__(self, robot: RobotModel, contact: ContactModel, gains=DEFAULT_TASK_GAINS,
-                 regularization: float = 1e-4, constraint_damping: float = 20.0,
+                 regularization: tuple[float, float, float] = (1e-5, 1e-7, 1e-7),
+                 constraint_damping: float = 20.0,
                  pivot_moment_weight: float = 1.0):
         self.robot, self.contact = robot, contact
-        self.gains, self.eps, self.k_h = gains, regularization, constraint_damping
+        self.gains, self.k_h = gains, constraint_damping
+        # Regularisation weights on v̇, τ and λ: enough for a unique solution, small enough
+        # (forces are O(100 N)) not to trade task accuracy for smaller forces.
+        eps_vdot, eps_tau, _ = regularization
+        self._eps = np.concatenate([np.full(robot.nv, eps_vdot), np.full(robot.nu, eps_tau)])
+        self._eps_force = regularization[2]
         self.w_pivot = pivot_moment_weight
         self.solver = ClarabelSolver()
         self.options = SolverOptions()
@@ -163,7 +170,7 @@ class TscQp:
         WJ = J * w[:, None]
         Q = np.zeros((n, n))
         Q[:nv, :nv] = 2.0 * J.T @ WJ
-        Q[np.diag_indices(n)] += 2.0 * self.eps
+        Q[np.diag_indices(n)] += 2.0 * np.concatenate([self._eps, np.full(n - nv - nu, self._eps_force)])
         if refs.domain in ("left", "right") and self.w_pivot > 0.0:
             G = self._pivot_moment_map(context, refs)
             f = slice(nv + nu, nv + nu + refs.num_contact_forces)

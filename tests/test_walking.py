@@ -1,0 +1,169 @@
+"""Whole-body control and closed-loop walking: TSC-QP on fixed inputs, the state machine, G1 walking."""
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+
+from romoco_drake.control.tscqp import TscQp
+from romoco_drake.embedding.references import MODES, EmbeddingCore
+from romoco_drake.planners.state_machine import GaitStateMachine
+from romoco_drake.robots.model import load_robot
+from romoco_drake.rom.types import WalkCommand
+from romoco_drake.scenario import CommandPoint, build_diagram, load_scenario
+
+
+@pytest.fixture(scope="module")
+def g1():
+    robot = load_robot("g1")
+    core = EmbeddingCore(robot)
+    return robot, core, TscQp(robot, core.contact)
+
+
+def _standing_refs(robot, core, v):
+    context = robot.plant.CreateDefaultContext()
+    robot.plant.SetPositions(context, robot.nominal.q)
+    robot.plant.SetVelocities(context, v)
+    return context, core.evaluate(context, "standing", 0.0, None, None)
+
+
+def test_tscqp_reproduces_feasible_task_accelerations(g1):
+    """Accelerations consistent with the contacts and the locked joints are tracked exactly."""
+    robot, core, qp = g1
+    rng = np.random.default_rng(3)
+    locked = np.zeros((int(robot.locked_actuator_mask.sum()), robot.nv))
+    locked[np.arange(len(locked)), robot.actuated_v_index[robot.locked_actuator_mask]] = 1.0
+    context, refs = _standing_refs(robot, core, np.zeros(robot.nv))
+    fixed = np.vstack([refs.holonomic.J, locked])  # contacts hold, locked joints stay still
+    null = np.linalg.svd(fixed)[2][np.linalg.matrix_rank(fixed):].T
+    v = null @ (0.05 * rng.standard_normal(null.shape[1]))
+    context, refs = _standing_refs(robot, core, v)
+    Jh = refs.holonomic.J
+    fixed = np.vstack([Jh, locked])
+    rank = np.linalg.matrix_rank(fixed)
+    null = np.linalg.svd(fixed)[2][rank:].T
+    rhs = np.concatenate([-refs.holonomic.Jdot_v - qp.k_h * Jh @ v, np.zeros(len(locked))])
+    vdot = np.linalg.lstsq(fixed, rhs, rcond=None)[0] + null @ (0.2 * rng.standard_normal(null.shape[1]))
+    wanted = refs.J @ vdot + refs.Jdot_v
+    refs = type(refs)(**{**refs.__dict__, "y_des": refs.y.copy(), "ydot_des": refs.J @ v,
+                         "yddot_des": wanted})
+    solution = qp.solve(context, refs)
+    assert solution.success
+    achieved = refs.J @ solution.vdot + refs.Jdot_v
+    np.testing.assert_allclose(achieved, wanted, atol=2e-3 * (1 + np.abs(wanted).max()))
+    np.testing.assert_allclose(Jh @ solution.vdot, -refs.holonomic.Jdot_v - qp.k_h * Jh @ v, atol=1e-6)
+    # Dynamics: M v̇ + C = B τ + J_hᵀ λ.
+    plant = robot.plant
+    lhs = plant.CalcMassMatrix(context) @ solution.vdot + plant.CalcBiasTerm(context) \
+        - plant.CalcGravityGeneralizedForces(context)
+    np.testing.assert_allclose(lhs, robot.B @ solution.tau + Jh.T @ solution.forces, atol=1e-5)
+
+
+def test_tscqp_respects_torque_and_friction_limits(g1):
+    """Infeasible demands give the best command inside the torque, friction and CoP limits."""
+    robot, core, qp = g1
+    context, refs = _standing_refs(robot, core, np.zeros(robot.nv))
+    huge = np.full(len(refs.y), 500.0)
+    refs = type(refs)(**{**refs.__dict__, "yddot_des": huge})
+    solution = qp.solve(context, refs)
+    assert solution.success
+    assert np.all(np.abs(solution.tau) <= robot.effort_limits * (1 + 1e-6) + 1e-6)
+    assert np.any(np.abs(solution.tau) > 0.5 * robot.effort_limits)  # the limits were reached
+    f = solution.forces[:refs.num_contact_forces]
+    assert np.all(refs.A_f @ f <= refs.b_f + 1e-5 * np.abs(f).max())
+
+
+def _machine(robot):
+    machine = GaitStateMachine(robot, period=0.002, t_ds=0.0)
+    context = machine.CreateDefaultContext()
+    x = np.concatenate([robot.nominal.q, np.zeros(robot.nv)])
+    machine.state_port.FixValue(context, x)
+    w = robot.config.walking
+    return machine, context, x, w
+
+
+def _command(w, vx=0.0, vy=0.0):
+    return WalkCommand(vx, vy, 0.0, w.step_width, w.z0, w.t_ss).to_vector()
+
+
+def test_state_machine_stand_walk_stand_and_damping(g1):
+    robot = g1[0]
+    machine, context, x, w = _machine(robot)
+    simulator = Simulator(machine, context)
+    machine.command_port.FixValue(context, _command(w))
+    simulator.AdvanceTo(0.1)
+    assert machine.schedule(context).mode == "standing"
+    machine.command_port.FixValue(context, _command(w, vx=0.3))
+    simulator.AdvanceTo(0.2)
+    s = machine.schedule(context)
+    assert s.mode == "walking" and s.side == "left"
+    simulator.AdvanceTo(0.2 + w.t_ss + 0.01)
+    assert machine.schedule(context).side == "right"
+    assert machine.mode_port.Eval(context)[0] == MODES.index("walking")
+    phase = machine.gait_phase_port.Eval(context)
+    assert phase[0] == -1.0 and 0.0 < phase[1] < w.t_ss
+    machine.command_port.FixValue(context, _command(w))
+    simulator.AdvanceTo(context.get_time() + 3 * w.t_ss)
+    assert machine.schedule(context).mode == "standing"
+    bad = x.copy()
+    bad[robot.nq] = np.nan
+    machine.state_port.FixValue(context, bad)
+    simulator.AdvanceTo(context.get_time() + 0.01)
+    s = machine.schedule(context)
+    assert s.mode == "damping" and s.fall_reason == "invalid_state" and s.safe_mode_entries == 1
+
+
+def test_state_machine_waits_for_balance_and_leads_with_the_lateral_foot(g1):
+    robot = g1[0]
+    machine, context, x, w = _machine(robot)
+    moving = x.copy()
+    moving[robot.nq + robot.base_v_start + 3] = 0.5  # base moving forward at 0.5 m/s
+    machine.state_port.FixValue(context, moving)
+    machine.command_port.FixValue(context, _command(w, vy=0.2))
+    simulator = Simulator(machine, context)
+    simulator.AdvanceTo(0.05)
+    assert machine.schedule(context).mode == "standing"
+    machine.state_port.FixValue(context, x)
+    simulator.AdvanceTo(0.1)
+    s = machine.schedule(context)
+    assert s.mode == "walking" and s.side == "right"  # the left foot swings first to go left
+
+
+def test_g1_walks_forward_and_lands_on_its_targets():
+    """G1 with H-LIP + TSC-QP: stays up, walks at the command, swing feet land near the plan."""
+    scenario = load_scenario("g1_walk")
+    scenario.command = [CommandPoint(0.5, vx=0.3)]
+    built = build_diagram(scenario)
+    simulator = Simulator(built.diagram)
+    context = simulator.get_mutable_context()
+    plant = built.station.GetSubsystemByName("plant")
+    plant.SetPositions(plant.GetMyMutableContextFromRoot(context), built.robot.nominal.q)
+    loop = built.walking
+    machine_ctx = loop.state_machine.GetMyContextFromRoot(context)
+    planner_ctx = loop.planner.GetMyContextFromRoot(context)
+    emb_ctx = loop.embedding.GetMyContextFromRoot(context)
+    simulator.Initialize()
+    period, t, landing_errors, last = 0.002, 0.0, [], None
+    while t < 4.0:
+        t += period
+        simulator.AdvanceTo(t)
+        s = loop.state_machine.schedule(machine_ctx)
+        if s.mode != "walking":
+            continue
+        tau = t - s.step_start
+        if last is not None and s.steps != last[0]:
+            landing_errors.append(np.linalg.norm(last[2] - last[1]))
+        refs = loop.embedding.task_references_port.Eval(emb_ctx)
+        plan = loop.planner.planner_output_port.Eval(planner_ctx)
+        if tau < s.t_ss and refs.mode == "walking":
+            i = refs.names.index("swing_foot_x")
+            last = (s.steps, refs.y[i:i + 2].copy(), plan.swing_target[:2].copy())
+    summary_ctx = built.monitor.GetMyContextFromRoot(context)
+    assert not built.monitor.summary(summary_ctx)["fell"]
+    assert loop.state_machine.schedule(machine_ctx).steps >= 8
+    assert max(landing_errors[2:]) < 0.03, landing_errors
+    log = built.state_log.FindLog(context)
+    times, states = log.sample_times(), log.data()
+    from romoco_drake.metrics import heading_velocity
+
+    v = heading_velocity(built.robot, times, states)[times > 2.5].mean(axis=0)
+    assert abs(v[0] - 0.3) < 0.08 and abs(v[1]) < 0.08, v
