@@ -40,6 +40,7 @@ class TaskGain:
 DEFAULT_TASK_GAINS = (
     TaskGain("com_[xy]", 30.0, 12.0, 10.0),  # standing: gentle, the support polygon is small
     TaskGain("com_*", 100.0, 20.0, 10.0),
+    TaskGain("pelvis_yaw", 50.0, 10.0, 1.0),  # standing: only the feet's friction turns the body
     TaskGain("pelvis_*", 200.0, 30.0, 10.0),
     TaskGain("*hip_yaw", 100.0, 20.0, 1.0),
     TaskGain("swing_foot_[xyz]", 400.0, 40.0, 10.0),

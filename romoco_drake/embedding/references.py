@@ -10,7 +10,9 @@ wraps it as a system. Desired values per mode:
   (apex ``swing_height``, zero touchdown velocity), replanned each tick from its own state.
   Double support keeps CoM height, pelvis tilt and the stance hip yaw.
 - standing: CoM over the middle of the two soles at the nominal CoM height, pelvis level and
-  facing the mean heading of the feet.
+  facing the mean heading of the feet. On entering standing the horizontal CoM reference is a
+  quintic from the CoM's state at that instant to the middle over ``STAND_SETTLE_S``, so the
+  switch from walking asks for no jump in position or velocity.
 - in air: the nominal joint positions.
 """
 
@@ -21,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from romoco_drake.embedding.bezier import SwingTrajectory, plan_swing
+from romoco_drake.embedding.bezier import BezierCurve, SwingTrajectory, plan_swing, quintic_bezier
 from romoco_drake.embedding.contact import DOMAINS, ContactModel
 from romoco_drake.embedding.outputs import InAirOutputs, Output, StandingOutputs, WalkingOutputs
 from romoco_drake.robots.model import RobotModel
@@ -34,6 +36,7 @@ MODES = ("in_air", "standing", "walking", "damping")
 # The swing target is frozen once this fraction of single support has passed: late target
 # moves would need large swing accelerations just before touchdown.
 FREEZE_FRACTION = 0.85
+STAND_SETTLE_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -82,6 +85,14 @@ class SwingState(SharedValue):
     step_start: float  # controller time at which this step began
     liftoff_hip_yaw: tuple[float, float]  # (stance, swing) hip yaw angles at the step start
     trajectory: SwingTrajectory | None  # swing sole rel. stance sole, stance yaw frame
+
+
+@dataclass(frozen=True)
+class StandState(SharedValue):
+    """The horizontal CoM reference latched when standing began."""
+
+    start: float  # controller time
+    com_xy: BezierCurve  # from the CoM's entry position and velocity to the middle of the soles
 
 
 class EmbeddingCore:
@@ -139,17 +150,28 @@ class EmbeddingCore:
     def _target(plan: PlannerOutput) -> np.ndarray:
         return np.array([plan.swing_target[0], plan.swing_target[1], 0.0])
 
-    def evaluate(self, context, mode: str, tau: float, plan: PlannerOutput | None,
-                 swing: SwingState | None) -> TaskReferences:
-        """References ``tau`` seconds into the step on the controller-plant ``context`` (state set).
+    def start_standing(self, context, t: float) -> StandState:
+        """Latches the CoM's state at the start of standing (time t)."""
+        out = self.standing.evaluate(context)
+        v = self.robot.plant.GetVelocities(context)
+        target = self._standing_targets(context)[:2]
+        curve = quintic_bezier(out.y[:2], out.J[:2] @ v, np.zeros(2), target, np.zeros(2), np.zeros(2),
+                               STAND_SETTLE_S)
+        return StandState(t, curve)
 
-        Walking without a plan or a latched step falls back to standing references.
+    def evaluate(self, context, mode: str, tau: float, plan: PlannerOutput | None,
+                 memory: SwingState | StandState | None, t: float = 0.0) -> TaskReferences:
+        """References on the controller-plant ``context`` (state set) at controller time t.
+
+        Walking uses ``tau`` (time into the step), the plan and the latched step in ``memory``;
+        standing uses the latched entry in ``memory`` if there is one. Walking without a plan or
+        a latched step falls back to standing references.
         """
-        if mode == "walking" and plan is not None and swing is not None:
-            return self._walking(context, tau, plan, swing)
+        if mode == "walking" and plan is not None and isinstance(memory, SwingState):
+            return self._walking(context, tau, plan, memory)
         if mode == "in_air":
             return self._in_air(context)
-        return self._standing(context)
+        return self._standing(context, memory if isinstance(memory, StandState) else None, t)
 
     def _walking(self, context, tau: float, plan: PlannerOutput, swing: SwingState) -> TaskReferences:
         stance = swing.stance_side
@@ -175,8 +197,16 @@ class EmbeddingCore:
         return self._pack("walking", stance if single else "double", stance, out, y_d, yd_d, ydd_d, active,
                           context)
 
-    def _standing(self, context) -> TaskReferences:
+    def _standing(self, context, stand: StandState | None, t: float) -> TaskReferences:
         out = self.standing.evaluate(context)
+        y_d, yd_d, ydd_d = self._standing_targets(context), np.zeros(6), np.zeros(6)
+        if stand is not None:
+            y_d[:2], yd_d[:2], ydd_d[:2] = stand.com_xy.evaluate(t - stand.start)
+        active = np.ones(6, dtype=bool)
+        return self._pack("standing", "double", "left", out, y_d, yd_d, ydd_d, active, context)
+
+    def _standing_targets(self, context) -> np.ndarray:
+        """CoM over the middle of the soles at the nominal height; pelvis level, mean foot heading."""
         plant = self.robot.plant
         world = plant.world_frame()
         centers, headings = [], []
@@ -189,8 +219,7 @@ class EmbeddingCore:
         y_d[:2] = 0.5 * (centers[0][:2] + centers[1][:2])
         y_d[2] = 0.5 * (centers[0][2] + centers[1][2]) + self.nominal_com_height
         y_d[5] = math.atan2(sum(math.sin(h) for h in headings), sum(math.cos(h) for h in headings))
-        return self._pack("standing", "double", "left", out, y_d, np.zeros(6), np.zeros(6),
-                          np.ones(6, dtype=bool), context)
+        return y_d
 
     def _in_air(self, context) -> TaskReferences:
         out = self.in_air.evaluate(context)

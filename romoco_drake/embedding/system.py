@@ -5,7 +5,7 @@ from __future__ import annotations
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
-from romoco_drake.embedding.references import MODES, EmbeddingCore, SwingState, TaskReferences
+from romoco_drake.embedding.references import MODES, EmbeddingCore, StandState, SwingState, TaskReferences
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.types import GAIT_PHASE_SIZE, PlannerOutput, side_from_sign
 
@@ -25,7 +25,8 @@ class OutputEmbedding(LeafSystem):
     | ``mode`` | in | 1 | index into ``MODES``: in-air, standing, walking, damping |
     | ``task_references`` | out | abstract | :class:`~romoco_drake.embedding.references.TaskReferences` |
 
-    Abstract state: the current step's :class:`SwingState` (None outside walking).
+    Abstract state: the current step's :class:`SwingState` when walking, the
+    :class:`StandState` latched on entering standing, else nothing.
     """
 
     def __init__(self, robot: RobotModel, period: float, core: EmbeddingCore | None = None):
@@ -55,13 +56,24 @@ class OutputEmbedding(LeafSystem):
         index = int(round(float(self.mode_port.Eval(context)[0])))
         return MODES[min(max(index, 0), len(MODES) - 1)]
 
-    def swing_state(self, context) -> SwingState | None:
+    def memory(self, context) -> SwingState | StandState | None:
+        """The latched step (walking) or standing entry, if any."""
         value = context.get_abstract_state(self._swing).get_value()
         return None if isinstance(value, _NoSwing) else value
 
+    def swing_state(self, context) -> SwingState | None:
+        value = self.memory(context)
+        return value if isinstance(value, SwingState) else None
+
     def _update_swing(self, context, state) -> None:
         swing = self.swing_state(context)
-        if self._mode(context) != "walking":
+        mode = self._mode(context)
+        if mode == "standing":
+            new = self.memory(context)
+            if not isinstance(new, StandState):
+                self._set_plant_state(context)
+                new = self.core.start_standing(self._plant_context, context.get_time())
+        elif mode != "walking":
             new = _NoSwing()
         else:
             phase = self.gait_phase_port.Eval(context)
@@ -82,7 +94,7 @@ class OutputEmbedding(LeafSystem):
         phase = self.gait_phase_port.Eval(context)
         refs: TaskReferences = self.core.evaluate(
             self._plant_context, self._mode(context), float(phase[1]),
-            self.planner_output_port.Eval(context), self.swing_state(context))
+            self.planner_output_port.Eval(context), self.memory(context), context.get_time())
         value.set_value(refs)
 
 
