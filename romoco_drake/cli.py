@@ -87,15 +87,15 @@ def _cmd_run(args) -> int:
     from pydrake.geometry import Meshcat
 
     from romoco_drake.runner import run_scenario, stderr_progress
-    from romoco_drake.scenario import load_scenario
+    from romoco_drake.scenario import load_scenario, with_overrides
 
-    scenario = load_scenario(args.scenario)
+    scenario = with_overrides(load_scenario(args.scenario), args.planner, args.controller, args.command)
     meshcat = None
     if args.meshcat:
         meshcat = Meshcat()
         print(f"Meshcat: {meshcat.web_url()}", file=sys.stderr, flush=True)
     summary = run_scenario(scenario, duration=args.duration, meshcat=meshcat,
-                           record=args.record, progress=stderr_progress)
+                           record=args.record, progress=stderr_progress, plot_dir=args.plot)
     if args.json:
         print(json.dumps(summary))
     else:
@@ -104,6 +104,14 @@ def _cmd_run(args) -> int:
         print(f"{summary['scenario']} ({summary['robot']}): {summary['duration_s']} s simulated in "
               f"{summary['wall_s']} s ({summary['realtime_factor']}x real time); {state}; "
               f"base height drift {summary['base_height_drift_m'] * 1000:.1f} mm")
+        if "velocity_rms_error" in summary:
+            print(f"  {summary['planner']} + {summary['controller']}: {summary['steps']} steps, "
+                  f"velocity rms error (vx, vy, wz) {summary['velocity_rms_error']}, "
+                  f"mean velocity {summary['mean_velocity']}, "
+                  f"QP failures {summary['qp_failures']}, safe-mode entries {summary['safe_mode_entries']}, "
+                  f"controller tick {summary['controller_tick_ms']['median']} ms median")
+        for path in summary.get("plots", []):
+            print(f"  wrote {path}")
         if args.record:
             print(f"replay written to {args.record}")
     if args.meshcat and not args.no_wait and sys.stdin.isatty():
@@ -179,6 +187,11 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--record", type=Path, metavar="FILE.html", help="write an offline Meshcat replay")
     p.add_argument("--json", action="store_true", help="print the run summary as JSON (last line)")
     p.add_argument("--no-wait", action="store_true", help="with --meshcat, exit when the run ends")
+    p.add_argument("--planner", help="override the scenario's planner (see romoco list)")
+    p.add_argument("--controller", help="override the scenario's controller (see romoco list)")
+    p.add_argument("--command", metavar="T:VX,VY,WZ;...",
+                   help="override the velocity command: piecewise constant from each time T (s)")
+    p.add_argument("--plot", type=Path, metavar="DIR", help="write velocity and tracking-error PNGs")
     p.set_defaults(func=_cmd_run)
     bench = sub.add_parser("bench", help="benchmarks that print numbers").add_subparsers(
         dest="bench", required=True)

@@ -30,6 +30,7 @@ def run_scenario(
     meshcat: Meshcat | None = None,
     record: Path | None = None,
     progress=None,
+    plot_dir: Path | None = None,
 ) -> dict:
     """Simulates ``scenario`` and returns the run summary (see ``romoco run --json``)."""
     duration = scenario.duration_s if duration is None else duration
@@ -77,7 +78,7 @@ def run_scenario(
     }
     summary.update(built.monitor.summary(monitor_context))
     if built.walking is not None:
-        summary.update(_walking_summary(built, context, scenario))
+        summary.update(_walking_summary(built, context, scenario, plot_dir))
     if record is not None:
         summary["record"] = str(record)
     return summary
@@ -87,9 +88,10 @@ def stderr_progress(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
 
 
-def _walking_summary(built, context, scenario: Scenario) -> dict:
+def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None) -> dict:
     log = built.state_log.FindLog(context)
     tracking = velocity_tracking(built.robot, built.command, log.sample_times(), log.data())
+    ticks = built.walking.tick_log.FindLog(context).data()[0, 1:]  # the first sample precedes any tick
     loop = built.walking
     schedule = loop.state_machine.schedule(loop.state_machine.GetMyContextFromRoot(context))
     failures, safe_ticks, _ = loop.controller.stats_port.Eval(loop.controller.GetMyContextFromRoot(context))
@@ -101,4 +103,17 @@ def _walking_summary(built, context, scenario: Scenario) -> dict:
         "qp_failures": int(failures),
         "safe_mode_entries": schedule.safe_mode_entries,
         "safe_mode_ticks": int(safe_ticks),
-    }
+        "controller_tick_ms": {"median": round(float(np.median(ticks)), 3),
+                               "p99": round(float(np.percentile(ticks, 99)), 3)},
+    } | _plots(built, context, scenario, plot_dir, log, tracking)
+
+
+def _plots(built, context, scenario: Scenario, plot_dir: Path | None, log, tracking) -> dict:
+    if plot_dir is None:
+        return {}
+    from romoco_drake.plots import plot_walking_run
+
+    errors = built.walking.error_log.FindLog(context)
+    paths = plot_walking_run(Path(plot_dir), scenario.name, log.sample_times(), tracking,
+                             errors.sample_times(), errors.data())
+    return {"plots": [str(p) for p in paths]}

@@ -7,6 +7,7 @@ loop. ``build_diagram`` wires station → estimator → controller → station.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -30,7 +31,7 @@ from romoco_drake.planners.foot_placement import FootPlacementPlanner
 from romoco_drake.planners.state_machine import GaitStateMachine
 from romoco_drake.robots.model import RobotModel, load_robot, robot_names
 from romoco_drake.robots.source import DIAGRAMS_DIR
-from romoco_drake.rom.planners import PlannerParams, make_planner
+from romoco_drake.rom.planners import PLANNERS, PlannerParams, make_planner
 from romoco_drake.rom.types import WalkCommand
 
 CONTROLLERS = ("standing", "tscqp")
@@ -127,12 +128,51 @@ class BuiltDiagram:
 
 @dataclass
 class WalkingLoop:
-    """Handles on the walking loop's systems, for summaries and plots."""
+    """Handles on the walking loop's systems and logs, for summaries and plots."""
 
     state_machine: GaitStateMachine
     planner: FootPlacementPlanner
     embedding: OutputEmbedding
     controller: TscQpController
+    tick_log: VectorLogSink  # controller update wall time, every tick
+    error_log: VectorLogSink  # embedding tracking errors per group
+
+
+def parse_command(text: str) -> list[CommandPoint]:
+    """``"t:vx,vy,wz;t:vx,vy,wz;..."`` → command points (the --command override)."""
+    points = []
+    for item in filter(None, (part.strip() for part in text.split(";"))):
+        try:
+            t, values = item.split(":")
+            vx, vy, wz = (float(v) for v in values.split(","))
+            point = CommandPoint(float(t), vx, vy, wz)
+        except ValueError:
+            raise RomocoError(f"--command: '{item}' is not t:vx,vy,wz (e.g. '0:0,0,0;2:0.5,0,0')") from None
+        if not all(map(math.isfinite, (point.t, vx, vy, wz))) or point.t < 0.0:
+            raise RomocoError(f"--command: '{item}' needs a finite time ≥ 0 and finite velocities")
+        points.append(point)
+    if not points:
+        raise RomocoError("--command: empty profile")
+    if [p.t for p in points] != sorted(p.t for p in points):
+        raise RomocoError("--command: times must increase")
+    return points
+
+
+def with_overrides(scenario: Scenario, planner: str | None = None, controller: str | None = None,
+                   command: str | None = None) -> Scenario:
+    """``scenario`` with the CLI's --planner/--controller/--command applied (names checked)."""
+    if planner is not None:
+        if planner not in PLANNERS:
+            raise RomocoError(f"unknown planner '{planner}' (known: {', '.join(PLANNERS)})")
+        scenario = dataclasses.replace(scenario, planner=dataclasses.replace(scenario.planner, name=planner))
+    if controller is not None:
+        if controller not in CONTROLLERS:
+            raise RomocoError(f"unknown controller '{controller}' (known: {', '.join(CONTROLLERS)})")
+        scenario = dataclasses.replace(
+            scenario, controller=dataclasses.replace(scenario.controller, name=controller))
+    if command is not None:
+        scenario = dataclasses.replace(scenario, command=parse_command(command))
+    return scenario
 
 
 def command_segments(scenario: Scenario, robot: RobotModel) -> list[CommandSegment]:
@@ -199,4 +239,6 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     builder.Connect(embedding.task_references_port, controller.task_references_port)
     builder.Connect(machine.mode_port, controller.mode_port)
     builder.Connect(controller.actuation_port, actuation)
-    return WalkingLoop(machine, planner, embedding, controller)
+    tick_log = LogVectorOutput(controller.tick_ms_port, builder, period)
+    error_log = LogVectorOutput(embedding.tracking_error_port, builder, STATE_LOG_PERIOD)
+    return WalkingLoop(machine, planner, embedding, controller, tick_log, error_log)

@@ -190,7 +190,7 @@ def bench_rom(planner_name: str, robot: str = "g1", t_ds: float | None = None,
         "planner_cost": planner_cost_us(planner, run, segments),
     }
     if plot_dir is not None:
-        from romoco_drake.bench.plots import plot_template_run
+        from romoco_drake.plots import plot_template_run
 
         summary["plots"] = [str(p) for p in plot_template_run(plot_dir, planner_name, run, segments,
                                                               times, vel, mass)]

@@ -15,6 +15,7 @@ k_h damps constraint drift, since the controller plant's contacts are only held 
 from __future__ import annotations
 
 import fnmatch
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -219,6 +220,7 @@ class TscQpController(LeafSystem):
     | ``mode`` | in | 1 | index into ``MODES`` |
     | ``actuation`` | out | nu | joint torques [N·m], held between ticks |
     | ``stats`` | out | 3 | QP failures, safe (damping) ticks, consecutive failures |
+    | ``tick_ms`` | out | 1 | wall time of the last update [ms] (instrumentation, not control) |
     """
 
     def __init__(self, robot: RobotModel, period: float, qp: TscQp, max_stale_ticks: int = 20):
@@ -231,8 +233,10 @@ class TscQpController(LeafSystem):
         self.mode_port = self.DeclareVectorInputPort("mode", 1)
         self._tau = self.DeclareDiscreteState(robot.nu)
         self._stats = self.DeclareDiscreteState(3)
+        self._tick = self.DeclareDiscreteState(1)
         self.actuation_port = self.DeclareStateOutputPort("actuation", self._tau)
         self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
+        self.tick_ms_port = self.DeclareStateOutputPort("tick_ms", self._tick)
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
 
     def _damping(self, v: np.ndarray) -> np.ndarray:
@@ -241,6 +245,7 @@ class TscQpController(LeafSystem):
         return np.clip(tau, -r.effort_limits, r.effort_limits)
 
     def _update(self, context, discrete_state) -> None:
+        start = time.perf_counter()
         r = self.robot
         x = self.state_port.Eval(context)
         failures, safe, streak = context.get_discrete_state(self._stats).value()
@@ -258,6 +263,7 @@ class TscQpController(LeafSystem):
                        else self._damping(x[r.nq:]))
         discrete_state.get_mutable_vector(self._tau).SetFromVector(tau)
         discrete_state.get_mutable_vector(self._stats).SetFromVector([failures, safe, streak])
+        discrete_state.get_mutable_vector(self._tick).SetFromVector([1e3 * (time.perf_counter() - start)])
 
 
 def _placeholder_references(robot: RobotModel) -> TaskReferences:

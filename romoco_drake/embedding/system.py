@@ -2,12 +2,23 @@
 
 from __future__ import annotations
 
+import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.embedding.references import MODES, EmbeddingCore, StandState, SwingState, TaskReferences
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.types import GAIT_PHASE_SIZE, PlannerOutput, side_from_sign
+
+# Output groups of the ``tracking_error`` port: (label, name prefixes). Unmatched outputs (in-air
+# joints) count as "joints".
+ERROR_GROUPS = (
+    ("com", ("com_",)),
+    ("pelvis", ("pelvis_",)),
+    ("swing foot position", ("swing_foot_x", "swing_foot_y", "swing_foot_z")),
+    ("swing foot tilt, hip yaw", ("swing_foot_", "stance_hip_yaw", "swing_hip_yaw")),
+    ("joints", ()),
+)
 
 
 class OutputEmbedding(LeafSystem):
@@ -24,6 +35,7 @@ class OutputEmbedding(LeafSystem):
     | ``gait_phase`` | in | 2 | stance (+1 left, −1 right), time in step [s] |
     | ``mode`` | in | 1 | index into ``MODES``: in-air, standing, walking, damping |
     | ``task_references`` | out | abstract | :class:`~romoco_drake.embedding.references.TaskReferences` |
+    | ``tracking_error`` | out | 5 | norm of the active errors y − y_d per ``ERROR_GROUPS`` (m or rad) |
 
     Abstract state: the current step's :class:`SwingState` when walking, the
     :class:`StandState` latched on entering standing, else nothing.
@@ -42,6 +54,8 @@ class OutputEmbedding(LeafSystem):
         self._swing = self.DeclareAbstractState(AbstractValue.Make(_NoSwing()))
         self.task_references_port = self.DeclareAbstractOutputPort(
             "task_references", self._default_references, self._calc_references)
+        self.tracking_error_port = self.DeclareVectorOutputPort(
+            "tracking_error", len(ERROR_GROUPS), self._calc_tracking_error)
         self.DeclareInitializationUnrestrictedUpdateEvent(self._update_swing)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update_swing)
 
@@ -96,6 +110,20 @@ class OutputEmbedding(LeafSystem):
             self._plant_context, self._mode(context), float(phase[1]),
             self.planner_output_port.Eval(context), self.memory(context), context.get_time())
         value.set_value(refs)
+
+    def _calc_tracking_error(self, context, out) -> None:
+        refs: TaskReferences = self.task_references_port.Eval(context)
+        err = np.where(refs.active, refs.error, 0.0) ** 2
+        sums = np.zeros(len(ERROR_GROUPS))
+        np.add.at(sums, [_group_of(n) for n in refs.names], err)
+        out.SetFromVector(np.sqrt(sums))
+
+
+def _group_of(name: str) -> int:
+    for i, (_, prefixes) in enumerate(ERROR_GROUPS):
+        if name.startswith(prefixes):
+            return i
+    return len(ERROR_GROUPS) - 1
 
 
 class _NoSwing:

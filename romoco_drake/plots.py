@@ -54,3 +54,42 @@ def plot_template_run(out_dir: Path, name: str, run, segments, stride_times: np.
     fig.savefig(phase, dpi=120)
     plt.close(fig)
     return [velocity, phase]
+
+
+def plot_walking_run(out_dir: Path, name: str, times: np.ndarray, tracking: dict, error_times: np.ndarray,
+                     errors: np.ndarray) -> list[Path]:
+    """Writes ``<name>_velocity.png`` (command vs measured) and ``<name>_tracking.png``."""
+    from romoco_drake.embedding.system import ERROR_GROUPS
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 6.5))
+    labels = ("forward velocity [m/s]", "lateral velocity [m/s]", "yaw rate [rad/s]")
+    for i, (ax, label) in enumerate(zip(axes, labels, strict=True)):
+        ax.plot(times, tracking["wanted"][:, i], "k--", lw=1.2, label="command")
+        ax.plot(times, tracking["measured"][:, i], lw=1.2, label="measured, 1 s average")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="upper left", fontsize=8)
+    axes[-1].set_xlabel("time [s]")
+    fig.suptitle(f"{name}: commanded and measured base velocity (heading frame)")
+    fig.tight_layout()
+    velocity = out_dir / f"{name}_velocity.png"
+    fig.savefig(velocity, dpi=120)
+    plt.close(fig)
+
+    fig, ax = plt.subplots(figsize=(8, 3.8))
+    for (label, _), series in zip(ERROR_GROUPS, errors, strict=True):
+        if np.any(series > 0.0):
+            ax.plot(error_times, series, lw=0.9, label=label)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("|y − y_d| of active outputs [m or rad]")
+    ax.set_yscale("symlog", linthresh=1e-3)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.suptitle(f"{name}: output tracking errors")
+    fig.tight_layout()
+    tracking_png = out_dir / f"{name}_tracking.png"
+    fig.savefig(tracking_png, dpi=120)
+    plt.close(fig)
+    return [velocity, tracking_png]
