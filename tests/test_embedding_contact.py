@@ -84,7 +84,7 @@ def _feasible_by_definition(robot, side, contact, f_S):
     if f[2] > 1e-9:
         cop = np.array([-m[1], m[0]]) / f[2]
         if robot.is_line_foot:
-            assert abs(cop[1]) < 1e-9  # no moment about the line: CoP on it
+            assert abs(cop[1]) < 1e-7  # no moment about the line: CoP on it
             toe, heel = (foot.R_FS.T @ (robot.feet[side].points[:, :2] - foot.p_FS[:, None]))[0]
             inside = min(toe - cop[0], cop[0] - heel)
         else:
