@@ -28,6 +28,7 @@ from romoco_drake.interfaces.monitor import FallMonitor
 from romoco_drake.interfaces.station import make_station
 from romoco_drake.planners.command import CommandSegment, CommandSource
 from romoco_drake.planners.foot_placement import FootPlacementPlanner
+from romoco_drake.planners.heading import HeadingHold
 from romoco_drake.planners.state_machine import GaitStateMachine
 from romoco_drake.robots.model import RobotModel, load_robot, robot_names
 from romoco_drake.robots.source import DIAGRAMS_DIR
@@ -217,6 +218,9 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     cfg = scenario.planner
     law = make_planner(cfg.name, PlannerParams(mass=robot.total_mass, t_ds=w.t_ds, gain=cfg.gain,
                                                alpha=cfg.alpha))
+    heading = builder.AddNamedSystem("heading", HeadingHold(robot, period))
+    builder.Connect(command.command_port, heading.command_in_port)
+    builder.Connect(state, heading.state_port)
     machine = builder.AddNamedSystem("state_machine", GaitStateMachine(robot, period, law.t_ds))
     rom_state = builder.AddNamedSystem("rom_state", RomStateFromRobot(robot))
     planner = builder.AddNamedSystem("planner", FootPlacementPlanner(law))
@@ -230,7 +234,7 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     builder.Connect(machine.gait_phase_port, rom_state.gait_phase_port)
     builder.Connect(rom_state.rom_state_port, planner.rom_state_port)
     builder.Connect(machine.gait_phase_port, planner.gait_phase_port)
-    builder.Connect(command.command_port, planner.command_port)
+    builder.Connect(heading.command_port, planner.command_port)
     builder.Connect(state, embedding.state_port)
     builder.Connect(planner.planner_output_port, embedding.planner_output_port)
     builder.Connect(machine.gait_phase_port, embedding.gait_phase_port)

@@ -3,7 +3,8 @@
 This is the output embedding's math (paper §IV); :class:`~romoco_drake.embedding.system.OutputEmbedding`
 wraps it as a system. Desired values per mode:
 
-- walking, single support: CoM height = the plan's z0; stance hip yaw turns the pelvis half of
+- walking, single support: CoM height from its lift-off value to the plan's z0 along a
+  rest-to-rest quintic over ``HEIGHT_BLEND_S``; stance hip yaw turns the pelvis half of
   the planned yaw change and the swing hip yaw the other half (linear in the step), so at
   touchdown the feet differ by the planned yaw and the pelvis bisects them; pelvis and swing-sole
   tilt zero; the swing sole follows a Bezier trajectory from lift-off to the plan's target
@@ -37,6 +38,9 @@ MODES = ("in_air", "standing", "walking", "damping")
 # moves would need large swing accelerations just before touchdown.
 FREEZE_FRACTION = 0.85
 STAND_SETTLE_S = 1.0
+# Each step moves the CoM height from its lift-off value to the plan's over this time (a
+# standing robot often carries its CoM higher than its walking height).
+HEIGHT_BLEND_S = 0.6
 
 
 @dataclass(frozen=True)
@@ -85,6 +89,7 @@ class SwingState(SharedValue):
     step_start: float  # controller time at which this step began
     liftoff_hip_yaw: tuple[float, float]  # (stance, swing) hip yaw angles at the step start
     trajectory: SwingTrajectory | None  # swing sole rel. stance sole, stance yaw frame
+    liftoff_com_height: float  # CoM height above the stance sole at the step start
 
 
 @dataclass(frozen=True)
@@ -114,6 +119,10 @@ class EmbeddingCore:
         self._swing_index = self.walking.names.index("swing_foot_x")
         self._swing_yaw_index = self.walking.names.index("swing_hip_yaw")
         ss = np.ones(len(self.walking.names), dtype=bool)
+        if not self.walking.has_ankle_roll and not robot.is_line_foot:
+            # A flat stance foot without an ankle roll joint ties the pelvis roll to the lateral
+            # CoM position; regulating it would stop the lateral pendulum, so it is left free.
+            ss[self.walking.names.index("pelvis_roll")] = False
         ds = np.zeros_like(ss)
         for name in ("com_z", "stance_hip_yaw", "pelvis_pitch", "pelvis_roll"):
             ds[self.walking.names.index(name)] = True
@@ -136,7 +145,7 @@ class EmbeddingCore:
         start = out.y[i:i + 3]
         trajectory = plan_swing(start, self._target(plan), plan.t_ss, self.swing_height)
         hips = (float(q[self._hip_yaw_q[stance_side]]), float(q[self._hip_yaw_q[other_side(stance_side)]]))
-        return SwingState(stance_side, t, hips, trajectory)
+        return SwingState(stance_side, t, hips, trajectory, float(out.y[0]))
 
     def update_swing(self, swing: SwingState, tau: float, plan: PlannerOutput) -> SwingState:
         """Replans the swing toward the plan's latest target, from the trajectory's own state at
@@ -144,7 +153,8 @@ class EmbeddingCore:
         if swing.trajectory is None or tau >= FREEZE_FRACTION * plan.t_ss:
             return swing
         trajectory = swing.trajectory.replan(tau, self._target(plan))
-        return SwingState(swing.stance_side, swing.step_start, swing.liftoff_hip_yaw, trajectory)
+        return SwingState(swing.stance_side, swing.step_start, swing.liftoff_hip_yaw, trajectory,
+                          swing.liftoff_com_height)
 
     @staticmethod
     def _target(plan: PlannerOutput) -> np.ndarray:
@@ -179,7 +189,7 @@ class EmbeddingCore:
         single = tau < plan.t_ss
         k = len(out.names)
         y_d, yd_d, ydd_d = np.zeros(k), np.zeros(k), np.zeros(k)
-        y_d[0] = plan.com_height
+        y_d[0], yd_d[0], ydd_d[0] = _blend(swing.liftoff_com_height, plan.com_height, tau, HEIGHT_BLEND_S)
         # Hip yaws: the pelvis turns half the planned yaw change relative to each foot.
         s = min(max(tau / plan.t_ss, 0.0), 1.0)
         rate = 0.0 if not single else 1.0 / plan.t_ss
@@ -242,3 +252,12 @@ class EmbeddingCore:
         n_f = A_f.shape[1]
         return TaskReferences(mode, domain, stance, out.names, out.y, out.J, out.Jdot_v, y_d, yd_d, ydd_d,
                               active, holonomic, n_f, A_f, b_f)
+
+
+def _blend(start: float, goal: float, t: float, duration: float) -> tuple[float, float, float]:
+    """Value, rate and acceleration of the rest-to-rest quintic from ``start`` to ``goal``."""
+    s = min(max(t / duration, 0.0), 1.0)
+    d = goal - start
+    return (start + d * s**3 * (10.0 - 15.0 * s + 6.0 * s * s),
+            d * 30.0 * s * s * (1.0 - s) ** 2 / duration,
+            d * 60.0 * s * (1.0 - s) * (1.0 - 2.0 * s) / duration**2)

@@ -1,0 +1,63 @@
+"""Heading hold: turns the commanded yaw rate into a yaw-rate command with heading feedback."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from pydrake.systems.framework import LeafSystem
+
+from romoco_drake.robots.model import RobotModel
+from romoco_drake.rom.types import COMMAND_SIZE
+
+
+def base_yaw(robot: RobotModel, x: np.ndarray) -> float:
+    """Heading of the floating base (rad) from its quaternion in state ``x``."""
+    i = robot.base_q_start
+    w, qx, qy, qz = x[i:i + 4]
+    return math.atan2(2.0 * (w * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+
+
+class HeadingHold(LeafSystem):
+    """wz_out = wz + k (ψ_d − ψ), with ψ_d the integral of the commanded wz from the start heading.
+
+    Foot placement turns the robot by wz·T per step but nothing else corrects yaw; without this
+    loop, small yaw slips at each touchdown accumulate into a drift. ψ_d starts at the base
+    heading at initialisation; the feedback term is limited to ``max_correction`` rad/s.
+
+    | port | kind | size | meaning |
+    |---|---|---|---|
+    | ``command_in`` | in | 6 | :class:`WalkCommand` vector from the user |
+    | ``state`` | in | nq+nv | robot state |
+    | ``command`` | out | 6 | the same command with the corrected yaw rate |
+
+    Discrete state: ψ_d, updated every ``period``.
+    """
+
+    def __init__(self, robot: RobotModel, period: float, gain: float = 1.0, max_correction: float = 0.3):
+        super().__init__()
+        self.robot, self.period, self.gain, self.max_correction = robot, period, gain, max_correction
+        self.command_in_port = self.DeclareVectorInputPort("command_in", COMMAND_SIZE)
+        self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
+        self._psi = self.DeclareDiscreteState(1)
+        self.command_port = self.DeclareVectorOutputPort("command", COMMAND_SIZE, self._calc)
+        self.DeclareInitializationDiscreteUpdateEvent(self._initialize)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._integrate)
+
+    def _initialize(self, context, discrete_state) -> None:
+        psi = base_yaw(self.robot, self.state_port.Eval(context))
+        discrete_state.get_mutable_vector(self._psi).SetFromVector([psi])
+
+    def _integrate(self, context, discrete_state) -> None:
+        psi = context.get_discrete_state(self._psi).value()[0]
+        wz = self.command_in_port.Eval(context)[2]
+        discrete_state.get_mutable_vector(self._psi).SetFromVector([psi + self.period * wz])
+
+    def _calc(self, context, out) -> None:
+        cmd = np.array(self.command_in_port.Eval(context))
+        x = self.state_port.Eval(context)
+        psi_d = context.get_discrete_state(self._psi).value()[0]
+        if np.all(np.isfinite(x)):
+            error = math.remainder(psi_d - base_yaw(self.robot, x), 2.0 * math.pi)
+            cmd[2] += float(np.clip(self.gain * error, -self.max_correction, self.max_correction))
+        out.SetFromVector(cmd)
