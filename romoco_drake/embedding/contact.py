@@ -34,12 +34,14 @@ SIDES = ("left", "right")
 DOMAINS = {"left": ("left",), "right": ("right",), "double": ("left", "right"), "none": ()}
 
 
-def select_contact_points(robot: RobotModel, side: str) -> tuple[tuple[str, ...], np.ndarray]:
+def select_contact_points(robot: RobotModel, side: str, line: bool | None = None
+                          ) -> tuple[tuple[str, ...], np.ndarray]:
     """Names and positions p_FC (3×k, foot frame) of the representative contact points.
 
     Line foot: the toe and heel points. Plane foot: LF and RF are the left- and right-most of
     the front points, MB the mean of the back points ("front"/"back": within 10% of the sole
-    length from the front-/back-most point along the forward axis).
+    length from the front-/back-most point along the forward axis). ``line=True`` models a
+    plane foot as the line from the mean of its back points to the mean of its front points.
     """
     pts = robot.feet[side].points
     if robot.is_line_foot:
@@ -49,6 +51,8 @@ def select_contact_points(robot: RobotModel, side: str) -> tuple[tuple[str, ...]
     tol = 0.1 * (x.max() - x.min())
     front = np.flatnonzero(x >= x.max() - tol)
     back = x <= x.min() + tol
+    if line:
+        return ("toe", "heel"), np.column_stack([pts[:, front].mean(axis=1), pts[:, back].mean(axis=1)])
     lf, rf = front[np.argmax(y[front])], front[np.argmin(y[front])]
     chosen = np.column_stack([pts[:, lf], pts[:, rf], pts[:, back].mean(axis=1)])
     a, b, c = (R_FS.T @ chosen)[:2].T
@@ -91,18 +95,19 @@ def _convex_hull(xy: np.ndarray) -> np.ndarray:
     return np.array(half(pts) + half(pts[::-1]))
 
 
-def support_halfplanes(robot: RobotModel, side: str) -> tuple[np.ndarray, np.ndarray]:
+def support_halfplanes(robot: RobotModel, side: str, line: bool | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """Outward normals N (e×2) and offsets d (e,) with the sole region {c : N c ≤ d} in S (x, y).
 
-    Plane foot: the edges of the convex hull of all sole points. Line foot: the segment
-    from heel to toe along x_S (its lateral CoP is zero by construction).
+    Plane foot: the edges of the convex hull of all sole points. Line foot (or ``line=True``):
+    the segment from heel to toe along x_S (its lateral CoP is zero by construction).
     """
     R_FS, p_FS = sole_frame(robot, side)
-    xy = (R_FS.T @ (robot.feet[side].points - p_FS[:, None]))[:2].T
-    if robot.is_line_foot:
-        toe, heel = xy[0, 0], xy[1, 0]
+    if robot.is_line_foot or line:
+        _, points = select_contact_points(robot, side, line)
+        toe, heel = (R_FS.T @ (points - p_FS[:, None]))[0]
         return np.array([[1.0, 0.0], [-1.0, 0.0]]), np.array([toe, -heel])
-    hull = _convex_hull(xy)
+    hull = _convex_hull((R_FS.T @ (robot.feet[side].points - p_FS[:, None]))[:2].T)
     edges = np.roll(hull, -1, axis=0) - hull
     normals = np.column_stack([edges[:, 1], -edges[:, 0]]) / np.linalg.norm(edges, axis=1)[:, None]
     return normals, np.einsum("ij,ij->i", normals, hull)
@@ -141,8 +146,9 @@ class ContactModel:
     """
 
     def __init__(self, robot: RobotModel, *, friction_margin: float = 0.0, cop_margin: float = 0.0,
-                 min_normal_force: float = 0.0):
+                 min_normal_force: float = 0.0, line_contact: bool = False):
         self.robot = robot
+        self.line_contact = robot.is_line_foot or line_contact
         plant = robot.plant
         mu = robot.config.feet.friction * (1.0 - friction_margin)
         limits = np.array([
@@ -154,14 +160,14 @@ class ContactModel:
         ])
         self.feet: dict[str, FootContact] = {}
         for side in SIDES:
-            names, points_F = select_contact_points(robot, side)
+            names, points_F = select_contact_points(robot, side, self.line_contact)
             R_FS, p_FS = sole_frame(robot, side)
             sole_z = R_FS[:, 2] @ (robot.feet[side].points - p_FS[:, None])
             if np.max(np.abs(sole_z)) > 1e-3:
                 raise RomocoError(f"{robot.yaml_path}: feet.{side}.points: not in one plane normal to "
                                   f"'up' (offsets {np.round(sole_z, 4).tolist()} m)")
             G = wrench_map(R_FS.T @ (points_F - p_FS[:, None]))
-            N, d = support_halfplanes(robot, side)
+            N, d = support_halfplanes(robot, side, self.line_contact)
             # N·(−m_y, m_x) ≤ (d − margin) f_z, valid for f_z ≥ 0.
             cop = np.zeros((len(d), 6))
             cop[:, 2] = -(d - cop_margin)

@@ -43,6 +43,7 @@ STAND_SETTLE_S = 1.0
 HEIGHT_BLEND_S = 0.6
 
 
+
 @dataclass(frozen=True)
 class TaskReferences(SharedValue):
     """Everything a whole-body controller needs for one tick.
@@ -108,7 +109,10 @@ class EmbeddingCore:
         self.walking = WalkingOutputs(robot)
         self.standing = StandingOutputs(robot)
         self.in_air = InAirOutputs(robot)
-        self.contact = contact or ContactModel(robot)
+        # Without an ankle roll joint the leg cannot set the stance foot's roll moment, and a
+        # flat-foot contact would tie the pelvis roll to the lateral CoM: the controller models
+        # such feet as their toe-heel line (the simulation keeps the whole sole).
+        self.contact = contact or ContactModel(robot, line_contact=not self.walking.has_ankle_roll)
         self.swing_height = robot.config.walking.swing_height
         self.nominal_com_height = float(robot.nominal.p_WCoM[2])
         self.nominal_joints = robot.nominal.q[robot.actuated_q_index]
@@ -119,10 +123,6 @@ class EmbeddingCore:
         self._swing_index = self.walking.names.index("swing_foot_x")
         self._swing_yaw_index = self.walking.names.index("swing_hip_yaw")
         ss = np.ones(len(self.walking.names), dtype=bool)
-        if not self.walking.has_ankle_roll and not robot.is_line_foot:
-            # A flat stance foot without an ankle roll joint ties the pelvis roll to the lateral
-            # CoM position; regulating it would stop the lateral pendulum, so it is left free.
-            ss[self.walking.names.index("pelvis_roll")] = False
         ds = np.zeros_like(ss)
         for name in ("com_z", "stance_hip_yaw", "pelvis_pitch", "pelvis_roll"):
             ds[self.walking.names.index(name)] = True

@@ -1,0 +1,137 @@
+"""What the equality-only whole-body controllers (ID, VEL-IK, POS-IK) share.
+
+- :class:`TaskStack`: the task rows tracked each tick, the active outputs of
+  :class:`~romoco_drake.embedding.references.TaskReferences` plus one joint task per locked
+  actuator (arms, waist) holding its nominal angle, with the TSC-QP's gains and weights.
+- :func:`subspace_basis`: A = U_r Σ_r V_rᵀ with orthonormal bases of A's row space (V_r), null
+  space (V_n) and left null space (U_n). For A = J_h: the multi-point contact rows are redundant
+  (rank 6 of 9 for a plane foot), so J_h is never inverted as it stands; V_n V_nᵀ = I − J_h⁺ J_h
+  is the constraint null-space projector.
+- :func:`weighted_least_squares`: the damped weighted task solve in a null-space coordinate.
+- :func:`pivot_moment_map`: the stance contact forces' moment about the sole centroid.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from romoco_drake.control.tscqp import DEFAULT_TASK_GAINS, LOCKED_GAIN, TaskGain, task_gains
+from romoco_drake.embedding.contact import ContactModel
+from romoco_drake.embedding.references import TaskReferences
+from romoco_drake.robots.model import RobotModel
+
+# Singular values below this fraction of the largest count as zero (redundant contact rows
+# and unactuated directions are zero to round-off; real ones are ≥ 1e-3 of the largest).
+RANK_RTOL = 1e-8
+
+
+@dataclass(frozen=True)
+class Tasks:
+    """Stacked task rows: J (k×nv), J̇·v, error y − y_d (angles wrapped), ẏ_d, ÿ_d, gains, weights."""
+
+    J: np.ndarray
+    Jdot_v: np.ndarray
+    error: np.ndarray
+    ydot_des: np.ndarray
+    yddot_des: np.ndarray
+    kp: np.ndarray
+    kd: np.ndarray
+    weight: np.ndarray
+
+
+class TaskStack:
+    """Builds :class:`Tasks` from references: active outputs, then the locked joints."""
+
+    def __init__(self, robot: RobotModel, gains: tuple[TaskGain, ...] = DEFAULT_TASK_GAINS):
+        self.gains = gains
+        mask = robot.locked_actuator_mask
+        self._locked_q = robot.actuated_q_index[mask]
+        self._locked_q0 = robot.nominal.q[self._locked_q]
+        n = len(self._locked_q)
+        self._J_locked = np.zeros((n, robot.nv))
+        self._J_locked[np.arange(n), robot.actuated_v_index[mask]] = 1.0
+        self._zeros = np.zeros(n)
+        g = LOCKED_GAIN
+        self._locked_gains = (np.full(n, g.kp), np.full(n, g.kd), np.full(n, g.weight))
+        self._cache: dict[tuple[tuple[str, ...], bytes], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+    def _gains(self, names: tuple[str, ...], active: np.ndarray):
+        key = (names, active.tobytes())
+        if key not in self._cache:
+            kp, kd, w = (np.concatenate([g[active], locked])
+                         for g, locked in zip(task_gains(names, self.gains), self._locked_gains, strict=True))
+            self._cache[key] = kp, kd, w
+        return self._cache[key]
+
+    def evaluate(self, refs: TaskReferences, q: np.ndarray) -> Tasks:
+        """The task rows of ``refs`` (y, J at the configuration ``q`` the locked rows read)."""
+        a = refs.active
+        kp, kd, w = self._gains(refs.names, a)
+        z = self._zeros
+        return Tasks(np.vstack([refs.J[a], self._J_locked]), np.concatenate([refs.Jdot_v[a], z]),
+                     np.concatenate([refs.error[a], q[self._locked_q] - self._locked_q0]),
+                     np.concatenate([refs.ydot_des[a], z]), np.concatenate([refs.yddot_des[a], z]), kp, kd, w)
+
+
+@dataclass(frozen=True)
+class SubspaceBasis:
+    """A = U_r diag(s_r) V_rᵀ (rank r); V_n spans A's null space, U_n its left null space."""
+
+    U_r: np.ndarray
+    U_n: np.ndarray
+    s_r: np.ndarray
+    V_r: np.ndarray
+    V_n: np.ndarray
+
+    def pinv(self, b: np.ndarray) -> np.ndarray:
+        """A⁺ b: the least-norm x with A x = b (least squares if b is off A's range); b may be a matrix."""
+        return self.V_r @ ((self.U_r.T @ b) / self.s_r.reshape((-1,) + (1,) * (b.ndim - 1)))
+
+    def pinv_transpose(self, f: np.ndarray) -> np.ndarray:
+        """(Aᵀ)⁺ f: the least-norm λ with Aᵀ λ = f (least squares if f is off A's row space)."""
+        return self.U_r @ ((self.V_r.T @ f) / self.s_r.reshape((-1,) + (1,) * (f.ndim - 1)))
+
+
+def subspace_basis(A: np.ndarray) -> SubspaceBasis:
+    """The SVD bases of A (m×n; m may be 0, then the whole space is free)."""
+    m, n = A.shape
+    if not m:
+        return SubspaceBasis(np.zeros((0, 0)), np.zeros((0, 0)), np.zeros(0), np.zeros((n, 0)), np.eye(n))
+    U, s, Vt = np.linalg.svd(A)
+    r = int(np.count_nonzero(s > RANK_RTOL * s[0])) if len(s) else 0
+    return SubspaceBasis(U[:, :r], U[:, r:], s[:r], Vt[:r].T, Vt[r:].T)
+
+
+def weighted_least_squares(A: np.ndarray, b: np.ndarray, w: np.ndarray, damping: float,
+                           prior: np.ndarray | None = None) -> np.ndarray:
+    """argmin_x Σ w_i (A x − b)_i² + damping ‖x − prior‖² (prior 0 if None).
+
+    The damping keeps the solve unique and bounded when tasks are redundant or singular.
+    """
+    WA = A * w[:, None]
+    H = A.T @ WA
+    H.flat[::H.shape[0] + 1] += damping
+    g = WA.T @ b
+    if prior is not None:
+        g += damping * prior
+    return np.linalg.solve(H, g)
+
+
+def pivot_moment_map(contact: ContactModel, context, refs: TaskReferences) -> np.ndarray:
+    """G (2 × n_f): horizontal moment of the single-support contact forces about the sole centroid.
+
+    The ROM planners assume the stance foot is a pivot (no ankle torque about the sole
+    centroid, LIP eq. 1); penalising G λ, as TSC-QP does, keeps the centre of pressure near
+    that point in single support so the robot's momentum evolves as the planner predicts.
+    """
+    foot = contact.feet[refs.domain]
+    plant = contact.robot.plant
+    pivot = plant.CalcPointsPositions(context, foot.frame, foot.p_FS, plant.world_frame()).ravel()
+    r = refs.holonomic.y[:refs.num_contact_forces].reshape(-1, 3) - pivot
+    G = np.zeros((2, refs.num_contact_forces))
+    # (r × f)_x = r_y f_z − r_z f_y ; (r × f)_y = r_z f_x − r_x f_z
+    G[0, 1::3], G[0, 2::3] = -r[:, 2], r[:, 1]
+    G[1, 0::3], G[1, 2::3] = r[:, 2], -r[:, 0]
+    return G
