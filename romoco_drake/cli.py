@@ -153,6 +153,52 @@ def _cmd_bench_embedding(args) -> int:
     return 0
 
 
+def _cmd_bench_matrix(args) -> int:
+    from romoco_drake.bench.walking import WALKING_ROBOTS, bench_matrix
+    from romoco_drake.rom.planners import PLANNERS
+    from romoco_drake.runner import stderr_progress
+    from romoco_drake.scenario import CONTROLLERS
+
+    robots = _names(args.robots, WALKING_ROBOTS, "robot", WALKING_ROBOTS)
+    planners = _names(args.planners, ("hlip", "mlip", "dcm"), "planner", PLANNERS)
+    controllers = _names(args.controllers, ("tscqp",), "controller", CONTROLLERS)
+    rows = bench_matrix(robots, planners, controllers, args.duration, progress=stderr_progress)
+    if args.json:
+        print(json.dumps(rows))
+    else:
+        print("robot   planner       controller  fell   vel rms err (vx, vy, wz)   realtime  tick ms")
+        for r in rows:
+            fell = f"{r['fall_time_s']:.1f} s" if r["fell"] else "no"
+            print(f"{r['robot']:7s} {r['planner']:13s} {r['controller']:11s} {fell:6s} "
+                  f"{r['velocity_rms_error']!s:26s} {r['realtime_factor']:8.2f}  "
+                  f"{r['controller_tick_ms']['median']}")
+    return 0
+
+
+def _names(text: str | None, default, what: str, known) -> list[str]:
+    names = list(default) if text is None else [n.strip() for n in text.split(",") if n.strip()]
+    for n in names:
+        if n not in known:
+            raise RomocoError(f"unknown {what} '{n}' (known: {', '.join(known)})")
+    return names
+
+
+def _cmd_bench_tick(args) -> int:
+    from romoco_drake.bench.walking import bench_tick
+    from romoco_drake.scenario import load_scenario, with_overrides
+
+    scenario = with_overrides(load_scenario(args.scenario), args.planner, args.controller)
+    s = bench_tick(scenario, ticks=args.ticks)
+    if args.json:
+        print(json.dumps(s))
+    else:
+        print(f"{s['scenario']}: {s['planner']} + {s['controller']}, {s['ticks']} ticks of "
+              f"{s['period_s'] * 1e3:g} ms while {s['mode']}")
+        for name, v in s["tick_ms"].items():
+            print(f"  {name:14s} {v['median']:8.3f} ms median  {v['p99']:8.3f} ms p99")
+    return 0
+
+
 def _print_rom_summary(s: dict) -> None:
     cost = s["planner_cost"]
     print(f"{s['planner']} on the {s['robot']} template (z0 {s['com_height_m']} m, T_SS {s['t_ss_s']} s, "
@@ -208,6 +254,20 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--ticks", type=int, default=2000)
     p.add_argument("--json", action="store_true", help="print the result as JSON (last line)")
     p.set_defaults(func=_cmd_bench_embedding)
+    p = bench.add_parser("matrix", help="every robot x planner x controller on its default walking profile")
+    p.add_argument("--robots", help="comma-separated (default: g1,cassie,h1)")
+    p.add_argument("--planners", help="comma-separated (default: hlip,mlip,dcm)")
+    p.add_argument("--controllers", help="comma-separated (default: tscqp)")
+    p.add_argument("--duration", type=float, default=None, help="simulated seconds per run")
+    p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
+    p.set_defaults(func=_cmd_bench_matrix)
+    p = bench.add_parser("tick", help="per-component controller tick time on a running closed loop")
+    p.add_argument("--scenario", default="g1_walk")
+    p.add_argument("--planner")
+    p.add_argument("--controller")
+    p.add_argument("--ticks", type=int, default=500)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_bench_tick)
     return parser
 
 

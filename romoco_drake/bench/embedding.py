@@ -7,7 +7,7 @@ import time
 import numpy as np
 from pydrake.systems.analysis import Simulator
 
-from romoco_drake.bench.rom import _percentiles
+from romoco_drake.bench.rom import percentiles
 from romoco_drake.embedding.references import MODES
 from romoco_drake.embedding.system import OutputEmbedding
 from romoco_drake.robots.model import load_robot
@@ -64,5 +64,5 @@ def bench_embedding(robot_name: str = "g1", ticks: int = 2000, period: float = 0
 
 
 def _ms(ns: list[int]) -> dict:
-    us = _percentiles(ns)
+    us = percentiles(ns)
     return {k: round(v / 1e3, 4) for k, v in us.items()}

@@ -157,12 +157,12 @@ def planner_cost_us(planner: FootPlacementPlanner, run: TemplateRun, segments: l
         planner.planner_output_port.Eval(context)
         sys_ns.append(time.perf_counter_ns() - t0)
     return {
-        "update_us": _percentiles(law_ns),
-        "system_eval_us": _percentiles(sys_ns),
+        "update_us": percentiles(law_ns),
+        "system_eval_us": percentiles(sys_ns),
     }
 
 
-def _percentiles(ns: list[int]) -> dict:
+def percentiles(ns: list[int]) -> dict:
     a = np.array(ns) / 1e3
     return {"median": round(float(np.median(a)), 2), "p99": round(float(np.percentile(a, 99)), 2)}
 

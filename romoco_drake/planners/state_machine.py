@@ -89,11 +89,8 @@ class GaitStateMachine(LeafSystem):
         tau = context.get_time() - s.step_start if s.mode == "walking" else 0.0
         out.SetFromVector([1.0 if s.side == "left" else -1.0, tau])
 
-    def _update(self, context, state) -> None:
-        s = self.schedule(context)
-        t = context.get_time()
-        x = self.state_port.Eval(context)
-        cmd = WalkCommand.from_vector(self.command_port.Eval(context))
+    def next_schedule(self, s: GaitSchedule, t: float, x: np.ndarray, cmd: WalkCommand) -> GaitSchedule:
+        """One tick of the state machine at time t (the periodic update calls this)."""
         if cmd.problem() is not None:
             cmd = WalkCommand(step_width=cmd.step_width, com_height=cmd.com_height, step_time=s.t_ss)
         if s.mode != "damping":
@@ -110,6 +107,11 @@ class GaitStateMachine(LeafSystem):
             else:
                 s = replace(s, side=other_side(s.side), step_start=t, t_ss=cmd.step_time, steps=s.steps + 1,
                             idle_steps=idle)
+        return s
+
+    def _update(self, context, state) -> None:
+        s = self.next_schedule(self.schedule(context), context.get_time(), self.state_port.Eval(context),
+                               WalkCommand.from_vector(self.command_port.Eval(context)))
         state.get_mutable_abstract_state(int(self._schedule)).set_value(s)
 
     def _balanced(self, x: np.ndarray) -> bool:
