@@ -31,14 +31,19 @@ def run_scenario(
     record: Path | None = None,
     progress=None,
     plot_dir: Path | None = None,
+    law=None,
 ) -> dict:
-    """Simulates ``scenario`` and returns the run summary (see ``romoco run --json``)."""
+    """Simulates ``scenario`` and returns the run summary (see ``romoco run --json``).
+
+    ``law`` (a :class:`~romoco_drake.rom.planners.FootPlacementLaw`) replaces the scenario's
+    planner, e.g. a custom one.
+    """
     duration = scenario.duration_s if duration is None else duration
     if duration <= 0:
         raise RomocoError(f"--duration must be positive, got {duration}")
     if record is not None and meshcat is None:
         meshcat = Meshcat()
-    built = build_diagram(scenario, meshcat)
+    built = build_diagram(scenario, meshcat, law)
     simulator = Simulator(built.diagram)
     context = simulator.get_mutable_context()
     plant = built.station.GetSubsystemByName("plant")
@@ -96,7 +101,7 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None) 
     schedule = loop.state_machine.schedule(loop.state_machine.GetMyContextFromRoot(context))
     failures, safe_ticks, _ = loop.controller.stats_port.Eval(loop.controller.GetMyContextFromRoot(context))
     return {
-        "planner": scenario.planner.name,
+        "planner": loop.planner.law.name,
         "velocity_rms_error": tracking["velocity_rms_error"],
         "mean_velocity": tracking["mean_velocity"],
         "steps": schedule.steps,

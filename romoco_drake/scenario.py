@@ -32,7 +32,7 @@ from romoco_drake.planners.heading import HeadingHold
 from romoco_drake.planners.state_machine import GaitStateMachine
 from romoco_drake.robots.model import RobotModel, load_robot, robot_names
 from romoco_drake.robots.source import DIAGRAMS_DIR
-from romoco_drake.rom.planners import PLANNERS, PlannerParams, make_planner
+from romoco_drake.rom.planners import PLANNERS, FootPlacementLaw, PlannerParams, make_planner
 from romoco_drake.rom.types import WalkCommand
 
 CONTROLLERS = ("standing", "tscqp")
@@ -185,8 +185,9 @@ def command_segments(scenario: Scenario, robot: RobotModel) -> list[CommandSegme
     return [CommandSegment(p.t, WalkCommand(p.vx, p.vy, p.wz, w.step_width, w.z0, w.t_ss)) for p in points]
 
 
-def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None) -> BuiltDiagram:
-    """Wires the closed loop of ``scenario``."""
+def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
+                  law: FootPlacementLaw | None = None) -> BuiltDiagram:
+    """Wires the closed loop of ``scenario``; ``law`` replaces the scenario's planner law."""
     robot = load_robot(scenario.robot)
     builder = DiagramBuilder()
     station = builder.AddNamedSystem("station", make_station(robot, scenario.time_step, meshcat))
@@ -202,7 +203,7 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None) -> BuiltDi
     else:
         command = builder.AddNamedSystem("command", CommandSource(command_segments(scenario, robot)))
         walking = _add_walking_loop(builder, scenario, robot, estimator.state_output, command,
-                                    station.GetInputPort("actuation"), period)
+                                    station.GetInputPort("actuation"), period, law)
     state_log = LogVectorOutput(estimator.state_output, builder, STATE_LOG_PERIOD)
     monitor = builder.AddNamedSystem("monitor", FallMonitor(robot))
     builder.Connect(estimator.state_output, monitor.state_input)
@@ -212,12 +213,13 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None) -> BuiltDi
 
 
 def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, state,
-                      command: CommandSource, actuation, period: float) -> WalkingLoop:
+                      command: CommandSource, actuation, period: float,
+                      law: FootPlacementLaw | None) -> WalkingLoop:
     """State machine → planner → output embedding → whole-body controller, all at ``period``."""
-    w = robot.config.walking
-    cfg = scenario.planner
-    law = make_planner(cfg.name, PlannerParams(mass=robot.total_mass, t_ds=w.t_ds, gain=cfg.gain,
-                                               alpha=cfg.alpha))
+    if law is None:
+        cfg = scenario.planner
+        law = make_planner(cfg.name, PlannerParams(mass=robot.total_mass, t_ds=robot.config.walking.t_ds,
+                                                   gain=cfg.gain, alpha=cfg.alpha))
     heading = builder.AddNamedSystem("heading", HeadingHold(robot, period))
     builder.Connect(command.command_port, heading.command_in_port)
     builder.Connect(state, heading.state_port)

@@ -10,31 +10,28 @@ V_r spans J_h's row space (the redundant multi-point contact rows drop out: rank
 plane foot) and V_n its null space, P = V_n V_nᵀ = I − J_h⁺ J_h. Then
 
     V_nᵀ (M v̇ + C) = V_nᵀ B τ        (projected dynamics: no λ)
-    V_rᵀ (M v̇ + C − B τ) = R λ      (constraint forces, recovered afterwards)
+    V_rᵀ (M v̇ + C − B τ) = R λ      (constraint forces: λ = (J_hᵀ)⁺ (M v̇ + C − B τ))
 
-One tick:
+so every solution is parametrised by two small coordinates x and y:
 
-1. v̇ = v̇_p + N x over the constraint-consistent accelerations: v̇_p = J_h⁺ (−J̇_h v − k_h J_h v)
-   and N = V_n. Directions of the projected dynamics that S = V_nᵀ B cannot reach (its left null
-   space Z: the floating base in the air, the roll about a line foot) must hold with τ-free
-   accelerations, Zᵀ V_nᵀ (M v̇ + C) = 0; these rows shrink N and shift v̇_p.
-2. x tracks the commanded task accelerations ÿ_cmd = ÿ_d − K_p (y − y_d) − K_d (ẏ − ẏ_d) of the
-   active outputs and the locked joints (gains and weights as TSC-QP) by weighted least squares
-   with a small ε‖v̇‖² regularisation. In single support the stance foot's moment about its sole
-   centroid, G λ (affine in x, since τ and λ are then functions of v̇), is penalised with
-   TSC-QP's pivot weight: without it the free directions (the body tipping about the stance
-   foot, which the ROM leaves to the pendulum) would be held still by ankle torque and the
-   CoP would leave the sole. This is the TSC-QP cost without its inequalities.
-3. τ from the projected dynamics: τ = τ₀ + N_s y with τ₀ = S⁺ V_nᵀ (M v̇ + C) and N_s spanning
-   S's null space (empty in single support of a fully actuated robot, where τ is unique; in
-   double support it is the internal force between the feet), and the least-norm multipliers
-   λ(τ) = R⁺ V_rᵀ (M v̇ + C − B τ) = (J_hᵀ)⁺ (M v̇ + C − B τ). y minimises ‖τ‖² + α‖λ‖²
-   (Righetti et al. 2013's force distribution): α = 0 is the least-norm torque, the default
-   α = 1 is TSC-QP's regularisation (ε_τ = ε_λ), so both give the same τ when no inequality
-   is active. Small internal forces also keep the feet further inside their friction cones.
+1. v̇ = v̇_p + N x, the constraint-consistent accelerations: v̇_p = J_h⁺ (−J̇_h v − k_h J_h v),
+   N = V_n. Directions of the projected dynamics that S = V_nᵀ B cannot reach (its left null
+   space Z: the floating base in the air, the roll about a line foot) must hold without torque,
+   Zᵀ V_nᵀ (M v̇ + C) = 0; these rows shrink N and shift v̇_p.
+2. τ = S⁺ V_nᵀ (M v̇ + C) + N_s y, N_s spanning S's null space: empty in single support of a
+   fully actuated robot (τ unique), the internal forces between the feet in double support.
+3. λ = (J_hᵀ)⁺ (M v̇ + C − B τ), the least-norm multipliers of the redundant contact rows.
 
-No friction, CoP or torque limits: the controller clips τ to the effort limits, and the
-contact forces may leave their friction cones (use TSC-QP where that matters).
+v̇, τ and λ are affine in (x, y), so TSC-QP's cost, without its inequalities, is one weighted
+least-squares problem: the commanded task accelerations ÿ_cmd = ÿ_d − K_p (y − y_d) −
+K_d (ẏ − ẏ_d) of the active outputs and locked joints (TSC-QP's gains and weights), the
+regularisation ε_v‖v̇‖² + ε_τ‖τ‖² + ε_λ‖λ‖² and, in single support, the stance foot's moment
+about its sole centroid (TSC-QP's pivot weight). The regularisation is not cosmetic: with
+ε_v alone the directions no task regulates (the body tipping about the stance foot, left to
+the pendulum by the ROM) would be held still by ankle torque and large internal forces.
+
+No friction, CoP or torque limits: the controller clips τ to the effort limits, and contact
+forces may leave their friction cones or pull on the ground (use TSC-QP where that matters).
 """
 
 from __future__ import annotations
@@ -49,16 +46,21 @@ from romoco_drake.robots.model import RobotModel
 
 
 class InverseDynamics:
-    """The ID solve for one robot. ``solve`` takes the controller-plant context (state set)."""
+    """The ID solve for one robot. ``solve`` takes the controller-plant context (state set).
+
+    ``regularization`` = (ε_v, ε_τ, ε_λ) and ``pivot_moment_weight`` mean what they mean in
+    :class:`~romoco_drake.control.tscqp.TscQp` (same defaults), so both agree when none of the
+    QP's inequalities is active.
+    """
 
     def __init__(self, robot: RobotModel, contact: ContactModel,
-                 gains: tuple[TaskGain, ...] = DEFAULT_TASK_GAINS, regularization: float = 1e-5,
-                 constraint_damping: float = 20.0, force_weight: float = 1.0,
-                 pivot_moment_weight: float = 1.0):
+                 gains: tuple[TaskGain, ...] = DEFAULT_TASK_GAINS,
+                 regularization: tuple[float, float, float] = (1e-5, 1e-7, 1e-7),
+                 constraint_damping: float = 20.0, pivot_moment_weight: float = 1.0):
         self.robot, self.contact = robot, contact
         self.tasks = TaskStack(robot, gains)
-        self.eps, self.k_h, self.force_weight = regularization, constraint_damping, force_weight
-        self.w_pivot = pivot_moment_weight
+        self.eps, self.k_h, self.w_pivot = regularization, constraint_damping, pivot_moment_weight
+        self._eye = np.eye(robot.nv)
 
     def solve(self, context, refs: TaskReferences) -> QpSolution:
         """v̇, τ and the constraint multipliers λ (all J_h rows) of one tick; success iff finite."""
@@ -85,26 +87,28 @@ class InverseDynamics:
             d = subspace_basis(NZ.T @ M @ N)
             vdot_p = vdot_p + N @ d.pinv(-NZ.T @ (C + M @ vdot_p))
             N = N @ d.V_n
-        A, b, w = t.J @ N, a_cmd - t.Jdot_v - t.J @ vdot_p, t.weight
+        # Affine maps of z = (x, y): v̇ = v̇_p + N_z z, τ = τ_p + T z, λ = λ_p + L z.
+        ny = s.V_n.shape[1]
+        N_z = np.hstack([N, np.zeros((r.nv, ny))])
+        f_p = M @ vdot_p + C
+        S_pinv = s.pinv(h.V_n.T)  # τ = S⁺ V_nᵀ f + N_s y
+        tau_p = S_pinv @ f_p
+        T = np.hstack([S_pinv @ M @ N, s.V_n])
+        Lam = h.pinv_transpose(self._eye)  # λ = (J_hᵀ)⁺ (f − B τ)
+        lam_p = Lam @ (f_p - r.B @ tau_p)
+        L = Lam @ (M @ N_z - r.B @ T)
+        eps_v, eps_tau, eps_lam = self.eps
+        rows = [t.J @ N_z, N_z, T, L]
+        targets = [a_cmd - t.Jdot_v - t.J @ vdot_p, -vdot_p, -tau_p, -lam_p]
+        weights = [t.weight, np.full(r.nv, eps_v), np.full(r.nu, eps_tau), np.full(len(lam_p), eps_lam)]
         if refs.domain in ("left", "right") and self.w_pivot > 0.0:
-            # λ(v̇) = T (M v̇ + C) with T = (J_hᵀ)⁺ (I − B S⁺ V_nᵀ): the pivot moment rows G λ.
-            GT = pivot_moment_map(self.contact, context, refs) @ h.pinv_transpose(
-                np.eye(r.nv) - r.B @ s.pinv(h.V_n.T))[:refs.num_contact_forces]
-            A = np.vstack([A, GT @ M @ N])
-            b = np.concatenate([b, -GT @ (M @ vdot_p + C)])
-            w = np.concatenate([w, [self.w_pivot, self.w_pivot]])
-        x = weighted_least_squares(A, b, w, self.eps, prior=-(N.T @ vdot_p))
-        vdot = vdot_p + N @ x
-        f = M @ vdot + C
-        tau = s.pinv(h.V_n.T @ f)
-        forces = h.pinv_transpose(f - r.B @ tau)
-        if self.force_weight > 0.0 and s.V_n.shape[1]:
-            # τ₀ ⊥ N_s, so ‖τ₀ + N_s y‖² + α‖λ₀ − G y‖² is minimal at (I + α GᵀG) y = α Gᵀ λ₀.
-            G = h.pinv_transpose(r.B @ s.V_n)
-            H = self.force_weight * (G.T @ G)
-            H[np.diag_indices_from(H)] += 1.0
-            y = np.linalg.solve(H, self.force_weight * (G.T @ forces))
-            tau, forces = tau + s.V_n @ y, forces - G @ y
+            G = pivot_moment_map(self.contact, context, refs)
+            n_f = refs.num_contact_forces
+            rows.append(G @ L[:n_f])
+            targets.append(-G @ lam_p[:n_f])
+            weights.append(np.full(2, self.w_pivot))
+        z = weighted_least_squares(np.vstack(rows), np.concatenate(targets), np.concatenate(weights), 0.0)
+        vdot, tau, forces = vdot_p + N_z @ z, tau_p + T @ z, lam_p + L @ z
         ok = bool(np.all(np.isfinite(tau)) and np.all(np.isfinite(vdot)))
         return QpSolution(tau, vdot, forces, ok)
 

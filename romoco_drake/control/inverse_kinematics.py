@@ -3,22 +3,28 @@
 For robots whose motors run their own position loops (G1) the controller sends joint targets
 (q_d, v_d), a feedforward torque τ_ff and gains; the motor applies (paper eq. 17)
 
-    τ = K_p (q_d − q) + K_d (v_d − v) + τ_ff,     τ_ff = contact-consistent gravity compensation,
+    τ = K_p (q_d − q) + K_d (v_d − v) + τ_ff,     τ_ff = gravity compensation (below),
 
 with K_p, K_d the robot YAML's joint gains. Holonomic constraints (feet in contact, internal
 loops) are kept by moving only in J_h's null space, J̄ = J N (paper eq. 18), with N = V_n from
 the SVD of J_h (its multi-point contact rows are redundant, so J_h⁺ is never formed directly).
-The tasks are the active outputs plus the locked joints, weighted as in TSC-QP.
+The tasks are the active outputs plus the locked joints, weighted as in TSC-QP. Directions no
+task determines (the body tipping about the stance foot in single support, which the ROM
+leaves to the pendulum) follow the measured motion instead of being held still.
 
 - VEL-IK: v_d = N x with x the damped weighted least-squares solution of J N x = ẏ_cmd,
   ẏ_cmd = ẏ_d − K (y − y_d), K = K_p / K_d of each task's TSC-QP gains (the rate, 1/s, at which
-  a first-order loop closes the error). q_d integrates v_d over the period from the last target
-  (paper eq. 19's correction, spread over ticks), kept within ``max_lead`` of the measured joints
-  so a blocked joint cannot wind the target up.
+  a first-order loop closes the error), and x → Nᵀ v in the undetermined directions. q_d
+  integrates v_d over the period from the last target (paper eq. 19's correction, spread over
+  ticks), kept within ``max_lead`` of the measured joints so a blocked joint cannot wind it up.
 - POS-IK: Newton–Raphson on q from the measured configuration (paper eq. 21),
   Δq = J_h⁺ e_h + N x with J N x ≈ e_y − J J_h⁺ e_h: the contact points return to where they
   were measured and the internal loops to h = 0 exactly, the outputs to y_d as far as the null
   space allows. v_d is a VEL-IK step on ẏ_d alone (the position loop does the correcting).
+
+τ_ff balances gravity on the joints against the domain's contacts: both soles in double
+support, one force at the stance sole's centroid in single support (the ROM's pivot, so the
+CoP stays there rather than under the CoM, usually off the sole), a held base in the air.
 """
 
 from __future__ import annotations
@@ -31,6 +37,7 @@ from typing import Literal
 
 import numpy as np
 from pydrake.common.value import AbstractValue
+from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.control.tasks import TaskStack, subspace_basis, weighted_least_squares
@@ -41,18 +48,24 @@ from romoco_drake.embedding.references import MODES, EmbeddingCore, TaskReferenc
 from romoco_drake.robots.model import RobotModel
 
 
-def gravity_compensation(robot: RobotModel, context, J_h: np.ndarray, base_held: bool,
+def gravity_compensation(robot: RobotModel, contact: ContactModel, context, refs: TaskReferences,
                          force_weight: float = 1e-3) -> np.ndarray:
-    """Actuator torques u holding the configuration in ``context`` still: B u + J_hᵀ λ = −τ_g.
+    """Actuator torques u holding the joints against gravity: B u + J_cᵀ f + J_iᵀ λ = −τ_g.
 
     :func:`~romoco_drake.control.gravity.contact_gravity_compensation`'s static balance and
-    weighting, on the domain's holonomic rows (representative contact points and internal
-    loops) the references already carry. With ``base_held`` (in the air: the robot hangs on a
-    gantry) the base wrench is free as well.
+    weighting with the contacts of the references' domain (module docstring); J_i are the
+    internal loops. In single support the base's tipping about the pivot stays unbalanced.
     """
-    tau_g = robot.plant.CalcGravityGeneralizedForces(context)
+    plant = robot.plant
+    tau_g = plant.CalcGravityGeneralizedForces(context)
+    J_h, n_f = refs.holonomic.J, refs.num_contact_forces
     cols = [robot.B, np.sqrt(force_weight) * J_h.T]
-    if base_held:
+    if refs.domain in ("left", "right"):
+        foot, W = contact.feet[refs.domain], plant.world_frame()
+        J_p = plant.CalcJacobianTranslationalVelocity(context, JacobianWrtVariable.kV, foot.frame, foot.p_FS,
+                                                      W, W)
+        cols[1] = np.sqrt(force_weight) * np.vstack([J_p, J_h[n_f:]]).T
+    elif refs.domain == "none":
         base = np.zeros((robot.nv, 6))
         base[robot.base_v_start + np.arange(6), np.arange(6)] = np.sqrt(force_weight)
         cols.append(base)
@@ -98,7 +111,8 @@ class VelocityIK:
         t = self.tasks.evaluate(refs, self.robot.plant.GetPositions(context))
         ydot = t.ydot_des - (t.kp / t.kd) * t.error if feedback else t.ydot_des
         N = subspace_basis(refs.holonomic.J).V_n
-        return N @ weighted_least_squares(t.J @ N, ydot, t.weight, self.damping)
+        v = self.robot.plant.GetVelocities(context)
+        return N @ weighted_least_squares(t.J @ N, ydot, t.weight, self.damping, prior=N.T @ v)
 
 
 @dataclass(frozen=True)
@@ -197,7 +211,9 @@ class IkController(LeafSystem):
             raise ValueError(f"unknown IK kind '{kind}' (velocity or position)")
         self.robot, self.kind, self.period = robot, kind, period
         self.max_stale_ticks, self.max_lead = max_stale_ticks, max_lead
-        self.solver = VelocityIK(robot, gains) if kind == "velocity" else PositionIK(robot, contact, gains)
+        self.contact = contact or ContactModel(robot)
+        self.solver = (VelocityIK(robot, gains) if kind == "velocity"
+                       else PositionIK(robot, self.contact, gains))
         self._context = robot.plant.CreateDefaultContext()
         self._q_limits = (robot.q_lower[robot.actuated_q_index], robot.q_upper[robot.actuated_q_index])
         self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
@@ -238,7 +254,7 @@ class IkController(LeafSystem):
         else:
             solution = self.solver.solve(self._context, refs)
             q_d, v_d = solution.q[r.actuated_q_index], solution.v[r.actuated_v_index]
-        tau_ff = gravity_compensation(r, self._context, refs.holonomic.J, base_held=refs.domain == "none")
+        tau_ff = gravity_compensation(r, self.contact, self._context, refs)
         return np.concatenate([q_d, v_d, tau_ff, r.kp, r.kd])
 
     def _update(self, context, discrete_state) -> None:

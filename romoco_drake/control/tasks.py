@@ -66,7 +66,7 @@ class TaskStack:
         return self._cache[key]
 
     def evaluate(self, refs: TaskReferences, q: np.ndarray) -> Tasks:
-        """The task rows of ``refs`` (y, J at the configuration ``q`` the locked rows read)."""
+        """The task rows of ``refs``; the locked joints' errors are read from the configuration ``q``."""
         a = refs.active
         kp, kd, w = self._gains(refs.names, a)
         z = self._zeros
@@ -106,9 +106,10 @@ def subspace_basis(A: np.ndarray) -> SubspaceBasis:
 
 def weighted_least_squares(A: np.ndarray, b: np.ndarray, w: np.ndarray, damping: float,
                            prior: np.ndarray | None = None) -> np.ndarray:
-    """argmin_x Σ w_i (A x − b)_i² + damping ‖x − prior‖² (prior 0 if None).
+    """argmin_x Σ w_i (A x − b)_i² + damping ‖x − prior‖² (prior 0 if None; normal equations).
 
-    The damping keeps the solve unique and bounded when tasks are redundant or singular.
+    The damping keeps the solve unique and bounded when tasks are redundant or singular; the
+    prior is what x does in the directions no task determines.
     """
     WA = A * w[:, None]
     H = A.T @ WA
