@@ -12,11 +12,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
+import numpy as np
 from pydrake.geometry import Meshcat
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
 from romoco_drake.config import load_typed, load_yaml_file
+from romoco_drake.control.inverse_dynamics import InverseDynamics, InverseDynamicsController
+from romoco_drake.control.inverse_kinematics import IkController
 from romoco_drake.control.standing import StandingController
 from romoco_drake.control.tscqp import TscQp, TscQpController
 from romoco_drake.embedding.references import EmbeddingCore
@@ -35,14 +38,16 @@ from romoco_drake.robots.source import DIAGRAMS_DIR
 from romoco_drake.rom.planners import PLANNERS, FootPlacementLaw, PlannerParams, make_planner
 from romoco_drake.rom.types import WalkCommand
 
-CONTROLLERS = ("standing", "tscqp")
+CONTROLLERS = ("standing", "tscqp", "id", "velik", "posik")
+# Controllers that command the motors' own position loops (q_d, v_d, τ_ff, K_p, K_d).
+MOTOR_COMMAND_CONTROLLERS = ("velik", "posik")
 STATE_LOG_PERIOD = 0.01  # s, the state samples summaries and plots are computed from
 ESTIMATORS = ("ground_truth",)
 
 
 @dataclass
 class ControllerConfig:
-    name: Literal["standing", "tscqp"] = "standing"
+    name: Literal["standing", "tscqp", "id", "velik", "posik"] = "standing"
     rate_hz: float = 1000.0
 
 
@@ -134,7 +139,7 @@ class WalkingLoop:
     state_machine: GaitStateMachine
     planner: FootPlacementPlanner
     embedding: OutputEmbedding
-    controller: TscQpController
+    controller: TscQpController | IkController  # all expose actuation, stats and tick_ms
     tick_log: VectorLogSink  # controller update wall time, every tick
     error_log: VectorLogSink  # embedding tracking errors per group
 
@@ -190,7 +195,8 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
     """Wires the closed loop of ``scenario``; ``law`` replaces the scenario's planner law."""
     robot = load_robot(scenario.robot)
     builder = DiagramBuilder()
-    station = builder.AddNamedSystem("station", make_station(robot, scenario.time_step, meshcat))
+    motor_pd = scenario.controller.name in MOTOR_COMMAND_CONTROLLERS
+    station = builder.AddNamedSystem("station", make_station(robot, scenario.time_step, meshcat, motor_pd))
     estimator = builder.AddNamedSystem("estimator", GroundTruthEstimator(robot))
     for port in ("joint_state", "base_pose", "base_velocity"):
         builder.Connect(station.GetOutputPort(port), estimator.GetInputPort(port))
@@ -202,8 +208,8 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
         builder.Connect(controller.actuation_output, station.GetInputPort("actuation"))
     else:
         command = builder.AddNamedSystem("command", CommandSource(command_segments(scenario, robot)))
-        walking = _add_walking_loop(builder, scenario, robot, estimator.state_output, command,
-                                    station.GetInputPort("actuation"), period, law)
+        walking = _add_walking_loop(builder, scenario, robot, estimator.state_output, command, station,
+                                    period, law)
     state_log = LogVectorOutput(estimator.state_output, builder, STATE_LOG_PERIOD)
     monitor = builder.AddNamedSystem("monitor", FallMonitor(robot))
     builder.Connect(estimator.state_output, monitor.state_input)
@@ -212,8 +218,18 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
     return BuiltDiagram(diagram, robot, station, monitor, state_log, command, walking)
 
 
+def _make_controller(name: str, robot: RobotModel, core: EmbeddingCore, period: float):
+    """The whole-body controller system called ``name``; all share the TscQpController ports."""
+    if name == "tscqp":
+        return TscQpController(robot, period, TscQp(robot, core.contact))
+    if name == "id":
+        return InverseDynamicsController(robot, period, InverseDynamics(robot, core.contact))
+    kind = "velocity" if name == "velik" else "position"
+    return IkController(robot, period, kind=kind, contact=core.contact)
+
+
 def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, state,
-                      command: CommandSource, actuation, period: float,
+                      command: CommandSource, station, period: float,
                       law: FootPlacementLaw | None) -> WalkingLoop:
     """State machine → planner → output embedding → whole-body controller, all at ``period``."""
     if law is None:
@@ -228,8 +244,8 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     planner = builder.AddNamedSystem("planner", FootPlacementPlanner(law))
     core = EmbeddingCore(robot)
     embedding = builder.AddNamedSystem("embedding", OutputEmbedding(robot, period, core))
-    controller = builder.AddNamedSystem(
-        "controller", TscQpController(robot, period, TscQp(robot, core.contact)))
+    controller = builder.AddNamedSystem("controller", _make_controller(scenario.controller.name, robot, core,
+                                                                       period))
     builder.Connect(state, machine.state_port)
     builder.Connect(command.command_port, machine.command_port)
     builder.Connect(state, rom_state.state_port)
@@ -244,7 +260,12 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     builder.Connect(state, controller.state_port)
     builder.Connect(embedding.task_references_port, controller.task_references_port)
     builder.Connect(machine.mode_port, controller.mode_port)
-    builder.Connect(controller.actuation_port, actuation)
+    if scenario.controller.name in MOTOR_COMMAND_CONTROLLERS:
+        builder.Connect(controller.motor_command_port, station.GetInputPort("motor_command"))
+        zero = builder.AddNamedSystem("no_extra_torque", ConstantVectorSource(np.zeros(robot.nu)))
+        builder.Connect(zero.get_output_port(), station.GetInputPort("actuation"))
+    else:
+        builder.Connect(controller.actuation_port, station.GetInputPort("actuation"))
     tick_log = LogVectorOutput(controller.tick_ms_port, builder, period)
     error_log = LogVectorOutput(embedding.tracking_error_port, builder, STATE_LOG_PERIOD)
     return WalkingLoop(machine, planner, embedding, controller, tick_log, error_log)

@@ -8,6 +8,16 @@ Exported ports (the LCM hardware station exports the same names and sizes):
 | joint_state     | out | 2·nj   | [q_j; v_j] of every 1-DoF joint, RobotModel.joint_names order |
 | base_pose       | out | 7      | [qw qx qy qz x y z] of the floating base in world            |
 | base_velocity   | out | 6      | [ω_WB; v_WB] expressed in world (rad/s, m/s)                  |
+
+With ``motor_pd=True`` (robots driven through their motors' own position loops, for the IK
+controllers) the station also takes
+
+| motor_command   | in  | 5·nu   | blocks q_d, v_d, τ_ff, K_p, K_d per actuator                   |
+
+and runs each motor's PD loop implicitly inside the plant step (SAP PD-controlled actuators),
+as the motor's own loop would, rather than holding a PD torque over a control tick. The
+simulated motors use the robot YAML's gains; a command with K_p = 0 (damping) is sent with
+q_d = q, which the controllers do. τ_ff is added to ``actuation``.
 """
 
 from __future__ import annotations
@@ -15,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import MatrixGain
+from pydrake.systems.primitives import Adder, MatrixGain, PassThrough
 
 from romoco_drake.robots.model import RobotModel
 
@@ -39,13 +49,28 @@ def state_selections(robot: RobotModel) -> dict[str, np.ndarray]:
 
 
 def make_station(
-    robot: RobotModel, time_step: float = 0.001, meshcat: Meshcat | None = None
+    robot: RobotModel, time_step: float = 0.001, meshcat: Meshcat | None = None, motor_pd: bool = False
 ) -> Diagram:
     """Builds the simulated station for ``robot`` (see the module docstring for ports)."""
     builder = DiagramBuilder()
-    plant, scene_graph = robot.add_to_builder(builder, time_step)
+    plant, scene_graph = robot.add_to_builder(builder, time_step, motor_pd=motor_pd)
     plant.set_name("plant")
-    builder.ExportInput(plant.get_actuation_input_port(), "actuation")
+    if motor_pd:
+        nu = robot.nu
+        command = builder.AddNamedSystem("motor_command", PassThrough(5 * nu))
+        builder.ExportInput(command.get_input_port(), "motor_command")
+        desired = builder.AddNamedSystem("desired_state", MatrixGain(np.eye(2 * nu, 5 * nu)))
+        pick_ff = np.hstack([np.zeros((nu, 2 * nu)), np.eye(nu), np.zeros((nu, 2 * nu))])
+        feedforward = builder.AddNamedSystem("feedforward", MatrixGain(pick_ff))
+        total = builder.AddNamedSystem("torque", Adder(2, nu))
+        builder.Connect(command.get_output_port(), desired.get_input_port())
+        builder.Connect(command.get_output_port(), feedforward.get_input_port())
+        builder.Connect(desired.get_output_port(), plant.get_desired_state_input_port(robot.model_instance))
+        builder.Connect(feedforward.get_output_port(), total.get_input_port(0))
+        builder.ExportInput(total.get_input_port(1), "actuation")
+        builder.Connect(total.get_output_port(), plant.get_actuation_input_port())
+    else:
+        builder.ExportInput(plant.get_actuation_input_port(), "actuation")
     for name, S in state_selections(robot).items():
         gain = builder.AddNamedSystem(name, MatrixGain(S))
         builder.Connect(plant.get_state_output_port(), gain.get_input_port())

@@ -24,7 +24,7 @@ from pydrake.multibody.plant import (
     MultibodyPlant,
     MultibodyPlantConfig,
 )
-from pydrake.multibody.tree import JacobianWrtVariable, RevoluteJoint
+from pydrake.multibody.tree import JacobianWrtVariable, PdControllerGains, RevoluteJoint
 from pydrake.systems.framework import DiagramBuilder
 
 from romoco_drake.config import load_typed
@@ -209,9 +209,14 @@ class RobotModel:
 
     # ----------------------------------------------------------- simulation plant
     def add_to_builder(
-        self, builder: DiagramBuilder, time_step: float
+        self, builder: DiagramBuilder, time_step: float, motor_pd: bool = False
     ) -> tuple[MultibodyPlant, SceneGraph]:
-        """Adds the simulation plant (SAP, sole contact points, flat ground, loop constraints)."""
+        """Adds the simulation plant (SAP, sole contact points, flat ground, loop constraints).
+
+        ``motor_pd`` gives every actuator an implicit PD loop with the YAML gains, solved inside
+        the SAP step as a position-controlled motor's own loop would run; the plant then takes
+        a desired state [q_d; v_d] (actuator order) besides the feedforward torque.
+        """
         plant_config = MultibodyPlantConfig(
             time_step=time_step,
             discrete_contact_approximation="sap",
@@ -220,6 +225,10 @@ class RobotModel:
         plant, scene_graph = AddMultibodyPlant(plant_config, builder)
         self._add_model(plant)
         self._add_actuators(plant)
+        if motor_pd:
+            for i, index in enumerate(plant.GetJointActuatorIndices(self.model_instance)):
+                gains = PdControllerGains(p=self.kp[i], d=self.kd[i])
+                plant.get_joint_actuator(index).set_controller_gains(gains)
         self._add_contact_geometry(plant)
         self._add_sim_constraints(plant)
         plant.Finalize()
