@@ -226,9 +226,9 @@ class RobotModel:
         self._add_model(plant)
         self._add_actuators(plant)
         if motor_pd:
-            for i, index in enumerate(plant.GetJointActuatorIndices(self.model_instance)):
+            for i, index in enumerate(plant.GetJointActuatorIndices()):
                 gains = PdControllerGains(p=self.kp[i], d=self.kd[i])
-                plant.get_joint_actuator(index).set_controller_gains(gains)
+                plant.get_mutable_joint_actuator(index).set_controller_gains(gains)
         self._add_contact_geometry(plant)
         self._add_sim_constraints(plant)
         plant.Finalize()
