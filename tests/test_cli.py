@@ -73,6 +73,12 @@ def test_run_text_summary():
         (["show", "atlas", "--no-wait"], "unknown robot 'atlas'"),
         (["run", "g1_stand", "--duration", "-1"], "--duration must be positive"),
         (["bench", "rom", "--planner", "lipp"], "unknown planner 'lipp'"),
+        (["run", "g1_walk", "--planner", "lipp"], "unknown planner 'lipp'"),
+        (["run", "g1_walk", "--controller", "mpc"], "unknown controller 'mpc'"),
+        (["run", "g1_walk", "--command", "1:0.3,0"], "is not t:vx,vy,wz"),
+        (["run", "g1_walk", "--command", "2:0,0,0;1:0.3,0,0"], "times must increase"),
+        (["run", "g1_walk", "--command", "0:nan,0,0"], "finite"),
+        (["bench", "matrix", "--robots", "atlas"], "unknown robot 'atlas'"),
         (["bench", "rom", "--planner", "alip", "--gain", "lqr"], "supports gains"),
         (["bench", "rom", "--planner", "hlip", "--t-ds", "-0.1"], "t_ds must be non-negative"),
     ],
@@ -105,3 +111,15 @@ def test_bench_rom_json_and_plots(tmp_path):
     assert summary["planner_cost"]["update_us"]["median"] > 0
     for path in summary["plots"]:
         assert open(path, "rb").read(8) == b"\x89PNG\r\n\x1a\n"
+
+
+def test_run_walking_overrides_json_and_plots(tmp_path):
+    """--planner/--controller/--command reach the run; the summary carries the walking fields."""
+    out = romoco("run", "g1_walk", "--duration", "3", "--planner", "dcm", "--controller", "id",
+                 "--command", "0:0,0,0;1:0.3,0,0", "--json", "--plot", str(tmp_path))
+    assert out.returncode == 0, out.stderr
+    s = json.loads(out.stdout.strip().splitlines()[-1])
+    assert (s["planner"], s["controller"]) == ("dcm", "id")
+    assert not s["fell"] and s["steps"] >= 4 and s["qp_failures"] == 0
+    assert len(s["velocity_rms_error"]) == 3 and s["controller_tick_ms"]["median"] > 0
+    assert {p.rsplit("/", 1)[-1] for p in s["plots"]} == {"g1_walk_velocity.png", "g1_walk_tracking.png"}

@@ -167,3 +167,30 @@ def test_g1_walks_forward_and_lands_on_its_targets():
 
     v = heading_velocity(built.robot, times, states)[times > 2.5].mean(axis=0)
     assert abs(v[0] - 0.3) < 0.08 and abs(v[1]) < 0.08, v
+
+
+def test_motor_command_station_runs_the_motor_pd_loop(g1):
+    """With motor_pd the station applies K_p (q_d − q) + K_d (v_d − v) + τ_ff inside the step."""
+    from romoco_drake.interfaces.station import make_station
+
+    robot = g1[0]
+    station = make_station(robot, 0.002, None, motor_pd=True)
+    assert {station.get_input_port(i).get_name() for i in range(station.num_input_ports())} == {
+        "actuation", "motor_command"}
+    simulator = Simulator(station)
+    context = simulator.get_mutable_context()
+    plant = station.GetSubsystemByName("plant")
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+    plant.SetPositions(plant_context, robot.nominal.q)
+    nu, q = robot.nu, robot.nominal.q[robot.actuated_q_index]
+    k = robot.actuator_names.index("left_knee_joint")
+    command = np.concatenate([q, np.zeros(nu), np.zeros(nu), robot.kp, robot.kd])
+    command[k] += 0.02
+    command[2 * nu + k] = 1.0  # feedforward
+    station.GetInputPort("motor_command").FixValue(context, command)
+    station.GetInputPort("actuation").FixValue(context, np.zeros(nu))
+    simulator.AdvanceTo(0.002)
+    applied = plant.get_net_actuation_output_port().Eval(plant_context)
+    assert applied[k] == pytest.approx(robot.kp[k] * 0.02 + 1.0, rel=0.3)
+    others = np.delete(np.abs(applied), k)
+    assert others.max() < 0.5 * abs(applied[k])
