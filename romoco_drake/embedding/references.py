@@ -11,9 +11,10 @@ wraps it as a system. Desired values per mode:
   (apex ``swing_height``, zero touchdown velocity), replanned each tick from its own state.
   Double support keeps CoM height, pelvis tilt and the stance hip yaw.
 - standing: CoM over the middle of the two soles at the nominal CoM height, pelvis level and
-  facing the mean heading of the feet. On entering standing the horizontal CoM reference is a
-  quintic from the CoM's state at that instant to the middle over ``STAND_SETTLE_S``, so the
-  switch from walking asks for no jump in position or velocity.
+  facing the mean heading of the feet. On entering standing the CoM reference is a quintic
+  from the CoM's state at that instant to that target over ``STAND_SETTLE_S``, so the switch
+  from walking asks for no jump in position or velocity (the standing height may differ from
+  the walking height by 10 cm).
 - in air: the nominal joint positions.
 """
 
@@ -95,10 +96,10 @@ class SwingState(SharedValue):
 
 @dataclass(frozen=True)
 class StandState(SharedValue):
-    """The horizontal CoM reference latched when standing began."""
+    """The CoM reference latched when standing began."""
 
     start: float  # controller time
-    com_xy: BezierCurve  # from the CoM's entry position and velocity to the middle of the soles
+    com: BezierCurve  # from the CoM's entry position and velocity to its standing target
 
 
 class EmbeddingCore:
@@ -164,8 +165,8 @@ class EmbeddingCore:
         """Latches the CoM's state at the start of standing (time t)."""
         out = self.standing.evaluate(context)
         v = self.robot.plant.GetVelocities(context)
-        target = self._standing_targets(context)[:2]
-        curve = quintic_bezier(out.y[:2], out.J[:2] @ v, np.zeros(2), target, np.zeros(2), np.zeros(2),
+        target = self._standing_targets(context)[:3]
+        curve = quintic_bezier(out.y[:3], out.J[:3] @ v, np.zeros(3), target, np.zeros(3), np.zeros(3),
                                STAND_SETTLE_S)
         return StandState(t, curve)
 
@@ -211,7 +212,7 @@ class EmbeddingCore:
         out = self.standing.evaluate(context)
         y_d, yd_d, ydd_d = self._standing_targets(context), np.zeros(6), np.zeros(6)
         if stand is not None:
-            y_d[:2], yd_d[:2], ydd_d[:2] = stand.com_xy.evaluate(t - stand.start)
+            y_d[:3], yd_d[:3], ydd_d[:3] = stand.com.evaluate(t - stand.start)
         active = np.ones(6, dtype=bool)
         return self._pack("standing", "double", "left", out, y_d, yd_d, ydd_d, active, context)
 
