@@ -38,8 +38,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from romoco_drake.control.tasks import TaskStack, pivot_moment_map, subspace_basis, weighted_least_squares
-from romoco_drake.control.tscqp import DEFAULT_TASK_GAINS, QpSolution, TaskGain, TscQpController
+from romoco_drake.control.tasks import (
+    DEFAULT_TASK_GAINS,
+    TaskGain,
+    TaskStack,
+    pivot_moment_map,
+    subspace_basis,
+    weighted_least_squares,
+)
+from romoco_drake.control.tscqp import QpSolution, TscQpController
 from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.embedding.references import TaskReferences
 from romoco_drake.robots.model import RobotModel

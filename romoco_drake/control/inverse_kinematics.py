@@ -40,8 +40,14 @@ from pydrake.common.value import AbstractValue
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import LeafSystem
 
-from romoco_drake.control.tasks import TaskStack, subspace_basis, weighted_least_squares
-from romoco_drake.control.tscqp import DEFAULT_TASK_GAINS, TaskGain, _placeholder_references
+from romoco_drake.control.tasks import (
+    DEFAULT_TASK_GAINS,
+    TaskGain,
+    TaskStack,
+    placeholder_references,
+    subspace_basis,
+    weighted_least_squares,
+)
 from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.embedding.outputs import Output
 from romoco_drake.embedding.references import MODES, EmbeddingCore, TaskReferences
@@ -218,7 +224,7 @@ class IkController(LeafSystem):
         self._q_limits = (robot.q_lower[robot.actuated_q_index], robot.q_upper[robot.actuated_q_index])
         self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
         self.task_references_port = self.DeclareAbstractInputPort(
-            "task_references", AbstractValue.Make(_placeholder_references(robot)))
+            "task_references", AbstractValue.Make(placeholder_references(robot)))
         self.mode_port = self.DeclareVectorInputPort("mode", 1)
         self._tau = self.DeclareDiscreteState(robot.nu)
         self._command = self.DeclareDiscreteState(5 * robot.nu)

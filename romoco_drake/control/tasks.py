@@ -1,4 +1,4 @@
-"""What the equality-only whole-body controllers (ID, VEL-IK, POS-IK) share.
+"""What the whole-body controllers (TSC-QP, ID, VEL-IK, POS-IK) share.
 
 - :class:`TaskStack`: the task rows tracked each tick, the active outputs of
   :class:`~romoco_drake.embedding.references.TaskReferences` plus one joint task per locked
@@ -9,18 +9,52 @@
   is the constraint null-space projector.
 - :func:`weighted_least_squares`: the damped weighted task solve in a null-space coordinate.
 - :func:`pivot_moment_map`: the stance contact forces' moment about the sole centroid.
+- :class:`TaskGain` and the default gains and weights of every output, shared by all four
+  controllers, and :func:`placeholder_references`.
 """
 
 from __future__ import annotations
 
+import fnmatch
 from dataclasses import dataclass
 
 import numpy as np
 
-from romoco_drake.control.tscqp import DEFAULT_TASK_GAINS, LOCKED_GAIN, TaskGain, task_gains
 from romoco_drake.embedding.contact import ContactModel
-from romoco_drake.embedding.references import TaskReferences
+from romoco_drake.embedding.references import EmbeddingCore, TaskReferences
 from romoco_drake.robots.model import RobotModel
+
+
+@dataclass(frozen=True)
+class TaskGain:
+    """Gains and weight for the outputs whose names match ``outputs`` (a glob)."""
+
+    outputs: str
+    kp: float
+    kd: float
+    weight: float
+
+
+DEFAULT_TASK_GAINS = (
+    TaskGain("com_[xy]", 30.0, 12.0, 10.0),  # standing: gentle, the support polygon is small
+    TaskGain("com_*", 100.0, 20.0, 10.0),
+    TaskGain("pelvis_yaw", 50.0, 10.0, 1.0),  # standing: only the feet's friction turns the body
+    TaskGain("pelvis_*", 200.0, 30.0, 10.0),
+    TaskGain("*hip_yaw", 100.0, 20.0, 1.0),
+    TaskGain("swing_foot_[xyz]", 400.0, 40.0, 10.0),
+    TaskGain("swing_foot_*", 200.0, 30.0, 1.0),
+    TaskGain("*", 100.0, 20.0, 1.0),
+)
+# Locked joints (arms, waist) are held by a joint task in every mode.
+LOCKED_GAIN = TaskGain("locked", 200.0, 30.0, 1.0)
+
+
+def task_gains(names, gains=DEFAULT_TASK_GAINS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(kp, kd, weight) arrays for output ``names``: the first matching entry wins."""
+    rows = [next(g for g in gains if fnmatch.fnmatchcase(n, g.outputs)) for n in names]
+    return (np.array([g.kp for g in rows]), np.array([g.kd for g in rows]),
+            np.array([g.weight for g in rows]))
+
 
 # Singular values below this fraction of the largest count as zero (redundant contact rows
 # and unactuated directions are zero to round-off; real ones are ≥ 1e-3 of the largest).
@@ -136,3 +170,11 @@ def pivot_moment_map(contact: ContactModel, context, refs: TaskReferences) -> np
     G[0, 1::3], G[0, 2::3] = -r[:, 2], r[:, 1]
     G[1, 0::3], G[1, 2::3] = r[:, 2], -r[:, 0]
     return G
+
+
+def placeholder_references(robot: RobotModel) -> TaskReferences:
+    """Standing references at the nominal pose: the value task_references ports start with."""
+    core = EmbeddingCore(robot)
+    context = robot.plant.CreateDefaultContext()
+    robot.plant.SetPositions(context, robot.nominal.q)
+    return core.evaluate(context, "standing", 0.0, None, None)

@@ -14,7 +14,6 @@ k_h damps constraint drift, since the controller plant's contacts are only held 
 
 from __future__ import annotations
 
-import fnmatch
 import time
 from dataclasses import dataclass
 
@@ -23,41 +22,16 @@ from pydrake.common.value import AbstractValue
 from pydrake.solvers import ClarabelSolver, MathematicalProgram, SolverOptions
 from pydrake.systems.framework import LeafSystem
 
+from romoco_drake.control.tasks import (
+    DEFAULT_TASK_GAINS,
+    TaskStack,
+    pivot_moment_map,
+    placeholder_references,
+)
 from romoco_drake.embedding.contact import ContactModel
-from romoco_drake.embedding.references import MODES, EmbeddingCore, TaskReferences
+from romoco_drake.embedding.references import MODES, TaskReferences
 from romoco_drake.errors import RomocoError
 from romoco_drake.robots.model import RobotModel
-
-
-@dataclass(frozen=True)
-class TaskGain:
-    """Gains and weight for the outputs whose names match ``outputs`` (a glob)."""
-
-    outputs: str
-    kp: float
-    kd: float
-    weight: float
-
-
-DEFAULT_TASK_GAINS = (
-    TaskGain("com_[xy]", 30.0, 12.0, 10.0),  # standing: gentle, the support polygon is small
-    TaskGain("com_*", 100.0, 20.0, 10.0),
-    TaskGain("pelvis_yaw", 50.0, 10.0, 1.0),  # standing: only the feet's friction turns the body
-    TaskGain("pelvis_*", 200.0, 30.0, 10.0),
-    TaskGain("*hip_yaw", 100.0, 20.0, 1.0),
-    TaskGain("swing_foot_[xyz]", 400.0, 40.0, 10.0),
-    TaskGain("swing_foot_*", 200.0, 30.0, 1.0),
-    TaskGain("*", 100.0, 20.0, 1.0),
-)
-# Locked joints (arms, waist) are held by a joint task in every mode.
-LOCKED_GAIN = TaskGain("locked", 200.0, 30.0, 1.0)
-
-
-def task_gains(names, gains=DEFAULT_TASK_GAINS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(kp, kd, weight) arrays for output ``names``: the first matching entry wins."""
-    rows = [next(g for g in gains if fnmatch.fnmatchcase(n, g.outputs)) for n in names]
-    return (np.array([g.kp for g in rows]), np.array([g.kd for g in rows]),
-            np.array([g.weight for g in rows]))
 
 
 @dataclass(frozen=True)
@@ -120,10 +94,7 @@ class TscQp:
         for name, value in (("equilibrate_enable", False), ("tol_gap_abs", 1e-6), ("tol_gap_rel", 1e-6)):
             self.options.SetOption(ClarabelSolver.id(), name, value)
         self._programs: dict[str, _DomainProgram] = {}
-        self._locked_v = robot.actuated_v_index[robot.locked_actuator_mask]
-        self._locked_q = robot.actuated_q_index[robot.locked_actuator_mask]
-        self._locked_q0 = robot.nominal.q[self._locked_q]
-        self._gain_cache: dict[tuple[str, ...], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._tasks = TaskStack(robot, gains)
         B = robot.B
         selection = np.all((B == 0.0) | (B == 1.0)) and np.all(B.sum(axis=0) == 1.0)
         if not (selection and np.all(B.sum(axis=1) <= 1.0)):
@@ -139,33 +110,6 @@ class TscQp:
                 self.robot, Jh.shape[0], rank, refs.num_contact_forces, refs.A_f.shape[0], len(self._rows_u))
         return self._programs[refs.domain]
 
-    def _gains(self, names: tuple[str, ...]):
-        if names not in self._gain_cache:
-            self._gain_cache[names] = task_gains(names, self.gains)
-        return self._gain_cache[names]
-
-    def _pivot_moment_map(self, context, refs: TaskReferences) -> np.ndarray:
-        """G (2 × n_f): horizontal moment of the stance contact forces about the sole centroid.
-
-        The ROM planners assume the stance foot is a pivot (no ankle torque about the sole
-        centroid, LIP eq. 1); penalising G λ keeps the centre of pressure near that point in
-        single support, so the robot's momentum evolves as the planner predicts.
-        """
-        foot = self.contact.feet[refs.domain]
-        plant = self.robot.plant
-        pivot = plant.CalcPointsPositions(context, foot.frame, foot.p_FS, plant.world_frame()).ravel()
-        r = refs.holonomic.y[:refs.num_contact_forces].reshape(-1, 3) - pivot
-        G = np.zeros((2, refs.num_contact_forces))
-        # (r × f)_x = r_y f_z − r_z f_y ; (r × f)_y = r_z f_x − r_x f_z
-        G[0, 1::3], G[0, 2::3] = -r[:, 2], r[:, 1]
-        G[1, 0::3], G[1, 2::3] = r[:, 2], -r[:, 0]
-        return G
-
-    def commanded_accelerations(self, refs: TaskReferences, v: np.ndarray) -> np.ndarray:
-        """ÿ^cmd = ÿ_d − K_p (y − y_d) − K_d (ẏ − ẏ_d) for every output."""
-        kp, kd, _ = self._gains(refs.names)
-        return refs.yddot_des - kp * refs.error - kd * (refs.J @ v - refs.ydot_des)
-
     def solve(self, context, refs: TaskReferences) -> QpSolution:
         r, plant = self.robot, self.robot.plant
         nv, nu = r.nv, r.nu
@@ -173,20 +117,9 @@ class TscQp:
         q = plant.GetPositions(context)
         prog = self._program(refs)
         n = prog.n
-        # Task rows: active outputs, then locked joints.
-        _, _, w = self._gains(refs.names)
-        act = refs.active
-        a_cmd = self.commanded_accelerations(refs, v)[act]
-        J = refs.J[act]
-        bias = refs.Jdot_v[act]
-        w = w[act]
-        if len(self._locked_v):
-            kp, kd, wl = LOCKED_GAIN.kp, LOCKED_GAIN.kd, LOCKED_GAIN.weight
-            J_l = np.zeros((len(self._locked_v), nv))
-            J_l[np.arange(len(self._locked_v)), self._locked_v] = 1.0
-            a_l = kp * (self._locked_q0 - q[self._locked_q]) - kd * v[self._locked_v]
-            J, bias = np.vstack([J, J_l]), np.concatenate([bias, np.zeros(len(a_l))])
-            a_cmd, w = np.concatenate([a_cmd, a_l]), np.concatenate([w, np.full(len(a_l), wl)])
+        tasks = self._tasks.evaluate(refs, q)
+        J, bias, w = tasks.J, tasks.Jdot_v, tasks.weight
+        a_cmd = tasks.yddot_des - tasks.kp * tasks.error - tasks.kd * (J @ v - tasks.ydot_des)
         M = plant.CalcMassMatrix(context)
         C = plant.CalcBiasTerm(context) - plant.CalcGravityGeneralizedForces(context)
         Jh = refs.holonomic.J
@@ -199,7 +132,7 @@ class TscQp:
         Q += 2.0 * self._eps_tau * T.T @ T
         Q[np.diag_indices(n)] += 2.0 * np.concatenate([self._eps_vdot, np.full(n - nv, self._eps_force)])
         if refs.domain in ("left", "right") and self.w_pivot > 0.0:
-            G = self._pivot_moment_map(context, refs)
+            G = pivot_moment_map(self.contact, context, refs)
             f = slice(nv, nv + refs.num_contact_forces)
             Q[f, f] += 2.0 * self.w_pivot * G.T @ G
         b = 2.0 * self._eps_tau * T.T @ c
@@ -251,7 +184,7 @@ class TscQpController(LeafSystem):
         self._context = robot.plant.CreateDefaultContext()
         self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
         self.task_references_port = self.DeclareAbstractInputPort(
-            "task_references", AbstractValue.Make(_placeholder_references(robot)))
+            "task_references", AbstractValue.Make(placeholder_references(robot)))
         self.mode_port = self.DeclareVectorInputPort("mode", 1)
         self._tau = self.DeclareDiscreteState(robot.nu)
         self._stats = self.DeclareDiscreteState(3)
@@ -286,10 +219,3 @@ class TscQpController(LeafSystem):
         discrete_state.get_mutable_vector(self._tau).SetFromVector(tau)
         discrete_state.get_mutable_vector(self._stats).SetFromVector([failures, safe, streak])
         discrete_state.get_mutable_vector(self._tick).SetFromVector([1e3 * (time.perf_counter() - start)])
-
-
-def _placeholder_references(robot: RobotModel) -> TaskReferences:
-    core = EmbeddingCore(robot)
-    context = robot.plant.CreateDefaultContext()
-    robot.plant.SetPositions(context, robot.nominal.q)
-    return core.evaluate(context, "standing", 0.0, None, None)
