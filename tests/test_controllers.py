@@ -6,6 +6,7 @@ import functools
 import numpy as np
 import pytest
 from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.solvers import ClarabelSolver
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.control.gravity import contact_gravity_compensation
@@ -129,15 +130,26 @@ def test_inverse_dynamics_agrees_with_tscqp_when_no_inequality_is_active(name, m
     v = _consistent_velocity(name, mode, scale=0.02)
     context, refs = _references(name, mode, v)
     if mode == "standing":  # small CoM and pelvis errors
-        offset = np.array([0.005, -0.005, -0.01, 0.01, 0.01, 0.02])
+        offset = np.array([0.005, -0.005, -0.01, 0.01, 0.01, 0.002])
         refs = dataclasses.replace(refs, y_des=refs.y_des + offset)
+    else:  # at rest on the references, so the demand stays inside the torsional friction limit
+        refs = dataclasses.replace(refs, y_des=refs.y.copy(), ydot_des=refs.J @ v,
+                                   yddot_des=np.zeros_like(refs.y))
     ours = InverseDynamics(robot, core.contact).solve(context, refs)
-    theirs = TscQp(robot, core.contact).solve(context, refs)
+    qp = TscQp(robot, core.contact)
+    # Double support leaves τ weakly determined (ε_τ = 1e-7), so solve to tight gaps here.
+    for option, value in (("equilibrate_enable", True), ("tol_gap_abs", 1e-10), ("tol_gap_rel", 1e-10)):
+        qp.options.SetOption(ClarabelSolver.id(), option, value)
+    theirs = qp.solve(context, refs)
     assert ours.success and theirs.success
     n_f = refs.num_contact_forces
     assert np.all(refs.A_f @ ours.forces[:n_f] < refs.b_f)  # the friction and CoP limits are inactive
     assert np.all(np.abs(ours.tau) < robot.effort_limits)
-    for a, b in ((ours.vdot, theirs.vdot), (ours.tau, theirs.tau), (ours.forces, theirs.forces)):
+    # Forces are compared by what they do, J_hᵀ λ: the split among a foot's redundant contact
+    # points (internal forces) is nearly free, so solvers may differ there within tolerance.
+    Jh_t = refs.holonomic.J.T
+    pairs = ((ours.vdot, theirs.vdot), (ours.tau, theirs.tau), (Jh_t @ ours.forces, Jh_t @ theirs.forces))
+    for a, b in pairs:
         np.testing.assert_allclose(a, b, atol=1e-3 * (1 + np.abs(b).max()))  # Clarabel tolerance
 
 

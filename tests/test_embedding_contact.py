@@ -73,14 +73,18 @@ def _inside_distance(polygon, p):
 
 
 def _feasible_by_definition(robot, side, contact, f_S):
-    """Net force in the friction pyramid, normal force ≥ min, CoP inside the sole by the margin.
+    """Net force in the friction pyramid, normal force ≥ min, CoP inside the sole by the margin,
+    yaw moment within the torsional friction μ ρ f_z (ρ: half the sole points' mean radius).
 
     Returns (feasible, slack) with slack the smallest distance to a boundary (scaled).
     """
     foot = contact.feet[side]
     f, m = np.split(foot.wrench_map @ f_S, 2)
     mu = robot.config.feet.friction * (1 - MARGINS["friction_margin"])
-    slacks = [f[2] - MARGINS["min_normal_force"], mu * f[2] - abs(f[0]), mu * f[2] - abs(f[1])]
+    xy = (foot.R_FS.T @ (robot.feet[side].points - foot.p_FS[:, None]))[:2]
+    rho = 0.5 * np.mean(np.linalg.norm(xy, axis=0))
+    slacks = [f[2] - MARGINS["min_normal_force"], mu * f[2] - abs(f[0]), mu * f[2] - abs(f[1]),
+              mu * rho * f[2] - abs(m[2])]
     if f[2] > 1e-9:
         cop = np.array([-m[1], m[0]]) / f[2]
         if robot.is_line_foot:
