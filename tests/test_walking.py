@@ -194,3 +194,25 @@ def test_motor_command_station_runs_the_motor_pd_loop(g1):
     assert applied[k] == pytest.approx(robot.kp[k] * 0.02 + 1.0, rel=0.3)
     others = np.delete(np.abs(applied), k)
     assert others.max() < 0.5 * abs(applied[k])
+
+
+def test_motor_command_gains_are_honoured_by_moving_the_setpoint(g1):
+    """A command with K_p = 0 gives no position feedback although the motors' loop has K_p⁰ > 0."""
+    from romoco_drake.interfaces.motors import MotorCommandAdapter
+
+    robot = g1[0]
+    adapter = MotorCommandAdapter(robot)
+    context = adapter.CreateDefaultContext()
+    nu = robot.nu
+    x = np.concatenate([robot.nominal.q, np.zeros(robot.nv)])
+    q = x[robot.actuated_q_index]
+    kp = robot.kp.copy()
+    kp[0] = 0.0
+    kp[1] = 0.5 * robot.kp[1]
+    command = np.concatenate([q + 0.1, np.zeros(nu), np.arange(nu, dtype=float), kp, robot.kd])
+    adapter.motor_command_port.FixValue(context, command)
+    adapter.plant_state_port.FixValue(context, x)
+    q_d, v_d = np.split(adapter.desired_state_port.Eval(context), 2)
+    torque_p = robot.kp * (q_d - q)  # what the motors' own loop applies
+    np.testing.assert_allclose(torque_p, kp * 0.1, atol=1e-12)
+    np.testing.assert_allclose(adapter.feedforward_port.Eval(context), np.arange(nu))

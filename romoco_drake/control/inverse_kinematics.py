@@ -49,7 +49,7 @@ from romoco_drake.control.tasks import (
     weighted_least_squares,
 )
 from romoco_drake.embedding.contact import ContactModel
-from romoco_drake.embedding.outputs import Output
+from romoco_drake.embedding.outputs import Output, _leg_chain
 from romoco_drake.embedding.references import MODES, EmbeddingCore, TaskReferences
 from romoco_drake.robots.model import RobotModel
 
@@ -222,6 +222,7 @@ class IkController(LeafSystem):
                        else PositionIK(robot, self.contact, gains))
         self._context = robot.plant.CreateDefaultContext()
         self._q_limits = (robot.q_lower[robot.actuated_q_index], robot.q_upper[robot.actuated_q_index])
+        self._ankles = {side: _ankle_actuators(robot, side) for side in ("left", "right")}
         self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
         self.task_references_port = self.DeclareAbstractInputPort(
             "task_references", AbstractValue.Make(placeholder_references(robot)))
@@ -261,7 +262,13 @@ class IkController(LeafSystem):
             solution = self.solver.solve(self._context, refs)
             q_d, v_d = solution.q[r.actuated_q_index], solution.v[r.actuated_v_index]
         tau_ff = gravity_compensation(r, self.contact, self._context, refs)
-        return np.concatenate([q_d, v_d, tau_ff, r.kp, r.kd])
+        kp = r.kp
+        if refs.domain in self._ankles:
+            # No position feedback at the stance ankle: it acts as the pivot the ROM assumes
+            # (joint damping and the gravity feedforward stay).
+            kp = kp.copy()
+            kp[self._ankles[refs.domain]] = 0.0
+        return np.concatenate([q_d, v_d, tau_ff, kp, r.kd])
 
     def _update(self, context, discrete_state) -> None:
         start = time.perf_counter()
@@ -286,3 +293,10 @@ class IkController(LeafSystem):
         discrete_state.get_mutable_vector(self._tau).SetFromVector(self.torque(command, x))
         discrete_state.get_mutable_vector(self._stats).SetFromVector([failures, safe, streak])
         discrete_state.get_mutable_vector(self._tick).SetFromVector([1e3 * (time.perf_counter() - start)])
+
+
+def _ankle_actuators(robot: RobotModel, side: str) -> np.ndarray:
+    """Actuator indices of the leg's joints below the knee (ankle pitch/roll, Cassie's toe)."""
+    chain = [j.name() for j in _leg_chain(robot, side)]
+    knee = next(i for i, name in enumerate(chain) if "knee" in name)
+    return np.array([robot.actuator_names.index(name) for name in chain[knee + 1:]], dtype=int)

@@ -16,8 +16,8 @@ controllers) the station also takes
 
 and runs each motor's PD loop implicitly inside the plant step (SAP PD-controlled actuators),
 as the motor's own loop would, rather than holding a PD torque over a control tick. The
-simulated motors use the robot YAML's gains; a command with K_p = 0 (damping) is sent with
-q_d = q, which the controllers do. τ_ff is added to ``actuation``.
+command's own gains are honoured by moving the setpoints (:class:`MotorCommandAdapter`).
+τ_ff is added to ``actuation``.
 """
 
 from __future__ import annotations
@@ -25,8 +25,9 @@ from __future__ import annotations
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import Adder, MatrixGain, PassThrough
+from pydrake.systems.primitives import Adder, MatrixGain
 
+from romoco_drake.interfaces.motors import MotorCommandAdapter
 from romoco_drake.robots.model import RobotModel
 
 
@@ -56,17 +57,12 @@ def make_station(
     plant, scene_graph = robot.add_to_builder(builder, time_step, motor_pd=motor_pd)
     plant.set_name("plant")
     if motor_pd:
-        nu = robot.nu
-        command = builder.AddNamedSystem("motor_command", PassThrough(5 * nu))
-        builder.ExportInput(command.get_input_port(), "motor_command")
-        desired = builder.AddNamedSystem("desired_state", MatrixGain(np.eye(2 * nu, 5 * nu)))
-        pick_ff = np.hstack([np.zeros((nu, 2 * nu)), np.eye(nu), np.zeros((nu, 2 * nu))])
-        feedforward = builder.AddNamedSystem("feedforward", MatrixGain(pick_ff))
-        total = builder.AddNamedSystem("torque", Adder(2, nu))
-        builder.Connect(command.get_output_port(), desired.get_input_port())
-        builder.Connect(command.get_output_port(), feedforward.get_input_port())
-        builder.Connect(desired.get_output_port(), plant.get_desired_state_input_port(robot.model_instance))
-        builder.Connect(feedforward.get_output_port(), total.get_input_port(0))
+        adapter = builder.AddNamedSystem("motors", MotorCommandAdapter(robot))
+        builder.ExportInput(adapter.motor_command_port, "motor_command")
+        builder.Connect(plant.get_state_output_port(), adapter.plant_state_port)
+        builder.Connect(adapter.desired_state_port, plant.get_desired_state_input_port(robot.model_instance))
+        total = builder.AddNamedSystem("torque", Adder(2, robot.nu))
+        builder.Connect(adapter.feedforward_port, total.get_input_port(0))
         builder.ExportInput(total.get_input_port(1), "actuation")
         builder.Connect(total.get_output_port(), plant.get_actuation_input_port())
     else:
