@@ -100,6 +100,7 @@ class StandState(SharedValue):
 
     start: float  # controller time
     com: BezierCurve  # from the CoM's entry position and velocity to its standing target
+    yaw: float  # pelvis heading target: the feet's mean heading at entry
 
 
 class EmbeddingCore:
@@ -165,10 +166,10 @@ class EmbeddingCore:
         """Latches the CoM's state at the start of standing (time t)."""
         out = self.standing.evaluate(context)
         v = self.robot.plant.GetVelocities(context)
-        target = self._standing_targets(context)[:3]
-        curve = quintic_bezier(out.y[:3], out.J[:3] @ v, np.zeros(3), target, np.zeros(3), np.zeros(3),
+        target = self._standing_targets(context)
+        curve = quintic_bezier(out.y[:3], out.J[:3] @ v, np.zeros(3), target[:3], np.zeros(3), np.zeros(3),
                                STAND_SETTLE_S)
-        return StandState(t, curve)
+        return StandState(t, curve, float(target[5]))
 
     def evaluate(self, context, mode: str, tau: float, plan: PlannerOutput | None,
                  memory: SwingState | StandState | None, t: float = 0.0) -> TaskReferences:
@@ -213,6 +214,7 @@ class EmbeddingCore:
         y_d, yd_d, ydd_d = self._standing_targets(context), np.zeros(6), np.zeros(6)
         if stand is not None:
             y_d[:3], yd_d[:3], ydd_d[:3] = stand.com.evaluate(t - stand.start)
+            y_d[5] = stand.yaw  # latched: a foot rocking on its edge must not swing the target
         active = np.ones(6, dtype=bool)
         return self._pack("standing", "double", "left", out, y_d, yd_d, ydd_d, active, context)
 
