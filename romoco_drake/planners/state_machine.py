@@ -44,7 +44,9 @@ class GaitStateMachine(LeafSystem):
       (|v_CoM| < ``balance_speed``); the first stance is the foot away from the lateral command.
     - walking: each step is T_SS (from the command, latched at the step start) plus ``t_ds``;
       then the stance switches.
-    - walking → standing after ``stop_steps`` steps in a row under a zero command.
+    - walking → standing after ``stop_steps`` steps in a row under a zero command, at a support
+      switch where both soles are flat on the ground (every sole point below
+      ``touchdown_height``); otherwise it keeps stepping in place.
     - any mode → damping (latched) on a non-finite state, the base below ``fall_height`` of its
       nominal height, or a base tilt above ``fall_tilt`` rad; counted in ``safe_mode_entries``.
 
@@ -58,10 +60,12 @@ class GaitStateMachine(LeafSystem):
     """
 
     def __init__(self, robot: RobotModel, period: float, t_ds: float, balance_speed: float = 0.1,
-                 stop_steps: int = 2, fall_height: float = 0.5, fall_tilt: float = math.pi / 4):
+                 stop_steps: int = 2, fall_height: float = 0.5, fall_tilt: float = math.pi / 4,
+                 touchdown_height: float = 0.01):
         super().__init__()
         self.robot, self.t_ds = robot, t_ds
         self.balance_speed, self.stop_steps = balance_speed, stop_steps
+        self.touchdown_height = touchdown_height
         self._min_base_z = fall_height * robot.nominal.base_height
         self._cos_tilt = math.cos(fall_tilt)
         self._context = robot.plant.CreateDefaultContext()
@@ -102,7 +106,7 @@ class GaitStateMachine(LeafSystem):
             s = replace(s, mode="walking", side=side, step_start=t, t_ss=cmd.step_time, idle_steps=0)
         elif s.mode == "walking" and t - s.step_start >= s.t_ss + self.t_ds - 1e-9:
             idle = s.idle_steps + 1 if is_zero(cmd) else 0
-            if idle >= self.stop_steps:
+            if idle >= self.stop_steps and self._feet_down(x):
                 s = replace(s, mode="standing", idle_steps=0, steps=s.steps + 1)
             else:
                 s = replace(s, side=other_side(s.side), step_start=t, t_ss=cmd.step_time, steps=s.steps + 1,
@@ -113,6 +117,12 @@ class GaitStateMachine(LeafSystem):
         s = self.next_schedule(self.schedule(context), context.get_time(), self.state_port.Eval(context),
                                WalkCommand.from_vector(self.command_port.Eval(context)))
         state.get_mutable_abstract_state(int(self._schedule)).set_value(s)
+
+    def _feet_down(self, x: np.ndarray) -> bool:
+        """Every sole point of both feet within ``touchdown_height`` of the ground (z = 0)."""
+        self.robot.plant.SetPositionsAndVelocities(self._context, x)
+        heights = [self.robot.sole_points_in_world(self._context, side)[2] for side in ("left", "right")]
+        return float(np.max(np.concatenate(heights))) < self.touchdown_height
 
     def _balanced(self, x: np.ndarray) -> bool:
         plant = self.robot.plant
