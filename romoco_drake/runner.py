@@ -54,10 +54,16 @@ def run_scenario(
     simulator.Initialize()
     last_print = wall0
     chunk = min(0.1, duration)
-    t = 0.0
+    t, diverged = 0.0, None
     while t < duration - 1e-9:
         t = min(duration, t + chunk)
-        simulator.AdvanceTo(t)
+        try:
+            simulator.AdvanceTo(t)
+        except RuntimeError as e:
+            # The contact solver gives up on a state that has already blown up (a fall the
+            # monitor may not have sampled yet): end the run and report it, no traceback.
+            diverged = (context.get_time(), str(e).split(".")[0])
+            break
         now = time.perf_counter()
         if progress is not None and now - last_print > PROGRESS_WALL_S:
             progress(f"[{scenario.name}] t = {t:.1f}/{duration:.1f} s ({100 * t / duration:.0f}%)")
@@ -82,6 +88,10 @@ def run_scenario(
         "realtime_factor": round(duration / wall, 3) if wall > 0 else None,
     }
     summary.update(built.monitor.summary(monitor_context))
+    if diverged is not None:
+        summary["simulation_error"] = diverged[1]
+        if not summary["fell"]:
+            summary.update(fell=True, fall_time_s=diverged[0], fall_reason="simulation_diverged")
     if built.walking is not None:
         summary.update(_walking_summary(built, context, scenario, plot_dir))
     if record is not None:
@@ -102,8 +112,8 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None) 
     failures, safe_ticks, _ = loop.controller.stats_port.Eval(loop.controller.GetMyContextFromRoot(context))
     return {
         "planner": loop.planner.law.name,
-        "velocity_rms_error": tracking["velocity_rms_error"],
-        "mean_velocity": tracking["mean_velocity"],
+        "velocity_rms_error": _finite_or_none(tracking["velocity_rms_error"]),
+        "mean_velocity": _finite_or_none(tracking["mean_velocity"]),
         "steps": schedule.steps,
         "qp_failures": int(failures),
         "safe_mode_entries": schedule.safe_mode_entries,
@@ -122,3 +132,8 @@ def _plots(built, context, scenario: Scenario, plot_dir: Path | None, log, track
     paths = plot_walking_run(Path(plot_dir), scenario.name, log.sample_times(), tracking,
                              errors.sample_times(), errors.data())
     return {"plots": [str(p) for p in paths]}
+
+
+def _finite_or_none(values: list[float]) -> list[float | None]:
+    """JSON has no NaN: a diverged run reports None for what it could not measure."""
+    return [v if np.isfinite(v) else None for v in values]

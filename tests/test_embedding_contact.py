@@ -74,7 +74,8 @@ def _inside_distance(polygon, p):
 
 def _feasible_by_definition(robot, side, contact, f_S):
     """Net force in the friction pyramid, normal force ≥ min, CoP inside the sole by the margin,
-    yaw moment within the torsional friction μ ρ f_z (ρ: half the sole points' mean radius).
+    yaw moment within the torsional friction μ ρ f_z (ρ: the sole points' mean radius, halved
+    for a line contact).
 
     Returns (feasible, slack) with slack the smallest distance to a boundary (scaled).
     """
@@ -82,7 +83,7 @@ def _feasible_by_definition(robot, side, contact, f_S):
     f, m = np.split(foot.wrench_map @ f_S, 2)
     mu = robot.config.feet.friction * (1 - MARGINS["friction_margin"])
     xy = (foot.R_FS.T @ (robot.feet[side].points - foot.p_FS[:, None]))[:2]
-    rho = 0.5 * np.mean(np.linalg.norm(xy, axis=0))
+    rho = np.mean(np.linalg.norm(xy, axis=0)) * (0.5 if contact.line_contact else 1.0)
     slacks = [f[2] - MARGINS["min_normal_force"], mu * f[2] - abs(f[0]), mu * f[2] - abs(f[1]),
               mu * rho * f[2] - abs(m[2])]
     if f[2] > 1e-9:

@@ -143,7 +143,8 @@ class ContactModel:
     Force limits on one foot's wrench [f; m] in S: f_z ≥ ``min_normal_force``;
     |f_x|, |f_y| ≤ μ (1 − ``friction_margin``) f_z with μ = ``feet.friction``; the CoP
     (−m_y, m_x)/f_z at least ``cop_margin`` (m) inside the sole region; and the yaw moment
-    |m_z| ≤ μ ρ f_z (torsional friction, ρ half the sole points' mean distance from the centroid).
+    |m_z| ≤ μ ρ f_z (torsional friction, ρ the sole points' mean distance from the centroid,
+    halved for line contacts).
     """
 
     def __init__(self, robot: RobotModel, *, friction_margin: float = 0.0, cop_margin: float = 0.0,
@@ -174,10 +175,12 @@ class ContactModel:
             cop[:, 2] = -(d - cop_margin)
             cop[:, 3] = N[:, 1]
             cop[:, 4] = -N[:, 0]
-            # Torsion: |m_z| ≤ μ ρ f_z with ρ half the sole points' mean distance from the centroid,
-            # a conservative stand-in for the friction a sole of that size can hold about z.
+            # Torsion: |m_z| ≤ μ ρ f_z with ρ the sole points' mean distance from the centroid, the
+            # most friction can resist about z when the load is spread evenly over those points.
+            # A line foot resists z moments only by the lateral friction at its two ends, which
+            # also carries its lateral force, so it gets half of that.
             xy = (R_FS.T @ (robot.feet[side].points - p_FS[:, None]))[:2]
-            rho = 0.5 * float(np.mean(np.linalg.norm(xy, axis=0)))
+            rho = float(np.mean(np.linalg.norm(xy, axis=0))) * (0.5 if self.line_contact else 1.0)
             torsion = np.array([[0.0, 0.0, -mu * rho, 0.0, 0.0, 1.0], [0.0, 0.0, -mu * rho, 0.0, 0.0, -1.0]])
             A_w = np.vstack([limits, cop, torsion])
             b = np.zeros(len(A_w))

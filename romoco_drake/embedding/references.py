@@ -42,8 +42,8 @@ STAND_SETTLE_S = 1.0
 # Each step moves the CoM height from its lift-off value to the plan's over this time (a
 # standing robot often carries its CoM higher than its walking height).
 HEIGHT_BLEND_S = 0.6
-# The controllers keep the centre of pressure this far inside each sole (m): at the edge the
-# opposite contact points carry nothing and the foot starts to roll off.
+# On line feet the controllers keep the centre of pressure this far inside the toe-heel
+# segment (m): at an end the other point carries nothing and the foot starts to roll off.
 COP_MARGIN = 0.01
 
 
@@ -117,8 +117,9 @@ class EmbeddingCore:
         # Without an ankle roll joint the leg cannot set the stance foot's roll moment, and a
         # flat-foot contact would tie the pelvis roll to the lateral CoM: the controller models
         # such feet as their toe-heel line (the simulation keeps the whole sole).
-        self.contact = contact or ContactModel(robot, line_contact=not self.walking.has_ankle_roll,
-                                               cop_margin=COP_MARGIN)
+        line = not self.walking.has_ankle_roll
+        self.contact = contact or ContactModel(robot, line_contact=line,
+                                               cop_margin=COP_MARGIN if robot.is_line_foot else 0.0)
         self.swing_height = robot.config.walking.swing_height
         self.nominal_com_height = float(robot.nominal.p_WCoM[2])
         self.nominal_joints = robot.nominal.q[robot.actuated_q_index]
