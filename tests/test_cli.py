@@ -123,3 +123,13 @@ def test_run_walking_overrides_json_and_plots(tmp_path):
     assert not s["fell"] and s["steps"] >= 4 and s["qp_failures"] == 0
     assert len(s["velocity_rms_error"]) == 3 and s["controller_tick_ms"]["median"] > 0
     assert {p.rsplit("/", 1)[-1] for p in s["plots"]} == {"g1_walk_velocity.png", "g1_walk_tracking.png"}
+
+
+def test_bench_tick_json():
+    out = romoco("bench", "tick", "--scenario", "g1_walk", "--ticks", "20", "--json")
+    assert out.returncode == 0, out.stderr
+    s = json.loads(out.stdout.strip().splitlines()[-1])
+    assert s["mode"] == "walking" and s["ticks"] == 20
+    parts = ("estimator", "state_machine", "planner", "embedding", "controller")
+    assert all(s["tick_ms"][p]["median"] > 0 for p in parts)
+    assert s["tick_ms"]["total"]["median"] >= s["tick_ms"]["controller"]["median"]
