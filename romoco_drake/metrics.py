@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from romoco_drake.planners.command import CommandSource
+from romoco_drake.planners.heading import base_yaw
 from romoco_drake.robots.model import RobotModel
 
 AVERAGE_WINDOW_S = 1.0
@@ -15,9 +16,8 @@ SETTLE_S = 1.0  # each command segment's first second is not scored
 
 def heading_velocity(robot: RobotModel, times: np.ndarray, states: np.ndarray) -> np.ndarray:
     """(N, 3): base forward and lateral velocity in the base's heading frame, and yaw rate."""
-    i, j = robot.base_q_start, robot.nq + robot.base_v_start
-    w, x, y, z = states[i:i + 4]
-    yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    j = robot.nq + robot.base_v_start
+    yaw = base_yaw(robot, states)
     wz, vx, vy = states[j + 2], states[j + 3], states[j + 4]
     c, s = np.cos(yaw), np.sin(yaw)
     return np.column_stack([c * vx + s * vy, -s * vx + c * vy, wz])

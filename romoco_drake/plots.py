@@ -29,11 +29,8 @@ def plot_template_run(out_dir: Path, name: str, run, segments, stride_times: np.
         ax.grid(alpha=0.3)
     axes[0].legend(loc="upper left", fontsize=8)
     axes[-1].set_xlabel("time [s]")
-    fig.suptitle(f"{name}: velocity tracking on the hybrid LIP template")
-    fig.tight_layout()
-    velocity = out_dir / f"rom_{name}_velocity.png"
-    fig.savefig(velocity, dpi=120)
-    plt.close(fig)
+    velocity = _save(fig, f"{name}: velocity tracking on the hybrid LIP template",
+                     out_dir / f"rom_{name}_velocity.png")
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.5))
     planes = (("sagittal", run.rom_state[0], run.rom_state[4] / mass),
@@ -48,11 +45,8 @@ def plot_template_run(out_dir: Path, name: str, run, segments, stride_times: np.
         ax.set_title(label)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=7)
-    fig.suptitle(f"{name}: phase portraits (jumps are support switches)")
-    fig.tight_layout()
-    phase = out_dir / f"rom_{name}_phase.png"
-    fig.savefig(phase, dpi=120)
-    plt.close(fig)
+    phase = _save(fig, f"{name}: phase portraits (jumps are support switches)",
+                  out_dir / f"rom_{name}_phase.png")
     return [velocity, phase]
 
 
@@ -72,11 +66,8 @@ def plot_walking_run(out_dir: Path, name: str, times: np.ndarray, tracking: dict
         ax.grid(alpha=0.3)
     axes[0].legend(loc="upper left", fontsize=8)
     axes[-1].set_xlabel("time [s]")
-    fig.suptitle(f"{name}: commanded and measured base velocity (heading frame)")
-    fig.tight_layout()
-    velocity = out_dir / f"{name}_velocity.png"
-    fig.savefig(velocity, dpi=120)
-    plt.close(fig)
+    velocity = _save(fig, f"{name}: commanded and measured base velocity (heading frame)",
+                     out_dir / f"{name}_velocity.png")
 
     fig, ax = plt.subplots(figsize=(8, 3.8))
     for (label, _), series in zip(ERROR_GROUPS, errors, strict=True):
@@ -87,9 +78,13 @@ def plot_walking_run(out_dir: Path, name: str, times: np.ndarray, tracking: dict
     ax.set_yscale("symlog", linthresh=1e-3)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    fig.suptitle(f"{name}: output tracking errors")
-    fig.tight_layout()
-    tracking_png = out_dir / f"{name}_tracking.png"
-    fig.savefig(tracking_png, dpi=120)
-    plt.close(fig)
+    tracking_png = _save(fig, f"{name}: output tracking errors", out_dir / f"{name}_tracking.png")
     return [velocity, tracking_png]
+
+
+def _save(fig, title: str, path: Path) -> Path:
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

@@ -11,11 +11,12 @@ from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.types import COMMAND_SIZE
 
 
-def base_yaw(robot: RobotModel, x: np.ndarray) -> float:
-    """Heading of the floating base (rad) from its quaternion in state ``x``."""
+def base_yaw(robot: RobotModel, x: np.ndarray) -> float | np.ndarray:
+    """Heading of the floating base (rad) from its quaternion in state ``x`` ((nq+nv,) or one
+    state per column)."""
     i = robot.base_q_start
     w, qx, qy, qz = x[i:i + 4]
-    return math.atan2(2.0 * (w * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+    return np.arctan2(2.0 * (w * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
 
 
 class HeadingHold(LeafSystem):
@@ -45,7 +46,7 @@ class HeadingHold(LeafSystem):
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._integrate)
 
     def _initialize(self, context, discrete_state) -> None:
-        psi = base_yaw(self.robot, self.state_port.Eval(context))
+        psi = float(base_yaw(self.robot, self.state_port.Eval(context)))
         discrete_state.get_mutable_vector(self._psi).SetFromVector([psi])
 
     def _integrate(self, context, discrete_state) -> None:
