@@ -44,6 +44,7 @@ class LegJoints:
 
     hip_yaw: str
     ankle_roll: str | None
+    hip_yaw_sign: float = 1.0  # +1 if the hip yaw turns the leg about +z at the nominal pose
 
 
 def sole_frame(robot: RobotModel, side: str) -> tuple[np.ndarray, np.ndarray]:
@@ -101,7 +102,7 @@ def find_leg_joints(robot: RobotModel, side: str) -> LegJoints:
     forward = robot.foot_frames[side].CalcRotationMatrixInWorld(context).matrix() @ R_FS[:, 0]
     rolls = [j.name() for j, a in zip(chain[-2:], axes[-2:], strict=True)
              if abs(a @ forward) > np.cos(np.pi / 6)]
-    return LegJoints(chain[i_yaw].name(), rolls[-1] if rolls else None)
+    return LegJoints(chain[i_yaw].name(), rolls[-1] if rolls else None, float(np.sign(axes[i_yaw, 2])))
 
 
 def _motion(plant, context, frame: Frame, p_FP: np.ndarray, W: Frame):

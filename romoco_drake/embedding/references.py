@@ -126,7 +126,7 @@ class EmbeddingCore:
         plant = robot.plant
         self._hip_yaw_q = {s: plant.GetJointByName(leg.hip_yaw).position_start()
                            for s, leg in self.walking.legs.items()}
-        self._hip_yaw_sign = {s: self._yaw_axis_sign(leg.hip_yaw) for s, leg in self.walking.legs.items()}
+        self._hip_yaw_sign = {s: leg.hip_yaw_sign for s, leg in self.walking.legs.items()}
         self._swing_index = self.walking.names.index("swing_foot_x")
         self._swing_yaw_index = self.walking.names.index("swing_hip_yaw")
         ss = np.ones(len(self.walking.names), dtype=bool)
@@ -134,15 +134,6 @@ class EmbeddingCore:
         for name in ("com_z", "stance_hip_yaw", "pelvis_pitch", "pelvis_roll"):
             ds[self.walking.names.index(name)] = True
         self._walking_active = {"single": ss, "double": ds}
-
-    def _yaw_axis_sign(self, joint_name: str) -> float:
-        """+1 if the hip yaw joint turns the leg about +z at the nominal pose, else −1."""
-        plant = self.robot.plant
-        context = plant.CreateDefaultContext()
-        plant.SetPositions(context, self.robot.nominal.q)
-        joint = plant.GetJointByName(joint_name)
-        axis = joint.frame_on_parent().CalcRotationMatrixInWorld(context).matrix() @ joint.revolute_axis()
-        return 1.0 if axis[2] > 0.0 else -1.0
 
     def start_step(self, context, stance_side: str, t: float, plan: PlannerOutput) -> SwingState:
         """Latches lift-off: the swing sole's pose and both hip yaws at the start of a step."""
