@@ -216,3 +216,19 @@ def test_motor_command_gains_are_honoured_by_moving_the_setpoint(g1):
     torque_p = robot.kp * (q_d - q)  # what the motors' own loop applies
     np.testing.assert_allclose(torque_p, kp * 0.1, atol=1e-12)
     np.testing.assert_allclose(adapter.feedforward_port.Eval(context), np.arange(nu))
+
+
+@pytest.mark.parametrize("scenario, controller, planner", [("h1_walk", "id", "mlip"),
+                                                           ("cassie_walk", "tscqp", "dcm")])
+def test_other_robots_walk_forward_in_closed_loop(scenario, controller, planner):
+    """H1 (line-modelled feet, ID) and Cassie (line feet, loops, double support): stay up, go forward."""
+    from romoco_drake.runner import run_scenario
+    from romoco_drake.scenario import with_overrides
+
+    s = with_overrides(load_scenario(scenario), planner=planner, controller=controller,
+                       command="0:0,0,0;1:0.3,0,0")
+    summary = run_scenario(s, duration=4.5)
+    assert not summary["fell"] and summary["qp_failures"] == 0 and summary["steps"] >= 8
+    vx, vy, _ = summary["velocity_rms_error"]
+    assert vx < 0.1 and vy < 0.1
+    assert summary["mean_velocity"][0] > 0.1  # it went forward (the average includes the first second)
