@@ -10,7 +10,7 @@ from pydrake.solvers import ClarabelSolver
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.control.gravity import contact_gravity_compensation
-from romoco_drake.control.inverse_dynamics import InverseDynamics, InverseDynamicsController
+from romoco_drake.control.inverse_dynamics import InverseDynamics, InverseDynamicsController, load_split_forces
 from romoco_drake.control.inverse_kinematics import (
     IkController,
     PositionIK,
@@ -103,12 +103,52 @@ def test_inverse_dynamics_satisfies_the_constrained_dynamics(name, mode):
     np.testing.assert_allclose(residual, Jh.T @ solution.forces, atol=1e-8 * scale)
 
 
+def test_load_split_carries_the_force_at_its_zmp():
+    """Shares follow the ZMP between the feet; the forces' resultant and CoP are the requested ones."""
+    left = np.array([[0.1, 0.15, 0.0], [0.1, 0.05, 0.0], [-0.1, 0.1, 0.0]])  # LF, RF, MB
+    points = np.vstack([left, left - [0.0, 0.2, 0.0]])
+    force = np.array([20.0, -10.0, 300.0])
+    for zmp, share_right in (([0.0, 0.1], 0.0), ([0.0, 0.0], 0.5), ([0.03, -0.05], 0.75), ([0.0, -0.3], 1.0)):
+        f = load_split_forces(points, np.array(zmp), force).reshape(-1, 3)
+        assert np.all(f[:, 2] >= 0.0)
+        np.testing.assert_allclose(f.sum(axis=0), force)
+        np.testing.assert_allclose(f[3:, 2].sum(), force[2] * share_right, atol=1e-9)
+        cop = points[:, :2].T @ f[:, 2] / f[:, 2].sum()
+        if share_right < 1.0:  # inside the support: the CoP is the ZMP
+            np.testing.assert_allclose(cop, zmp, atol=1e-9)
+        else:  # beyond the right foot: on the right sole, moved toward the ZMP
+            right = points[3:, :2]
+            assert np.all(cop >= right.min(axis=0) - 1e-9) and np.all(cop <= right.max(axis=0) + 1e-9)
+            assert cop[1] < right[:, 1].mean()
+
+
+@pytest.mark.parametrize("name", ["g1", "cassie"])
+def test_inverse_dynamics_double_support_forces_push(name):
+    """With the load split, a standing demand is met with every sole point pushing on the ground.
+
+    The same references with ``load_split_weight=0`` (least-norm internal forces) pull on a
+    sole point; the split keeps the CoM accelerations near that solution's.
+    """
+    robot, core = _setup(name)
+    context, refs = _references(name, "standing")
+    offset = np.zeros(len(refs.y))
+    offset[:3] = [0.02, -0.02, -0.02]
+    refs = dataclasses.replace(refs, y_des=refs.y_des + offset)
+    n_f = refs.num_contact_forces
+    split = InverseDynamics(robot, core.contact).solve(context, refs)
+    pure = InverseDynamics(robot, core.contact, load_split_weight=0.0).solve(context, refs)
+    assert split.success and pure.success
+    assert pure.forces[:n_f].reshape(-1, 3)[:, 2].min() < 0.0
+    assert split.forces[:n_f].reshape(-1, 3)[:, 2].min() > 0.0
+    np.testing.assert_allclose((refs.J @ split.vdot)[:3], (refs.J @ pure.vdot)[:3], atol=0.15)
+
+
 def test_inverse_dynamics_reproduces_feasible_task_accelerations():
     """Accelerations consistent with the contacts and the locked joints are tracked exactly."""
     robot, core = _setup("g1")
     v = _consistent_velocity("g1", "standing")
     context, refs = _references("g1", "standing", v)
-    solver = InverseDynamics(robot, core.contact)
+    solver = InverseDynamics(robot, core.contact, load_split_weight=0.0)  # the pure projection method
     locked = _locked_rows(robot)
     fixed = np.vstack([refs.holonomic.J, locked])
     rhs = np.concatenate([-refs.holonomic.Jdot_v - solver.k_h * refs.holonomic.J @ v, np.zeros(len(locked))])
@@ -135,7 +175,7 @@ def test_inverse_dynamics_agrees_with_tscqp_when_no_inequality_is_active(name, m
     else:  # at rest on the references, so the demand stays inside the torsional friction limit
         refs = dataclasses.replace(refs, y_des=refs.y.copy(), ydot_des=refs.J @ v,
                                    yddot_des=np.zeros_like(refs.y))
-    ours = InverseDynamics(robot, core.contact).solve(context, refs)
+    ours = InverseDynamics(robot, core.contact, load_split_weight=0.0).solve(context, refs)
     qp = TscQp(robot, core.contact)
     # Double support leaves τ weakly determined (ε_τ = 1e-7), so solve to tight gaps here.
     for option, value in (("equilibrate_enable", True), ("tol_gap_abs", 1e-10), ("tol_gap_rel", 1e-10)):
