@@ -10,7 +10,11 @@ from pydrake.solvers import ClarabelSolver
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.control.gravity import contact_gravity_compensation
-from romoco_drake.control.inverse_dynamics import InverseDynamics, InverseDynamicsController, load_split_forces
+from romoco_drake.control.inverse_dynamics import (
+    InverseDynamics,
+    InverseDynamicsController,
+    load_split_forces,
+)
 from romoco_drake.control.inverse_kinematics import (
     IkController,
     PositionIK,

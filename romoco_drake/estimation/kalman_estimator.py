@@ -1,0 +1,188 @@
+"""Kalman estimator: encoders, IMU and contact flags into the controller plant's state."""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.common.eigen_geometry import Quaternion
+from pydrake.math import RotationMatrix
+from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+from romoco_drake.estimation.kalman import (
+    POSITION,
+    VELOCITY,
+    ContactAidedKalman,
+    KalmanParams,
+    pack,
+    unpack,
+)
+from romoco_drake.robots.model import RobotModel
+
+SIDES = ("left", "right")
+IMU_SIZE = 10
+# An IMU quaternion further than this from unit norm is malformed (e.g. an all-zero message).
+QUATERNION_NORM_TOLERANCE = 0.1
+
+
+class KalmanEstimator(LeafSystem):
+    """Floating-base state from a contact-aided Kalman filter (:mod:`.kalman`); swaps in for
+    :class:`GroundTruthEstimator`.
+
+    | port         | dir | size    | meaning                                                         |
+    |--------------|-----|---------|-----------------------------------------------------------------|
+    | joint_state  | in  | 2·nj    | encoders [q_j; v_j], ``robot.joint_names`` order                |
+    | imu          | in  | 10      | [qw qx qy qz] R_WB; gyro ω_B (rad/s); f_B = R_WBᵀ(a − g) (m/s²) |
+    | foot_contact | in  | 2       | [left, right], 1.0 in contact                                   |
+    | state        | out | nq + nv | controller-plant state [q; v]                                   |
+
+    ``state``: joints, base quaternion and ω_WB = R_WB ω_B straight from the current inputs;
+    p_WB and v_WB from the filter. A malformed orientation gives NaN base orientation and ω_WB
+    there, for downstream safe modes to see.
+
+    Rate: one update every ``period`` s; the filter (x, P), each foot's time in contact (for its
+    contact confidence), a started flag and the rejection count are discrete state. The foot
+    reference point is the mean of the foot's sole points.
+
+    Start: the first update with valid inputs starts the filter at rest from the measured
+    configuration, so it agrees with the first measurement (an initialization event would read
+    simulated sensors before their first sample). The base starts at ``initial_base_position``
+    or, by default, at x = y = 0 and z such that the lowest sole point is at z = 0 (as the
+    flat-ground measurement assumes). Later updates predict and correct. Until the first
+    update, the state is that start for the nominal pose ``robot.nominal``.
+
+    Malformed inputs (NaN/Inf anywhere, or a quaternion far from unit norm, e.g. an all-zero
+    message): the update is skipped, the estimate kept, and the skip counted
+    (:meth:`rejected_updates`).
+    """
+
+    def __init__(self, robot: RobotModel, period: float = 0.002, params: KalmanParams | None = None,
+                 initial_base_position: np.ndarray | None = None):
+        super().__init__()
+        self._robot = robot
+        self._period = period
+        self._filter = ContactAidedKalman(params or KalmanParams())
+        self._initial_base_position = (
+            None if initial_base_position is None else np.array(initial_base_position, dtype=float))
+        self._context = robot.plant.CreateDefaultContext()
+        nj = len(robot.joint_names)
+        self.joint_state_input = self.DeclareVectorInputPort("joint_state", 2 * nj)
+        self.imu_input = self.DeclareVectorInputPort("imu", IMU_SIZE)
+        self.foot_contact_input = self.DeclareVectorInputPort("foot_contact", 2)
+        q0 = robot.nominal.q
+        nominal_js = np.concatenate([q0[robot.joint_q_index], np.zeros(nj)])
+        nominal_imu = np.concatenate([q0[robot.base_q_start:robot.base_q_start + 4], np.zeros(6)])
+        self._kf_index = self.DeclareDiscreteState(pack(*self._start(nominal_js, nominal_imu)))
+        self._started_index = self.DeclareDiscreteState(1)
+        self._contact_time_index = self.DeclareDiscreteState(2)
+        self._rejected_index = self.DeclareDiscreteState(1)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+        self.state_output = self.DeclareVectorOutputPort("state", robot.nq + robot.nv, self._calc_state)
+
+    # ------------------------------------------------------------------ kinematics
+    def foot_kinematics(self, joint_state: np.ndarray, imu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Foot reference points relative to the base and their velocities relative to the base,
+        both in world axes (2×3 each, left then right): r = R_WB r_B(q_j) and
+        v_rel = R_WB (ω_B × r_B + J_B(q_j) q̇_j)."""
+        ctx = self._set_kinematics(joint_state, imu)
+        plant, world = self._robot.plant, self._robot.plant.world_frame()
+        v = plant.GetVelocities(ctx)
+        r, v_rel = np.zeros((2, 3)), np.zeros((2, 3))
+        for i, side in enumerate(SIDES):
+            frame, point = self._robot.foot_frames[side], self._robot.feet[side].points.mean(axis=1)
+            r[i] = plant.CalcPointsPositions(ctx, frame, point, world).ravel()
+            J = plant.CalcJacobianTranslationalVelocity(
+                ctx, JacobianWrtVariable.kV, frame, point, world, world)
+            v_rel[i] = J @ v
+        return r, v_rel
+
+    def _set_kinematics(self, joint_state: np.ndarray, imu: np.ndarray):
+        """The own plant context with the base at the world origin, at rest in translation."""
+        r, ctx = self._robot, self._context
+        nj = len(r.joint_names)
+        R = _rotation(imu[:4])
+        q, v = np.zeros(r.nq), np.zeros(r.nv)
+        q[r.joint_q_index] = joint_state[:nj]
+        q[r.base_q_start:r.base_q_start + 4] = imu[:4] / np.linalg.norm(imu[:4])
+        v[r.joint_v_index] = joint_state[nj:]
+        v[r.base_v_start:r.base_v_start + 3] = R @ imu[4:7]
+        r.plant.SetPositionsAndVelocities(ctx, np.concatenate([q, v]))
+        return ctx
+
+    def _start(self, joint_state: np.ndarray, imu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        r_world, _ = self.foot_kinematics(joint_state, imu)
+        p_WB = self._initial_base_position
+        if p_WB is None:
+            lowest = min(self._robot.sole_points_in_world(self._context, s)[2].min() for s in SIDES)
+            p_WB = np.array([0.0, 0.0, -lowest])
+        return self._filter.initial(p_WB, r_world)
+
+    # ---------------------------------------------------------------------- events
+    def _valid_inputs(self, context):
+        """(joint_state, imu, contact flags, R_WB), or None if any input is malformed."""
+        js = self.joint_state_input.Eval(context)
+        imu = self.imu_input.Eval(context)
+        contact = self.foot_contact_input.Eval(context)
+        R = _rotation(imu[:4])
+        if R is None or not all(np.all(np.isfinite(u)) for u in (js, imu, contact)):
+            return None
+        return js, imu, contact > 0.5, R
+
+    def _update(self, context, discrete_state) -> None:
+        inputs = self._valid_inputs(context)
+        if inputs is None:
+            count = context.get_discrete_state(self._rejected_index).value()[0]
+            discrete_state.get_mutable_vector(self._rejected_index).SetFromVector([count + 1.0])
+            return
+        js, imu, contact, R_WB = inputs
+        if not context.get_discrete_state(self._started_index).value()[0]:
+            discrete_state.get_mutable_vector(self._kf_index).SetFromVector(pack(*self._start(js, imu)))
+            discrete_state.get_mutable_vector(self._started_index).SetFromVector([1.0])
+            return
+        contact_time = np.where(contact, context.get_discrete_state(self._contact_time_index).value()
+                                + self._period, 0.0)
+        w = self._filter.contact_confidence(contact_time)
+        x, P = unpack(context.get_discrete_state(self._kf_index).value())
+        x, P = self._filter.predict(x, P, R_WB, imu[7:10], w, self._period)
+        r_world, v_rel = self.foot_kinematics(js, imu)
+        x, P = self._filter.correct(x, P, r_world, v_rel, w)
+        discrete_state.get_mutable_vector(self._kf_index).SetFromVector(pack(x, P))
+        discrete_state.get_mutable_vector(self._contact_time_index).SetFromVector(contact_time)
+
+    # --------------------------------------------------------------------- outputs
+    def filter_state(self, context) -> tuple[np.ndarray, np.ndarray]:
+        """The filter's (x, P) (see :mod:`.kalman` for the layout of x)."""
+        return unpack(context.get_discrete_state(self._kf_index).value())
+
+    def rejected_updates(self, context) -> int:
+        """How many updates were skipped for malformed inputs."""
+        return int(context.get_discrete_state(self._rejected_index).value()[0])
+
+    def _calc_state(self, context, output: BasicVector) -> None:
+        r = self._robot
+        nj = len(r.joint_names)
+        js = self.joint_state_input.Eval(context)
+        imu = self.imu_input.Eval(context)
+        kf = context.get_discrete_state(self._kf_index).value()
+        x = np.zeros(r.nq + r.nv)
+        x[r.joint_q_index] = js[:nj]
+        x[r.nq + r.joint_v_index] = js[nj:]
+        b, bv = r.base_q_start, r.nq + r.base_v_start
+        R = _rotation(imu[:4])
+        if R is None:
+            x[b:b + 4] = np.nan
+            x[bv:bv + 3] = np.nan
+        else:
+            x[b:b + 4] = imu[:4] / np.linalg.norm(imu[:4])
+            x[bv:bv + 3] = R @ imu[4:7]
+        x[b + 4:b + 7] = kf[POSITION]
+        x[bv + 3:bv + 6] = kf[VELOCITY]
+        output.SetFromVector(x)
+
+
+def _rotation(wxyz: np.ndarray) -> np.ndarray | None:
+    """R_WB from an IMU quaternion [w x y z], or None if it is not finite or far from unit norm."""
+    norm = np.linalg.norm(wxyz)
+    if not np.isfinite(norm) or abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
+        return None
+    return RotationMatrix(Quaternion(np.asarray(wxyz) / norm)).matrix()
+

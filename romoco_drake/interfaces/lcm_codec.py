@@ -1,0 +1,307 @@
+"""LCM messages to and from numpy, with every received message checked before anyone uses it.
+
+| channel               | message (romoco_lcm)     | value           | sender                  |
+|-----------------------|--------------------------|-----------------|-------------------------|
+| ROMOCO_PROPRIOCEPTION | biped_proprioception_t   | Proprioception  | robot (or its sim)      |
+| ROMOCO_MOTOR_COMMAND  | biped_motor_command_t    | MotorCommand    | controller              |
+| ROMOCO_BASE_STATE     | base_state_t             | BaseState       | motion capture / sim    |
+| ROMOCO_ESTOP          | estop_t                  | Estop           | operator or watchdog    |
+
+``decode_*`` is the trust boundary: it raises :class:`MessageRejected` (one line naming the
+message type and the offending field) for bytes that are not the message, sizes other than the
+robot's, NaN/Inf, non-unit quaternions, negative gains and negative times. ``encode_*`` checks
+only shapes (the dataclasses do that on construction); values are the receiver's to check.
+
+In a diagram, LCM subscribers carry the raw bytes (:class:`RawBytesSerializer`) so a malformed
+message never raises inside LCM handling; the translator systems downstream call ``decode_*``.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from io import BytesIO
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.lcm import SerializerInterface
+
+from romoco_drake.errors import RomocoError
+from romoco_drake.interfaces.lcmtypes.romoco_lcm import (
+    base_state_t,
+    biped_motor_command_t,
+    biped_proprioception_t,
+    estop_t,
+)
+from romoco_drake.values import SharedValue
+
+PROPRIOCEPTION_CHANNEL = "ROMOCO_PROPRIOCEPTION"
+MOTOR_COMMAND_CHANNEL = "ROMOCO_MOTOR_COMMAND"
+BASE_STATE_CHANNEL = "ROMOCO_BASE_STATE"
+ESTOP_CHANNEL = "ROMOCO_ESTOP"
+
+# A received quaternion is renormalised if its norm is within this of 1, rejected otherwise.
+QUATERNION_NORM_TOLERANCE = 1e-3
+
+
+class MessageRejected(RomocoError):
+    """A received LCM message failed decoding or validation; ``reason`` says why in one line."""
+
+    def __init__(self, message_type: str, reason: str):
+        self.message_type = message_type
+        self.reason = reason
+        super().__init__(f"{message_type} rejected: {reason}")
+
+
+def _frozen_vector(name: str, value, size: int | None = None) -> np.ndarray:
+    """A read-only 1-D float copy of ``value``; ``size`` (if given) is its required length."""
+    array = np.array(value, dtype=float)
+    if array.ndim != 1 or (size is not None and array.size != size):
+        expected = f"({size},)" if size is not None else "1-D"
+        raise ValueError(f"{name} must have shape {expected}, got {array.shape}")
+    array.flags.writeable = False
+    return array
+
+
+def _same_length(owner: str, names: tuple[str, ...], arrays: tuple[np.ndarray, ...]) -> None:
+    sizes = {name: array.size for name, array in zip(names, arrays, strict=True)}
+    if len(set(sizes.values())) > 1:
+        raise ValueError(f"{owner}: {', '.join(names)} must have one length, got {sizes}")
+
+
+@dataclass(frozen=True, eq=False)
+class Proprioception(SharedValue):
+    """Joint state, IMU and foot contacts of one robot tick (joints in RobotModel.joint_names order).
+
+    ``imu`` is [q_WB (w x y z), ω_B (rad/s, base frame), specific force (m/s², base frame)];
+    ``foot_contact`` is [left, right] as 0.0/1.0.
+    """
+
+    utime: int
+    q: np.ndarray
+    v: np.ndarray
+    tau: np.ndarray
+    imu: np.ndarray
+    foot_contact: np.ndarray
+
+    def __post_init__(self):
+        for name, size in (("q", None), ("v", None), ("tau", None), ("imu", 10), ("foot_contact", 2)):
+            object.__setattr__(self, name, _frozen_vector(name, getattr(self, name), size))
+        _same_length("Proprioception", ("q", "v", "tau"), (self.q, self.v, self.tau))
+
+
+@dataclass(frozen=True, eq=False)
+class MotorCommand(SharedValue):
+    """Per-actuator PD command τ = τ_ff + kp (q_d − q) + kd (v_d − v), RobotModel.actuator_names order."""
+
+    utime: int
+    q_d: np.ndarray
+    v_d: np.ndarray
+    tau_ff: np.ndarray
+    kp: np.ndarray
+    kd: np.ndarray
+
+    def __post_init__(self):
+        names = ("q_d", "v_d", "tau_ff", "kp", "kd")
+        for name in names:
+            object.__setattr__(self, name, _frozen_vector(name, getattr(self, name)))
+        _same_length("MotorCommand", names, tuple(getattr(self, name) for name in names))
+
+
+@dataclass(frozen=True, eq=False)
+class BaseState(SharedValue):
+    """Floating-base pose and velocity: q_WB (w x y z), p_WB (m), ω_WB and v_WB in world (rad/s, m/s)."""
+
+    utime: int
+    quaternion: np.ndarray
+    position: np.ndarray
+    angular_velocity: np.ndarray
+    linear_velocity: np.ndarray
+
+    def __post_init__(self):
+        sizes = (("quaternion", 4), ("position", 3), ("angular_velocity", 3), ("linear_velocity", 3))
+        for name, size in sizes:
+            object.__setattr__(self, name, _frozen_vector(name, getattr(self, name), size))
+
+
+@dataclass(frozen=True)
+class Estop(SharedValue):
+    """Emergency-stop state and who set it."""
+
+    utime: int
+    engaged: bool
+    source: str = ""
+
+
+def encode_proprioception(msg: Proprioception) -> bytes:
+    lcm = biped_proprioception_t()
+    lcm.utime = int(msg.utime)
+    lcm.num_joints = msg.q.size
+    lcm.q, lcm.v, lcm.tau = msg.q.tolist(), msg.v.tolist(), msg.tau.tolist()
+    lcm.imu_quaternion = msg.imu[:4].tolist()
+    lcm.gyro = msg.imu[4:7].tolist()
+    lcm.accel = msg.imu[7:].tolist()
+    lcm.foot_contact = [bool(c) for c in msg.foot_contact]
+    return lcm.encode()
+
+
+def encode_motor_command(msg: MotorCommand) -> bytes:
+    lcm = biped_motor_command_t()
+    lcm.utime = int(msg.utime)
+    lcm.num_actuators = msg.q_d.size
+    lcm.q_d, lcm.v_d, lcm.tau_ff = msg.q_d.tolist(), msg.v_d.tolist(), msg.tau_ff.tolist()
+    lcm.kp, lcm.kd = msg.kp.tolist(), msg.kd.tolist()
+    return lcm.encode()
+
+
+def encode_base_state(msg: BaseState) -> bytes:
+    lcm = base_state_t()
+    lcm.utime = int(msg.utime)
+    lcm.quaternion = msg.quaternion.tolist()
+    lcm.position = msg.position.tolist()
+    lcm.angular_velocity = msg.angular_velocity.tolist()
+    lcm.linear_velocity = msg.linear_velocity.tolist()
+    return lcm.encode()
+
+
+def encode_estop(msg: Estop) -> bytes:
+    lcm = estop_t()
+    lcm.utime = int(msg.utime)
+    lcm.engaged = bool(msg.engaged)
+    lcm.source = msg.source
+    return lcm.encode()
+
+
+def _unpack(lcm_type, data: bytes):
+    """The generated message decoded from exactly ``data``, or MessageRejected."""
+    name = lcm_type.__name__
+    buffer = BytesIO(data)
+    try:
+        message = lcm_type.decode(buffer)
+    except (ValueError, struct.error) as error:
+        reason = "wrong fingerprint (not this message type)" if str(error) == "Decode error" else error
+        raise MessageRejected(name, f"{len(data)} bytes do not decode: {reason}") from None
+    trailing = len(data) - buffer.tell()
+    if trailing:
+        raise MessageRejected(name, f"{trailing} unexpected bytes after the message")
+    return message
+
+
+def _check_utime(name: str, utime: int) -> int:
+    if utime < 0:
+        raise MessageRejected(name, f"utime {utime} is negative")
+    return utime
+
+
+def _check_count(name: str, field: str, count: int, expected: int) -> None:
+    if count != expected:
+        raise MessageRejected(name, f"{field} is {count}, expected {expected}")
+
+
+def _finite(name: str, field: str, values) -> np.ndarray:
+    array = np.asarray(values, dtype=float)
+    bad = np.flatnonzero(~np.isfinite(array))
+    if bad.size:
+        raise MessageRejected(name, f"{field}[{bad[0]}] is {array[bad[0]]}")
+    return array
+
+
+def _unit_quaternion(name: str, field: str, values) -> np.ndarray:
+    quaternion = _finite(name, field, values)
+    norm = np.linalg.norm(quaternion)
+    if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
+        raise MessageRejected(name, f"{field} norm {norm:.6g} is not 1 (± {QUATERNION_NORM_TOLERANCE})")
+    return quaternion / norm
+
+
+def _nonnegative(name: str, field: str, values) -> np.ndarray:
+    array = _finite(name, field, values)
+    bad = np.flatnonzero(array < 0)
+    if bad.size:
+        raise MessageRejected(name, f"{field}[{bad[0]}] = {array[bad[0]]:.6g} is negative")
+    return array
+
+
+def decode_proprioception(data: bytes, num_joints: int) -> Proprioception:
+    """The checked measurement in ``data``; MessageRejected unless it has ``num_joints`` joints."""
+    name = "biped_proprioception_t"
+    lcm = _unpack(biped_proprioception_t, data)
+    utime = _check_utime(name, lcm.utime)
+    _check_count(name, "num_joints", lcm.num_joints, num_joints)
+    imu = np.concatenate([
+        _unit_quaternion(name, "imu_quaternion", lcm.imu_quaternion),
+        _finite(name, "gyro", lcm.gyro),
+        _finite(name, "accel", lcm.accel),
+    ])
+    return Proprioception(
+        utime=utime,
+        q=_finite(name, "q", lcm.q),
+        v=_finite(name, "v", lcm.v),
+        tau=_finite(name, "tau", lcm.tau),
+        imu=imu,
+        foot_contact=np.array(lcm.foot_contact, dtype=float),
+    )
+
+
+def decode_motor_command(data: bytes, num_actuators: int) -> MotorCommand:
+    """The checked command in ``data``; MessageRejected unless it has ``num_actuators`` actuators."""
+    name = "biped_motor_command_t"
+    lcm = _unpack(biped_motor_command_t, data)
+    utime = _check_utime(name, lcm.utime)
+    _check_count(name, "num_actuators", lcm.num_actuators, num_actuators)
+    return MotorCommand(
+        utime=utime,
+        q_d=_finite(name, "q_d", lcm.q_d),
+        v_d=_finite(name, "v_d", lcm.v_d),
+        tau_ff=_finite(name, "tau_ff", lcm.tau_ff),
+        kp=_nonnegative(name, "kp", lcm.kp),
+        kd=_nonnegative(name, "kd", lcm.kd),
+    )
+
+
+def decode_base_state(data: bytes) -> BaseState:
+    """The checked base state in ``data`` (all sizes are fixed by the message)."""
+    name = "base_state_t"
+    lcm = _unpack(base_state_t, data)
+    return BaseState(
+        utime=_check_utime(name, lcm.utime),
+        quaternion=_unit_quaternion(name, "quaternion", lcm.quaternion),
+        position=_finite(name, "position", lcm.position),
+        angular_velocity=_finite(name, "angular_velocity", lcm.angular_velocity),
+        linear_velocity=_finite(name, "linear_velocity", lcm.linear_velocity),
+    )
+
+
+def decode_estop(data: bytes) -> Estop:
+    """The checked emergency-stop state in ``data``."""
+    lcm = _unpack(estop_t, data)
+    return Estop(utime=_check_utime("estop_t", lcm.utime), engaged=bool(lcm.engaged), source=lcm.source)
+
+
+class RawBytesSerializer(SerializerInterface):
+    """Serializer whose value is the message's raw ``bytes`` (``b""`` until one arrives).
+
+    ``LcmSubscriberSystem(channel, RawBytesSerializer(), lcm)`` outputs whatever arrived on the
+    channel without decoding it, so a malformed message cannot raise inside LCM handling; the
+    downstream translator decodes with ``decode_*`` and counts rejections. For publishing,
+    ``LcmPublisherSystem(channel, RawBytesSerializer(), lcm, publish_period)`` takes ``bytes``
+    (e.g. from ``encode_motor_command``) on its abstract input port and sends them unchanged.
+    """
+
+    def __init__(self):
+        SerializerInterface.__init__(self)
+
+    def __repr__(self) -> str:
+        return "RawBytesSerializer()"
+
+    def CreateDefaultValue(self) -> AbstractValue:
+        return AbstractValue.Make(b"")
+
+    def Deserialize(self, message_bytes: bytes, abstract_value: AbstractValue) -> None:
+        abstract_value.set_value(bytes(message_bytes))
+
+    def Serialize(self, abstract_value: AbstractValue) -> bytes:
+        value = abstract_value.get_value()
+        if not isinstance(value, bytes):
+            raise TypeError(f"RawBytesSerializer publishes bytes, got {type(value).__name__}")
+        return value

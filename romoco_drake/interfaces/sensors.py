@@ -1,0 +1,219 @@
+"""Simulated proprioception: joint encoders, a base IMU and foot contact switches.
+
+The simulation station measures the plant the way the robot's own sensors do, in the layout
+the LCM hardware station and the Kalman estimator use: ``joint_state`` [q_j; v_j],
+``imu`` [q_WB (w x y z); ω_B; f_B] and ``foot_contact`` [left, right]. Each measurement is
+the exact plant quantity plus white noise (fresh every sample) and, for the IMU, a bias that
+is constant for the run.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.common.eigen_geometry import Quaternion
+from pydrake.math import RotationMatrix
+from pydrake.multibody.plant import ContactModel, ContactResults, MultibodyPlant
+from pydrake.multibody.tree import BodyIndex
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
+
+from romoco_drake.errors import RomocoError
+from romoco_drake.robots.model import RobotModel
+
+
+@dataclass
+class SensorConfig:
+    """Sampling rate and noise of the simulated sensors; all noise zero gives exact measurements.
+
+    IMU defaults are the Xsens MTi-1 series (industrial MEMS) datasheet figures: gyroscope noise
+    density 0.007 °/s/√Hz and bias instability 10 °/h, accelerometer 120 µg/√Hz and 0.03 mg.
+    White noise per sample is density·√(rate/2), here at the default 1 kHz. Biases are drawn at
+    the bias instability, i.e. what remains after the robot's start-up calibration. Encoder
+    defaults are a 17-bit absolute joint encoder (the middle of the usual 14–19 bits):
+    quantisation std 2π/2¹⁷/√12, and the velocity std of differencing it at 1 kHz (√2·σ_q·1000).
+    The orientation std is an assumption, 0.5°, a typical static roll/pitch accuracy of MEMS
+    AHRS units; it is applied as white noise, rougher than a real filter's slowly varying error.
+    """
+
+    rate_hz: float = 1000.0  # sampling rate (Hz); every output is held between samples
+    gyro_noise_std: float = 2.7e-3  # rad/s per sample (0.007 °/s/√Hz · √500 Hz)
+    gyro_bias_std: float = 4.8e-5  # rad/s (10 °/h); draws the bias when gyro_bias is not given
+    gyro_bias: list[float] | None = None  # rad/s in the base frame, 3 values
+    accel_noise_std: float = 2.6e-2  # m/s² per sample (120 µg/√Hz · √500 Hz)
+    accel_bias_std: float = 2.9e-4  # m/s² (0.03 mg); draws the bias when accel_bias is not given
+    accel_bias: list[float] | None = None  # m/s² in the base frame, 3 values
+    orientation_noise_std: float = 8.7e-3  # rad per axis, small rotation in the base frame (0.5°)
+    encoder_noise_std: float = 1.4e-5  # rad per joint (17-bit quantisation)
+    joint_velocity_noise_std: float = 2.0e-2  # rad/s per joint
+    contact_threshold_fraction: float = 0.02  # foot in contact above this fraction of the weight
+    seed: int = 0  # noise and drawn biases are a function of this seed alone
+
+    def __post_init__(self):
+        stds = ("gyro_noise_std", "gyro_bias_std", "accel_noise_std", "accel_bias_std",
+                "orientation_noise_std", "encoder_noise_std", "joint_velocity_noise_std")
+        for name in stds:
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+        for name in ("gyro_bias", "accel_bias"):
+            value = getattr(self, name)
+            if value is not None and len(value) != 3:
+                raise ValueError(f"{name} must have 3 values, got {len(value)}")
+        if self.rate_hz <= 0:
+            raise ValueError(f"rate_hz must be positive, got {self.rate_hz}")
+        if not 0 < self.contact_threshold_fraction < 1:
+            raise ValueError(f"contact_threshold_fraction must be in (0, 1), got "
+                             f"{self.contact_threshold_fraction}")
+        if self.seed < 0:
+            raise ValueError(f"seed must be >= 0, got {self.seed}")
+
+
+def specific_force(R_WB: np.ndarray, a_WBo_W: np.ndarray, g_W: np.ndarray) -> np.ndarray:
+    """Accelerometer reading f_B = R_WBᵀ (a_WBo − g_W): +g up when at rest, 0 in free fall."""
+    return R_WB.T @ (a_WBo_W - g_W)
+
+
+def perturb_quaternion(q_WB: np.ndarray, theta_B: np.ndarray) -> np.ndarray:
+    """q_WB ⊗ exp(θ_B/2): ``q_WB`` (w x y z) rotated by the small rotation vector θ_B in B."""
+    angle = np.linalg.norm(theta_B)
+    if angle == 0.0:
+        return q_WB.copy()
+    dq = np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * theta_B / angle])
+    return Quaternion(wxyz=q_WB).multiply(Quaternion(wxyz=dq)).wxyz()
+
+
+def foot_normal_forces(contacts: ContactResults, foot_bodies: Sequence[BodyIndex]) -> np.ndarray:
+    """Total normal force (N, ≥ 0 when pressing) of the point contacts on each of ``foot_bodies``.
+
+    A point pair's force on body B is f_Bc_W and its normal n̂_BA_W points from B into A, so
+    −f_Bc_W·n̂_BA_W is the pair's compressive normal force, the same for either body.
+    """
+    forces = np.zeros(len(foot_bodies))
+    for i in range(contacts.num_point_pair_contacts()):
+        info = contacts.point_pair_contact_info(i)
+        normal_force = -info.contact_force() @ info.point_pair().nhat_BA_W
+        for k, body in enumerate(foot_bodies):
+            if body in (info.bodyA_index(), info.bodyB_index()):
+                forces[k] += normal_force
+    return forces
+
+
+class SimulatedSensors(LeafSystem):
+    """Joint encoders, a base IMU and foot contact switches on the simulation plant.
+
+    | port                       | dir | size       | meaning                                       |
+    |----------------------------|-----|------------|-----------------------------------------------|
+    | plant_state                | in  | nx         | the plant's state [q; v]                      |
+    | body_spatial_accelerations | in  | abstract   | the plant's A_WB of every body                |
+    | contact_results            | in  | abstract   | the plant's ContactResults (point contact)    |
+    | joint_state                | out | 2·nj       | [q_j (rad); v_j (rad/s)], joint_names order   |
+    | imu                        | out | 10         | q_WB (w x y z); ω_B (rad/s); f_B (m/s²)       |
+    | foot_contact               | out | 2          | [left, right], 1.0 above the force threshold  |
+
+    The IMU sits at the base frame origin Bo with its axes along B: ω_B = R_WBᵀ ω_WB and
+    f_B = R_WBᵀ (a_WBo − g_W) with the plant's gravity g_W. A foot is in contact when the normal
+    force on its body exceeds ``contact_threshold_fraction`` of the robot's weight.
+
+    Outputs are discrete state, sampled every 1/``rate_hz`` s from t = 0 and once at
+    initialisation, so they have no direct feedthrough. The discrete (SAP) plant reports the
+    accelerations (Δv/h) and contact results of its most recent step; the initialisation sample
+    comes before any step, so it reads zero acceleration (f_B = −R_WBᵀ g_W) and no contact.
+
+    Noise: sample k draws one standard-normal vector from ``default_rng([seed, 0, k])`` with the
+    sample counter k kept in discrete state, so a sample depends only on (seed, k) and a cloned or
+    reset context replays the same measurements (resume a cloned context with initialisation
+    events suppressed, or the extra initialisation sample shifts k); a Drake RandomSource would
+    keep its generator in the context too, but needs one source and gain per channel. IMU biases come from
+    ``default_rng([seed, 1])`` when not given and are constant for the run (``gyro_bias``,
+    ``accel_bias``).
+    """
+
+    def __init__(self, robot: RobotModel, plant: MultibodyPlant, config: SensorConfig | None = None):
+        super().__init__()
+        config = config or SensorConfig()
+        if plant.get_contact_model() != ContactModel.kPoint:
+            raise RomocoError("simulated foot contact sensors need the point contact model, got "
+                              f"{plant.get_contact_model()}")
+        instance = robot.model_instance
+        nq = plant.num_positions()
+        joints = [plant.GetJointByName(name, instance) for name in robot.joint_names]
+        nj = len(joints)
+        self._joint_index = np.array([j.position_start() for j in joints]
+                                     + [nq + j.velocity_start() for j in joints], dtype=int)
+        base = plant.GetBodyByName(robot.config.base_body, instance)
+        self._base = base.index()
+        self._base_q = base.floating_positions_start()
+        self._base_v = nq + base.floating_velocities_start_in_v()
+        self._feet = [plant.GetBodyByName(robot.feet[s].body_name, instance).index()
+                      for s in ("left", "right")]
+        self._g_W = plant.gravity_field().gravity_vector()
+        self._contact_threshold = (
+            config.contact_threshold_fraction * robot.total_mass * np.linalg.norm(self._g_W))
+
+        self._seed = config.seed
+        bias_rng = np.random.default_rng([config.seed, 1])
+        self.gyro_bias = self._bias(config.gyro_bias, config.gyro_bias_std, bias_rng)
+        self.accel_bias = self._bias(config.accel_bias, config.accel_bias_std, bias_rng)
+        # Noise vector layout: q_j, v_j, orientation θ_B, gyro, accel.
+        self._noise_std = np.concatenate([
+            np.full(nj, config.encoder_noise_std), np.full(nj, config.joint_velocity_noise_std),
+            np.full(3, config.orientation_noise_std), np.full(3, config.gyro_noise_std),
+            np.full(3, config.accel_noise_std)])
+
+        self.plant_state_input = self.DeclareVectorInputPort("plant_state", plant.num_multibody_states())
+        self.accelerations_input = self.DeclareAbstractInputPort(
+            "body_spatial_accelerations", plant.get_body_spatial_accelerations_output_port().Allocate())
+        self.contact_results_input = self.DeclareAbstractInputPort(
+            "contact_results", plant.get_contact_results_output_port().Allocate())
+
+        self._counter = self.DeclareDiscreteState(1)
+        self._joint_state = self.DeclareDiscreteState(2 * nj)
+        self._imu = self.DeclareDiscreteState(np.concatenate([[1.0, 0, 0, 0, 0, 0, 0], -self._g_W]))
+        self._foot_contact = self.DeclareDiscreteState(2)
+        self.joint_state_output = self.DeclareStateOutputPort("joint_state", self._joint_state)
+        self.imu_output = self.DeclareStateOutputPort("imu", self._imu)
+        self.foot_contact_output = self.DeclareStateOutputPort("foot_contact", self._foot_contact)
+        self.DeclareInitializationDiscreteUpdateEvent(self._sample)
+        self.DeclarePeriodicDiscreteUpdateEvent(1.0 / config.rate_hz, 0.0, self._sample)
+
+    @staticmethod
+    def _bias(given: list[float] | None, std: float, rng: np.random.Generator) -> np.ndarray:
+        drawn = std * rng.standard_normal(3)  # drawn even when given: the other bias keeps its draw
+        bias = drawn if given is None else np.array(given, dtype=float)
+        bias.flags.writeable = False
+        return bias
+
+    def _sample(self, context, discrete_state) -> None:
+        k = context.get_discrete_state(self._counter).GetAtIndex(0)
+        rng = np.random.default_rng([self._seed, 0, int(k)])
+        noise = self._noise_std * rng.standard_normal(self._noise_std.size)
+        n_joint = self._joint_index.size
+        theta, gyro_noise, accel_noise = noise[n_joint:].reshape(3, 3)
+
+        x = self.plant_state_input.Eval(context)
+        q_WB = x[self._base_q:self._base_q + 4] / np.linalg.norm(x[self._base_q:self._base_q + 4])
+        R_WB = RotationMatrix(Quaternion(wxyz=q_WB)).matrix()
+        w_WB_W = x[self._base_v:self._base_v + 3]
+        a_WBo_W = self.accelerations_input.Eval(context)[self._base].translational()
+        forces = foot_normal_forces(self.contact_results_input.Eval(context), self._feet)
+
+        discrete_state.set_value(self._counter, [k + 1])
+        discrete_state.set_value(self._joint_state, x[self._joint_index] + noise[:n_joint])
+        discrete_state.set_value(self._imu, np.concatenate([
+            perturb_quaternion(q_WB, theta),
+            R_WB.T @ w_WB_W + self.gyro_bias + gyro_noise,
+            specific_force(R_WB, a_WBo_W, self._g_W) + self.accel_bias + accel_noise,
+        ]))
+        discrete_state.set_value(self._foot_contact, (forces > self._contact_threshold).astype(float))
+
+
+def add_sensors(
+    builder: DiagramBuilder, plant: MultibodyPlant, robot: RobotModel, config: SensorConfig | None = None
+) -> SimulatedSensors:
+    """Adds :class:`SimulatedSensors` named "sensors" to ``builder`` and connects it to ``plant``."""
+    sensors = builder.AddNamedSystem("sensors", SimulatedSensors(robot, plant, config))
+    builder.Connect(plant.get_state_output_port(), sensors.plant_state_input)
+    builder.Connect(plant.get_body_spatial_accelerations_output_port(), sensors.accelerations_input)
+    builder.Connect(plant.get_contact_results_output_port(), sensors.contact_results_input)
+    return sensors

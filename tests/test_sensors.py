@@ -1,0 +1,202 @@
+"""Simulated sensors on the G1 sim plant: exact values, frames, noise statistics, determinism."""
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from pydrake.common.eigen_geometry import Quaternion
+from pydrake.math import RollPitchYaw, RotationMatrix
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.systems.analysis import InitializeParams, Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource
+
+from romoco_drake.config import load_typed
+from romoco_drake.control.gravity import contact_gravity_compensation
+from romoco_drake.errors import ConfigError
+from romoco_drake.interfaces.sensors import SensorConfig, SimulatedSensors, add_sensors, foot_normal_forces
+from romoco_drake.robots.model import RobotModel, load_robot
+
+TIME_STEP = 0.002
+EXACT = SensorConfig(gyro_noise_std=0.0, gyro_bias_std=0.0, accel_noise_std=0.0, accel_bias_std=0.0,
+                     orientation_noise_std=0.0, encoder_noise_std=0.0, joint_velocity_noise_std=0.0)
+NOISY = SensorConfig(gyro_noise_std=0.01, gyro_bias=[0.02, -0.03, 0.01], accel_noise_std=0.05,
+                     accel_bias=[-0.1, 0.05, 0.2], orientation_noise_std=0.01, encoder_noise_std=1e-3,
+                     joint_velocity_noise_std=0.02, seed=7)
+G_UP = np.array([0.0, 0.0, 9.81])
+
+
+@dataclass
+class Run:
+    robot: RobotModel
+    plant: MultibodyPlant
+    sensors: SimulatedSensors
+    simulator: Simulator
+    period: float
+
+    @property
+    def plant_context(self):
+        return self.plant.GetMyContextFromRoot(self.simulator.get_context())
+
+    def outputs(self) -> dict[str, np.ndarray]:
+        context = self.sensors.GetMyContextFromRoot(self.simulator.get_context())
+        s = self.sensors
+        return {name: port.Eval(context).copy() for name, port in (
+            ("joint_state", s.joint_state_output), ("imu", s.imu_output),
+            ("foot_contact", s.foot_contact_output))}
+
+    def samples(self, n: int) -> dict[str, np.ndarray]:
+        """The next ``n`` samples, each read half a period after it was taken."""
+        k0 = round(self.simulator.get_context().get_time() / self.period)
+        rows = []
+        for k in range(k0, k0 + n):
+            self.simulator.AdvanceTo((k + 0.5) * self.period)
+            rows.append(self.outputs())
+        return {name: np.array([r[name] for r in rows]) for name in rows[0]}
+
+    def base_truth(self) -> tuple[np.ndarray, np.ndarray]:
+        """R_WB and ω_WB (world) of the plant's base now."""
+        base = self.plant.GetBodyByName(self.robot.config.base_body)
+        R = self.plant.EvalBodyPoseInWorld(self.plant_context, base).rotation().matrix()
+        w = self.plant.EvalBodySpatialVelocityInWorld(self.plant_context, base).rotational()
+        return R, w
+
+
+def simulate(config: SensorConfig, standing: bool, lift: float = 0.0,
+             rotation: RotationMatrix | None = None, w_WB: np.ndarray | None = None) -> Run:
+    """G1 standing under PD about the nominal pose + gravity compensation, or unactuated and ``lift``
+    metres above its standing height, optionally with base ``rotation`` and angular velocity ``w_WB``."""
+    robot = load_robot("g1")
+    builder = DiagramBuilder()
+    plant, _ = robot.add_to_builder(builder, TIME_STEP, motor_pd=standing)
+    u = np.zeros(robot.nu)
+    if standing:
+        controller_context = robot.plant.CreateDefaultContext()
+        robot.plant.SetPositions(controller_context, robot.nominal.q)
+        u = contact_gravity_compensation(robot, controller_context)
+        x_d = np.concatenate([robot.nominal.q[robot.actuated_q_index], np.zeros(robot.nu)])
+        builder.Connect(builder.AddSystem(ConstantVectorSource(x_d)).get_output_port(),
+                        plant.get_desired_state_input_port(robot.model_instance))
+    builder.Connect(builder.AddSystem(ConstantVectorSource(u)).get_output_port(),
+                    plant.get_actuation_input_port())
+    sensors = add_sensors(builder, plant, robot, config)
+    simulator = Simulator(builder.Build())
+    plant_context = plant.GetMyMutableContextFromRoot(simulator.get_mutable_context())
+    q = robot.nominal.q.copy()
+    q[robot.base_q_start + 6] += lift
+    if rotation is not None:
+        q[robot.base_q_start:robot.base_q_start + 4] = rotation.ToQuaternion().wxyz()
+    plant.SetPositions(plant_context, q)
+    if w_WB is not None:
+        v = np.zeros(robot.nv)
+        v[robot.base_v_start:robot.base_v_start + 3] = w_WB
+        plant.SetVelocities(plant_context, v)
+    return Run(robot, plant, sensors, simulator, 1.0 / config.rate_hz)
+
+
+def rotation_vector_between(q_WA: np.ndarray, q_WB: np.ndarray) -> np.ndarray:
+    """θ_A with R_WB = R_WA exp(θ_A) for quaternions (w x y z)."""
+    R_AB = RotationMatrix(Quaternion(wxyz=q_WA)).InvertAndCompose(RotationMatrix(Quaternion(wxyz=q_WB)))
+    angle_axis = R_AB.ToAngleAxis()
+    return angle_axis.angle() * angle_axis.axis()
+
+
+def test_exact_measurements_while_standing():
+    run = simulate(EXACT, standing=True)
+    # The last sample (t = 0.300) came after the plant's last step, so it measures the state now.
+    run.simulator.AdvanceTo(0.3005)
+    out = run.outputs()
+    robot, x = run.robot, run.plant.GetPositionsAndVelocities(run.plant_context)
+    joints = np.r_[robot.joint_q_index, robot.nq + robot.joint_v_index]
+    np.testing.assert_array_equal(out["joint_state"], x[joints])
+    R_WB, w_WB = run.base_truth()
+    imu = out["imu"]
+    np.testing.assert_allclose(RotationMatrix(Quaternion(wxyz=imu[:4])).matrix(), R_WB, atol=1e-12)
+    np.testing.assert_allclose(imu[4:7], R_WB.T @ w_WB, atol=1e-12)
+    assert np.linalg.norm(imu[4:7]) < 0.02
+    np.testing.assert_allclose(imu[7:], R_WB.T @ G_UP, atol=0.1)
+    np.testing.assert_array_equal(out["foot_contact"], [1.0, 1.0])
+    contacts = run.plant.get_contact_results_output_port().Eval(run.plant_context)
+    feet = [run.plant.GetBodyByName(robot.feet[side].body_name).index() for side in ("left", "right")]
+    forces = foot_normal_forces(contacts, feet)
+    assert forces.sum() == pytest.approx(robot.total_mass * 9.81, rel=0.02)
+
+
+def test_free_fall_reads_no_contact_and_no_specific_force():
+    run = simulate(EXACT, standing=False, lift=0.3)
+    run.simulator.Initialize()
+    # The initialisation sample precedes the plant's first step: it reads the robot as at rest.
+    R_WB, _ = run.base_truth()
+    np.testing.assert_allclose(run.outputs()["imu"][7:], R_WB.T @ G_UP, atol=1e-9)
+    samples = run.samples(50)
+    np.testing.assert_array_equal(samples["foot_contact"], 0.0)
+    assert np.abs(samples["imu"][:, 7:]).max() < 1e-6
+    assert np.abs(samples["imu"][:, 4:7]).max() < 1e-9
+
+
+def test_noise_statistics_match_the_config():
+    n = 500
+    exact = simulate(EXACT, standing=False, lift=1.5).samples(n)
+    noisy = simulate(NOISY, standing=False, lift=1.5).samples(n)
+    imu_error = noisy["imu"] - exact["imu"]
+    gyro, accel = imu_error[:, 4:7], imu_error[:, 7:]
+    theta = np.array([rotation_vector_between(e[:4], m[:4])
+                      for e, m in zip(exact["imu"], noisy["imu"], strict=True)])
+    nj = len(load_robot("g1").joint_names)
+    joint_error = noisy["joint_state"] - exact["joint_state"]
+    cases = [(gyro, NOISY.gyro_noise_std, NOISY.gyro_bias), (accel, NOISY.accel_noise_std, NOISY.accel_bias),
+             (theta, NOISY.orientation_noise_std, np.zeros(3)),
+             (joint_error[:, :nj].reshape(-1, 1), NOISY.encoder_noise_std, [0.0]),
+             (joint_error[:, nj:].reshape(-1, 1), NOISY.joint_velocity_noise_std, [0.0])]
+    for error, std, bias in cases:
+        np.testing.assert_allclose(error.std(axis=0), std, rtol=0.2)
+        np.testing.assert_allclose(error.mean(axis=0), bias, atol=4 * std / np.sqrt(len(error)))
+
+
+def test_same_seed_same_samples_and_contexts_replay():
+    first = simulate(SensorConfig(seed=3), standing=False, lift=0.3)
+    a = first.samples(10)
+    clone = first.simulator.get_context().Clone()
+    a_next = first.samples(10)
+    again = simulate(SensorConfig(seed=3), standing=False, lift=0.3)
+    b = again.samples(20)
+    for name in a:
+        np.testing.assert_array_equal(np.concatenate([a[name], a_next[name]]), b[name])
+    np.testing.assert_array_equal(first.sensors.gyro_bias, again.sensors.gyro_bias)
+
+    replay = Simulator(first.simulator.get_system(), clone)
+    replay.Initialize(InitializeParams(suppress_initialization_events=True))
+    replayed = Run(first.robot, first.plant, first.sensors, replay, first.period).samples(10)
+    for name in a:
+        np.testing.assert_array_equal(replayed[name], a_next[name])
+
+    other = simulate(SensorConfig(seed=4), standing=False, lift=0.3)
+    c = other.samples(20)
+    assert not np.array_equal(c["imu"], b["imu"])
+    assert not np.array_equal(c["joint_state"], b["joint_state"])
+    assert not np.array_equal(other.sensors.accel_bias, again.sensors.accel_bias)
+
+
+def test_gyro_is_body_rate_in_the_base_frame():
+    rotation = RotationMatrix(RollPitchYaw(0.3, -0.2, 0.8))
+    w_WB = np.array([0.5, -1.0, 2.0])
+    run = simulate(EXACT, standing=False, lift=0.5, rotation=rotation, w_WB=w_WB)
+    run.simulator.Initialize()
+    gyro = run.outputs()["imu"][4:7]
+    np.testing.assert_allclose(gyro, rotation.matrix().T @ w_WB, atol=1e-12)
+    assert np.linalg.norm(gyro - w_WB) > 0.5  # the frame matters
+    # Later samples follow the (now changing) body rate.
+    run.samples(5)
+    R_WB, w = run.base_truth()
+    np.testing.assert_allclose(run.outputs()["imu"][4:7], R_WB.T @ w, atol=1e-12)
+
+
+def test_config_loads_from_yaml_data_and_rejects_bad_values():
+    config = load_typed("sensors.yaml", SensorConfig, {"gyro_bias": [0.0, 0.1, 0.0], "seed": 5})
+    assert config.gyro_bias == [0.0, 0.1, 0.0] and config.seed == 5
+    with pytest.raises(ConfigError, match="gyro_noise_std must be >= 0"):
+        load_typed("sensors.yaml", SensorConfig, {"gyro_noise_std": -1.0})
+    with pytest.raises(ConfigError, match="accel_bias must have 3 values"):
+        load_typed("sensors.yaml", SensorConfig, {"accel_bias": [0.0]})
+    with pytest.raises(ConfigError, match="unknown key"):
+        load_typed("sensors.yaml", SensorConfig, {"gyro_noise": 0.1})
