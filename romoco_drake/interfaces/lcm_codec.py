@@ -6,6 +6,7 @@
 | ROMOCO_MOTOR_COMMAND  | biped_motor_command_t    | MotorCommand    | controller              |
 | ROMOCO_BASE_STATE     | base_state_t             | BaseState       | motion capture / sim    |
 | ROMOCO_ESTOP          | estop_t                  | Estop           | operator or watchdog    |
+| ROMOCO_STATUS         | controller_status_t      | ControllerStatus| controller (for logs)   |
 
 ``decode_*`` is the trust boundary: it raises :class:`MessageRejected` (one line naming the
 message type and the offending field) for bytes that are not the message, sizes other than the
@@ -31,6 +32,7 @@ from romoco_drake.interfaces.lcmtypes.romoco_lcm import (
     base_state_t,
     biped_motor_command_t,
     biped_proprioception_t,
+    controller_status_t,
     estop_t,
 )
 from romoco_drake.values import SharedValue
@@ -39,6 +41,7 @@ PROPRIOCEPTION_CHANNEL = "ROMOCO_PROPRIOCEPTION"
 MOTOR_COMMAND_CHANNEL = "ROMOCO_MOTOR_COMMAND"
 BASE_STATE_CHANNEL = "ROMOCO_BASE_STATE"
 ESTOP_CHANNEL = "ROMOCO_ESTOP"
+STATUS_CHANNEL = "ROMOCO_STATUS"
 
 # A received quaternion is renormalised if its norm is within this of 1, rejected otherwise.
 QUATERNION_NORM_TOLERANCE = 1e-3
@@ -133,6 +136,23 @@ class Estop(SharedValue):
     source: str = ""
 
 
+@dataclass(frozen=True, eq=False)
+class ControllerStatus(SharedValue):
+    """What the controller is doing: mode, command, state estimate, output tracking errors."""
+
+    utime: int
+    robot: str
+    mode: int
+    command: np.ndarray
+    state: np.ndarray
+    tracking_error: np.ndarray
+
+    def __post_init__(self):
+        object.__setattr__(self, "command", _frozen_vector("command", self.command, 3))
+        object.__setattr__(self, "state", _frozen_vector("state", self.state))
+        object.__setattr__(self, "tracking_error", _frozen_vector("tracking_error", self.tracking_error))
+
+
 def encode_proprioception(msg: Proprioception) -> bytes:
     lcm = biped_proprioception_t()
     lcm.utime = int(msg.utime)
@@ -169,6 +189,15 @@ def encode_estop(msg: Estop) -> bytes:
     lcm.utime = int(msg.utime)
     lcm.engaged = bool(msg.engaged)
     lcm.source = msg.source
+    return lcm.encode()
+
+
+def encode_controller_status(msg: ControllerStatus) -> bytes:
+    lcm = controller_status_t()
+    lcm.utime, lcm.robot, lcm.mode = int(msg.utime), msg.robot, int(msg.mode)
+    lcm.command = msg.command.tolist()
+    lcm.num_states, lcm.state = msg.state.size, msg.state.tolist()
+    lcm.num_errors, lcm.tracking_error = msg.tracking_error.size, msg.tracking_error.tolist()
     return lcm.encode()
 
 
@@ -276,6 +305,16 @@ def decode_estop(data: bytes) -> Estop:
     """The checked emergency-stop state in ``data``."""
     lcm = _unpack(estop_t, data)
     return Estop(utime=_check_utime("estop_t", lcm.utime), engaged=bool(lcm.engaged), source=lcm.source)
+
+
+def decode_controller_status(data: bytes) -> ControllerStatus:
+    """The checked status in ``data`` (NaN state entries are allowed: a diverged estimate is news)."""
+    name = "controller_status_t"
+    lcm = _unpack(controller_status_t, data)
+    return ControllerStatus(
+        utime=_check_utime(name, lcm.utime), robot=lcm.robot, mode=int(lcm.mode),
+        command=_finite(name, "command", lcm.command), state=np.array(lcm.state, dtype=float),
+        tracking_error=np.array(lcm.tracking_error, dtype=float))
 
 
 class RawBytesSerializer(SerializerInterface):

@@ -9,4 +9,5 @@ lcm-gen 1.5.3
 from .base_state_t import base_state_t as base_state_t
 from .biped_motor_command_t import biped_motor_command_t as biped_motor_command_t
 from .biped_proprioception_t import biped_proprioception_t as biped_proprioception_t
+from .controller_status_t import controller_status_t as controller_status_t
 from .estop_t import estop_t as estop_t
