@@ -84,23 +84,26 @@ def _cmd_show(args) -> int:
 
 
 def _cmd_run(args) -> int:
-    from pydrake.geometry import Meshcat
 
+    from romoco_drake.interfaces.hardware import LINK_COUNTERS
     from romoco_drake.runner import run_scenario, stderr_progress
     from romoco_drake.scenario import load_scenario, with_overrides
 
-    scenario = with_overrides(load_scenario(args.scenario), args.planner, args.controller, args.command)
-    meshcat = None
-    if args.meshcat:
-        meshcat = Meshcat()
-        print(f"Meshcat: {meshcat.web_url()}", file=sys.stderr, flush=True)
+    scenario = with_overrides(load_scenario(args.scenario), args.planner, args.controller, args.command,
+                              args.estimator)
+    if args.via_lcm and args.hardware:
+        raise RomocoError("--via-lcm and --hardware exclude each other")
+    link = "via_lcm" if args.via_lcm else "hardware" if args.hardware else "sim"
+    if args.lcm_url is not None and link == "sim":
+        raise RomocoError("--lcm-url needs --via-lcm or --hardware")
+    meshcat = _live_meshcat(args.meshcat)
     summary = run_scenario(scenario, duration=args.duration, meshcat=meshcat,
-                           record=args.record, progress=stderr_progress, plot_dir=args.plot)
+                           record=args.record, progress=stderr_progress, plot_dir=args.plot, link=link,
+                           lcm_url=args.lcm_url, lcm_log=args.lcm_log)
     if args.json:
         print(json.dumps(summary))
     else:
-        state = f"FELL at {summary['fall_time_s']:.2f} s ({summary['fall_reason']})" if summary["fell"] \
-            else "stayed up"
+        state = _fall_text(summary)
         print(f"{summary['scenario']} ({summary['robot']}): {summary['duration_s']} s simulated in "
               f"{summary['wall_s']} s ({summary['realtime_factor']}x real time); {state}; "
               f"base height drift {summary['base_height_drift_m'] * 1000:.1f} mm")
@@ -110,6 +113,13 @@ def _cmd_run(args) -> int:
                   f"mean velocity {summary['mean_velocity']}, "
                   f"QP failures {summary['qp_failures']}, safe-mode entries {summary['safe_mode_entries']}, "
                   f"controller tick {summary['controller_tick_ms']['median']} ms median")
+        if "velocity_estimate_rms_error" in summary:
+            print(f"  kalman: base velocity estimate rms error {summary['velocity_estimate_rms_error']} m/s, "
+                  f"{summary['estimator_rejected_updates']} rejected updates")
+        if link != "sim":
+            print("  link: " + ", ".join(f"{k} {summary[k]}" for k in LINK_COUNTERS))
+        if "lcm_log" in summary:
+            print(f"  LCM log {summary['lcm_log']['path']}: {summary['lcm_log']['events']} messages")
         for path in summary.get("plots", []):
             print(f"  wrote {path}")
         if args.record:
@@ -119,6 +129,53 @@ def _cmd_run(args) -> int:
             input("Press Enter to quit (the Meshcat page replays the run). ")
         except (EOFError, KeyboardInterrupt):
             pass
+    return 0
+
+
+def _live_meshcat(wanted: bool):
+    """A Meshcat server (its URL printed) if ``wanted``, else None."""
+    if not wanted:
+        return None
+    from pydrake.geometry import Meshcat
+
+    meshcat = Meshcat()
+    print(f"Meshcat: {meshcat.web_url()}", file=sys.stderr, flush=True)
+    return meshcat
+
+
+def _fall_text(summary: dict) -> str:
+    if not summary["fell"]:
+        return "stayed up"
+    return f"FELL at {summary['fall_time_s']:.2f} s ({summary['fall_reason']})"
+
+
+def _cmd_robot_sim(args) -> int:
+    from romoco_drake.runner import run_robot_sim, stderr_progress
+    from romoco_drake.scenario import load_scenario
+
+    meshcat = _live_meshcat(args.meshcat)
+    summary = run_robot_sim(load_scenario(args.scenario), args.duration, args.lcm_url, meshcat,
+                            progress=stderr_progress)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        state = _fall_text(summary)
+        print(f"robot-sim {summary['robot']} on {summary['lcm_url']}: {summary['duration_s']} s; {state}; "
+              + ", ".join(f"{k} {summary[k]}" for k in ("stale_events", "rejected_messages", "estop")))
+    return 0
+
+
+def _cmd_plot(args) -> int:
+    from romoco_drake.interfaces.lcm_log import plot_status_log
+
+    s = plot_status_log(args.log, args.out)
+    if args.json:
+        print(json.dumps(s))
+    else:
+        print(f"{s['log']} ({s['robot']}, {s['duration_s']} s): velocity rms error (vx, vy, wz) "
+              f"{s['velocity_rms_error']}, mean velocity {s['mean_velocity']}")
+        for path in s["plots"]:
+            print(f"  wrote {path}")
     return 0
 
 
@@ -238,7 +295,26 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--command", metavar="T:VX,VY,WZ;...",
                    help="override the velocity command: piecewise constant from each time T (s)")
     p.add_argument("--plot", type=Path, metavar="DIR", help="write velocity and tracking-error PNGs")
+    p.add_argument("--estimator", help="override the scenario's estimator: ground_truth or kalman")
+    p.add_argument("--via-lcm", action="store_true",
+                   help="run the robot and the controller over LCM in this process (memq:// by default)")
+    p.add_argument("--hardware", action="store_true",
+                   help="run only the controller, at real time, against a robot on LCM (see robot-sim)")
+    p.add_argument("--lcm-url", help="LCM URL for --via-lcm or --hardware")
+    p.add_argument("--lcm-log", type=Path, metavar="FILE", help="record the LCM traffic (LCM log format)")
     p.set_defaults(func=_cmd_run)
+    p = sub.add_parser("robot-sim", help="a simulated robot behind LCM, for `romoco run --hardware`")
+    p.add_argument("scenario", help="scenario name or YAML path (robot, plant step, sensors, link)")
+    p.add_argument("--lcm-url", help="LCM URL (default: Drake's UDP multicast)")
+    p.add_argument("--duration", type=float, default=None, help="seconds to run (default: the scenario's)")
+    p.add_argument("--meshcat", action="store_true", help="serve a live Meshcat view")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON (last line)")
+    p.set_defaults(func=_cmd_robot_sim)
+    p = sub.add_parser("plot", help="plot a run from its LCM log (romoco run --lcm-log)")
+    p.add_argument("log", type=Path)
+    p.add_argument("--out", type=Path, default=Path("plots"), metavar="DIR", help="where to write PNGs")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON (last line)")
+    p.set_defaults(func=_cmd_plot)
     bench = sub.add_parser("bench", help="benchmarks that print numbers").add_subparsers(
         dest="bench", required=True)
     p = bench.add_parser("rom", help="planners walking the hybrid LIP template through a command profile")

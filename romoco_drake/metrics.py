@@ -47,3 +47,8 @@ def velocity_tracking(robot: RobotModel, command: CommandSource, times: np.ndarr
         "measured": measured,
         "wanted": wanted,
     }
+
+
+def finite_or_none(values: list[float]) -> list[float | None]:
+    """JSON has no NaN: a diverged run reports None for what it could not measure."""
+    return [v if np.isfinite(v) else None for v in values]

@@ -8,20 +8,19 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.geometry import Meshcat
+from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.errors import RomocoError
-from romoco_drake.metrics import velocity_tracking
-from romoco_drake.scenario import Scenario, build_diagram
+from romoco_drake.estimation.kalman_estimator import KalmanEstimator
+from romoco_drake.interfaces.hardware import link_summary
+from romoco_drake.interfaces.lcm_log import LcmLogRecorder
+from romoco_drake.interfaces.robot_sim import make_robot_sim, robot_summary
+from romoco_drake.metrics import finite_or_none, velocity_tracking
+from romoco_drake.robots.model import load_robot
+from romoco_drake.scenario import Scenario, build_diagram, initial_positions
 
 PROGRESS_WALL_S = 2.0  # print progress lines at most this often
-
-
-def initial_positions(built, scenario: Scenario) -> np.ndarray:
-    robot = built.robot
-    q = robot.nominal.q.copy()
-    q[robot.base_q_start + 6] += scenario.initial_height_offset
-    return q
 
 
 def run_scenario(
@@ -32,22 +31,36 @@ def run_scenario(
     progress=None,
     plot_dir: Path | None = None,
     law=None,
+    link: str = "sim",
+    lcm_url: str | None = None,
+    lcm_log: Path | None = None,
 ) -> dict:
     """Simulates ``scenario`` and returns the run summary (see ``romoco run --json``).
 
     ``law`` (a :class:`~romoco_drake.rom.planners.FootPlacementLaw`) replaces the scenario's
-    planner, e.g. a custom one.
+    planner, e.g. a custom one. ``link`` is ``"sim"``, ``"via_lcm"`` (robot and controller in
+    this process over ``lcm_url``, default ``memq://``) or ``"hardware"`` (the controller only,
+    at real time, against a robot on ``lcm_url``, default Drake's UDP multicast);
+    ``lcm_log`` records the LCM traffic of the run.
     """
     duration = scenario.duration_s if duration is None else duration
     if duration <= 0:
         raise RomocoError(f"--duration must be positive, got {duration}")
+    if lcm_log is not None and link == "sim":
+        raise RomocoError("--lcm-log records LCM traffic: use it with --via-lcm or --hardware")
     if record is not None and meshcat is None:
         meshcat = Meshcat()
-    built = build_diagram(scenario, meshcat, law)
+    lcm = make_lcm(lcm_url or ("memq://" if link == "via_lcm" else None)) if link != "sim" else None
+    built = build_diagram(scenario, meshcat, law, link, lcm)
     simulator = Simulator(built.diagram)
     context = simulator.get_mutable_context()
-    plant = built.station.GetSubsystemByName("plant")
-    plant.SetPositions(plant.GetMyMutableContextFromRoot(context), initial_positions(built, scenario))
+    if built.plant_station is not None:
+        plant = built.plant_station.GetSubsystemByName("plant")
+        q0 = initial_positions(built.robot, scenario)
+        plant.SetPositions(plant.GetMyMutableContextFromRoot(context), q0)
+    if link == "hardware":
+        simulator.set_target_realtime_rate(1.0)
+    recorder = LcmLogRecorder(lcm, Path(lcm_log), clock=context.get_time) if lcm_log is not None else None
     if record is not None:
         meshcat.StartRecording(frames_per_second=30.0)
     wall0 = time.perf_counter()
@@ -69,6 +82,8 @@ def run_scenario(
             progress(f"[{scenario.name}] t = {t:.1f}/{duration:.1f} s ({100 * t / duration:.0f}%)")
             last_print = now
     wall = time.perf_counter() - wall0
+    if recorder is not None:
+        recorder.close()
     if record is not None:
         meshcat.StopRecording()
         meshcat.PublishRecording()
@@ -79,6 +94,7 @@ def run_scenario(
             raise RomocoError(f"{record}: cannot write the replay ({e.strerror})") from None
     monitor_context = built.monitor.GetMyContextFromRoot(context)
     summary = {
+        "link": link,
         "scenario": scenario.name,
         "robot": scenario.robot,
         "controller": scenario.controller.name,
@@ -92,11 +108,69 @@ def run_scenario(
         summary["simulation_error"] = diverged[1]
         if not summary["fell"]:
             summary.update(fell=True, fall_time_s=diverged[0], fall_reason="simulation_diverged")
+    summary.update(_estimator_summary(built, context))
+    if link != "sim":
+        summary.update(link_summary(built.station, context))
+    if built.robot_sim is not None:
+        summary["robot_link"] = robot_summary(built.robot_sim, context)
+    if recorder is not None:
+        summary["lcm_log"] = {"path": str(recorder.path), "events": recorder.count}
     if built.walking is not None:
         summary.update(_walking_summary(built, context, scenario, plot_dir))
     if record is not None:
         summary["record"] = str(record)
     return summary
+
+
+def run_robot_sim(scenario: Scenario, duration: float | None = None, lcm_url: str | None = None,
+                  meshcat: Meshcat | None = None, progress=None) -> dict:
+    """Runs ``scenario``'s robot behind LCM at real time (``romoco robot-sim``) and summarises it."""
+    duration = scenario.duration_s if duration is None else duration
+    if duration <= 0:
+        raise RomocoError(f"--duration must be positive, got {duration}")
+    lcm = make_lcm(lcm_url)
+    robot = load_robot(scenario.robot)
+    robot_sim = make_robot_sim(robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link)
+    simulator = Simulator(robot_sim)
+    context = simulator.get_mutable_context()
+    station = robot_sim.GetSubsystemByName("station")
+    plant = station.GetSubsystemByName("plant")
+    plant.SetPositions(plant.GetMyMutableContextFromRoot(context), initial_positions(robot, scenario))
+    simulator.set_target_realtime_rate(1.0)
+    simulator.Initialize()
+    last_print = time.perf_counter()
+    while context.get_time() < duration - 1e-9:
+        simulator.AdvanceTo(min(duration, context.get_time() + 0.1))
+        if progress is not None and time.perf_counter() - last_print > PROGRESS_WALL_S:
+            progress(f"[robot-sim {robot.name}] t = {context.get_time():.1f}/{duration:.1f} s")
+            last_print = time.perf_counter()
+    monitor = station.GetSubsystemByName("monitor")
+    return ({"robot": robot.name, "lcm_url": lcm.get_lcm_url(), "duration_s": duration}
+            | monitor.summary(monitor.GetMyContextFromRoot(context)) | robot_summary(robot_sim, context))
+
+
+def make_lcm(url: str | None) -> DrakeLcm:
+    """A DrakeLcm on ``url`` (None: Drake's default UDP multicast), or one line saying why not."""
+    try:
+        return DrakeLcm(url) if url is not None else DrakeLcm()
+    except RuntimeError as e:
+        reason = str(e).splitlines()[0]
+        raise RomocoError(f"cannot open LCM on {url or 'the default URL'}: {reason}") from None
+
+
+def _estimator_summary(built, context) -> dict:
+    """The Kalman estimator's health and, when the true state is known, its velocity error."""
+    if not isinstance(built.estimator, KalmanEstimator):
+        return {}
+    out = {"estimator_rejected_updates": built.estimator.rejected_updates(
+        built.estimator.GetMyContextFromRoot(context))}
+    if built.plant_station is not None:
+        truth, estimate = built.state_log.FindLog(context).data(), built.estimate_log.FindLog(context).data()
+        n = min(truth.shape[1], estimate.shape[1])
+        j = built.robot.nq + built.robot.base_v_start + 3
+        error = np.linalg.norm(estimate[j:j + 3, :n] - truth[j:j + 3, :n], axis=0)
+        out["velocity_estimate_rms_error"] = finite_or_none([round(float(np.sqrt(np.mean(error**2))), 4)])[0]
+    return out
 
 
 def stderr_progress(message: str) -> None:
@@ -112,8 +186,8 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None) 
     failures, safe_ticks, _ = loop.controller.stats_port.Eval(loop.controller.GetMyContextFromRoot(context))
     return {
         "planner": loop.planner.law.name,
-        "velocity_rms_error": _finite_or_none(tracking["velocity_rms_error"]),
-        "mean_velocity": _finite_or_none(tracking["mean_velocity"]),
+        "velocity_rms_error": finite_or_none(tracking["velocity_rms_error"]),
+        "mean_velocity": finite_or_none(tracking["mean_velocity"]),
         "steps": schedule.steps,
         "qp_failures": int(failures),
         "safe_mode_entries": schedule.safe_mode_entries,
@@ -132,8 +206,3 @@ def _plots(built, context, scenario: Scenario, plot_dir: Path | None, log, track
     paths = plot_walking_run(Path(plot_dir), scenario.name, log.sample_times(), tracking,
                              errors.sample_times(), errors.data())
     return {"plots": [str(p) for p in paths]}
-
-
-def _finite_or_none(values: list[float]) -> list[float | None]:
-    """JSON has no NaN: a diverged run reports None for what it could not measure."""
-    return [v if np.isfinite(v) else None for v in values]

@@ -1,7 +1,11 @@
 """Scenarios: typed config of one simulation, and the diagram it wires.
 
 A scenario YAML (``diagrams/<name>.yaml``) names the robot and the components of the
-loop. ``build_diagram`` wires station → estimator → controller → station.
+loop. ``build_diagram`` wires station → estimator → controller → station, where the station
+is the simulated plant (``link="sim"``), the LCM hardware station talking to a robot
+(``"hardware"``), or the LCM hardware station talking to a simulated robot in the same
+diagram over the same LCM (``"via_lcm"``: the whole hardware path, exercised in one process).
+The controller part is the same in all three.
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ from typing import Literal
 
 import numpy as np
 from pydrake.geometry import Meshcat
+from pydrake.lcm import DrakeLcmInterface
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
@@ -26,8 +31,13 @@ from romoco_drake.embedding.references import EmbeddingCore
 from romoco_drake.embedding.system import OutputEmbedding
 from romoco_drake.errors import ConfigError, RomocoError
 from romoco_drake.estimation.ground_truth import GroundTruthEstimator
+from romoco_drake.estimation.kalman_estimator import KalmanEstimator
 from romoco_drake.estimation.rom_state import RomStateFromRobot
+from romoco_drake.interfaces.hardware import LinkConfig, StatusSender, make_hardware_station, publish
+from romoco_drake.interfaces.lcm_codec import STATUS_CHANNEL
 from romoco_drake.interfaces.monitor import FallMonitor
+from romoco_drake.interfaces.robot_sim import make_robot_sim
+from romoco_drake.interfaces.sensors import SensorConfig
 from romoco_drake.interfaces.station import make_station
 from romoco_drake.planners.command import CommandSegment, CommandSource
 from romoco_drake.planners.foot_placement import FootPlacementPlanner
@@ -42,7 +52,9 @@ CONTROLLERS = ("standing", "tscqp", "id", "velik", "posik")
 # Controllers that command the motors' own position loops (q_d, v_d, τ_ff, K_p, K_d).
 MOTOR_COMMAND_CONTROLLERS = ("velik", "posik")
 STATE_LOG_PERIOD = 0.01  # s, the state samples summaries and plots are computed from
-ESTIMATORS = ("ground_truth",)
+ESTIMATORS = ("ground_truth", "kalman")
+LINKS = ("sim", "hardware", "via_lcm")
+STATUS_PERIOD = 0.01  # s, controller status messages on LCM links (for logs)
 
 
 @dataclass
@@ -72,7 +84,11 @@ class CommandPoint:
 
 @dataclass
 class EstimatorConfig:
-    name: Literal["ground_truth"] = "ground_truth"
+    """``ground_truth``: encoders plus the base pose/velocity ports (exact in simulation, motion
+    capture on hardware); ``kalman``: encoders, IMU and contact switches only."""
+
+    name: Literal["ground_truth", "kalman"] = "ground_truth"
+    rate_hz: float = 1000.0
 
 
 @dataclass
@@ -90,6 +106,8 @@ class Scenario:
     command: list[CommandPoint] = dataclasses.field(default_factory=list)
     # Extra height of the base above the nominal pose at t = 0 (m): a drop test.
     initial_height_offset: float = 0.0
+    sensors: SensorConfig = dataclasses.field(default_factory=SensorConfig)
+    link: LinkConfig = dataclasses.field(default_factory=LinkConfig)
     # Filled in by load_scenario, not read from YAML.
     name: str = ""
 
@@ -115,7 +133,8 @@ def load_scenario(name_or_path: str) -> Scenario:
         known = ", ".join(robot_names())
         raise ConfigError(path, "robot", f"unknown robot '{scenario.robot}' (known: {known})")
     for key, value in (("duration_s", scenario.duration_s), ("time_step", scenario.time_step),
-                       ("controller.rate_hz", scenario.controller.rate_hz)):
+                       ("controller.rate_hz", scenario.controller.rate_hz),
+                       ("estimator.rate_hz", scenario.estimator.rate_hz)):
         if value <= 0:
             raise ConfigError(path, key, f"must be positive, got {value}")
     return scenario
@@ -123,13 +142,20 @@ def load_scenario(name_or_path: str) -> Scenario:
 
 @dataclass
 class BuiltDiagram:
+    """The diagram and handles on what summaries read: ``state_log`` and ``monitor`` watch the
+    true state when there is one (simulation, via LCM), else the estimate (hardware)."""
+
     diagram: Diagram
     robot: RobotModel
-    station: Diagram
+    station: Diagram  # the controller's station: simulated or LCM hardware
     monitor: FallMonitor
     state_log: VectorLogSink
+    estimate_log: VectorLogSink
     command: CommandSource | None = None
     walking: WalkingLoop | None = None
+    plant_station: Diagram | None = None  # the simulated station holding the plant, if any
+    robot_sim: Diagram | None = None  # the LCM robot side (via_lcm)
+    estimator: KalmanEstimator | GroundTruthEstimator | None = None
 
 
 @dataclass
@@ -165,8 +191,13 @@ def parse_command(text: str) -> list[CommandPoint]:
 
 
 def with_overrides(scenario: Scenario, planner: str | None = None, controller: str | None = None,
-                   command: str | None = None) -> Scenario:
-    """``scenario`` with the CLI's --planner/--controller/--command applied (names checked)."""
+                   command: str | None = None, estimator: str | None = None) -> Scenario:
+    """``scenario`` with the CLI's --planner/--controller/--command/--estimator applied (names checked)."""
+    if estimator is not None:
+        if estimator not in ESTIMATORS:
+            raise RomocoError(f"unknown estimator '{estimator}' (known: {', '.join(ESTIMATORS)})")
+        estimator_config = dataclasses.replace(scenario.estimator, name=estimator)
+        scenario = dataclasses.replace(scenario, estimator=estimator_config)
     if planner is not None:
         if planner not in PLANNERS:
             raise RomocoError(f"unknown planner '{planner}' (known: {', '.join(PLANNERS)})")
@@ -190,17 +221,40 @@ def command_segments(scenario: Scenario, robot: RobotModel) -> list[CommandSegme
     return [CommandSegment(p.t, WalkCommand(p.vx, p.vy, p.wz, w.step_width, w.z0, w.t_ss)) for p in points]
 
 
+def initial_positions(robot: RobotModel, scenario: Scenario) -> np.ndarray:
+    """Where the simulation starts: the nominal pose, raised by the drop-test offset."""
+    q = robot.nominal.q.copy()
+    q[robot.base_q_start + 6] += scenario.initial_height_offset
+    return q
+
+
 def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
-                  law: FootPlacementLaw | None = None) -> BuiltDiagram:
-    """Wires the closed loop of ``scenario``; ``law`` replaces the scenario's planner law."""
+                  law: FootPlacementLaw | None = None, link: str = "sim",
+                  lcm: DrakeLcmInterface | None = None) -> BuiltDiagram:
+    """Wires the closed loop of ``scenario``; ``law`` replaces the scenario's planner law.
+
+    ``link`` (module docstring) picks the station; ``"hardware"`` and ``"via_lcm"`` need ``lcm``.
+    """
+    if link not in LINKS:
+        raise RomocoError(f"unknown link '{link}' (known: {', '.join(LINKS)})")
+    if link != "sim" and lcm is None:
+        raise RomocoError(f"link '{link}' needs an LCM instance")
     robot = load_robot(scenario.robot)
     builder = DiagramBuilder()
     motor_pd = scenario.controller.name in MOTOR_COMMAND_CONTROLLERS
-    station = builder.AddNamedSystem("station", make_station(robot, scenario.time_step, meshcat, motor_pd))
-    estimator = builder.AddNamedSystem("estimator", GroundTruthEstimator(robot))
-    for port in ("joint_state", "base_pose", "base_velocity"):
-        builder.Connect(station.GetOutputPort(port), estimator.GetInputPort(port))
     period = 1.0 / scenario.controller.rate_hz
+    plant_station = robot_sim = None
+    if link == "sim":
+        station = make_station(robot, scenario.time_step, meshcat, motor_pd, scenario.sensors)
+        plant_station = builder.AddNamedSystem("station", station)
+    else:
+        station = builder.AddNamedSystem(
+            "station", make_hardware_station(robot, lcm, period, motor_pd, scenario.link))
+        if link == "via_lcm":
+            robot_sim = builder.AddNamedSystem("robot", make_robot_sim(
+                robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link))
+            plant_station = robot_sim.GetSubsystemByName("station")
+    estimator = _add_estimator(builder, scenario, robot, station, known_start=link != "hardware")
     walking = command = None
     if scenario.controller.name == "standing":
         controller = builder.AddNamedSystem("controller", StandingController(robot, period=period))
@@ -210,12 +264,44 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
         command = builder.AddNamedSystem("command", CommandSource(command_segments(scenario, robot)))
         walking = _add_walking_loop(builder, scenario, robot, estimator.state_output, command, station,
                                     period, law)
-    state_log = LogVectorOutput(estimator.state_output, builder, STATE_LOG_PERIOD)
-    monitor = builder.AddNamedSystem("monitor", FallMonitor(robot))
-    builder.Connect(estimator.state_output, monitor.state_input)
+        if link != "sim":
+            status = builder.AddNamedSystem("status", StatusSender(
+                robot, command.command_port.size(), walking.embedding.tracking_error_port.size()))
+            builder.Connect(estimator.state_output, status.state_port)
+            builder.Connect(walking.state_machine.mode_port, status.mode_port)
+            builder.Connect(command.command_port, status.command_port)
+            builder.Connect(walking.embedding.tracking_error_port, status.tracking_error_port)
+            publish(builder, lcm, STATUS_CHANNEL, status.message_port, STATUS_PERIOD)
+    estimate_log = LogVectorOutput(estimator.state_output, builder, STATE_LOG_PERIOD)
+    if plant_station is not None:
+        monitor = plant_station.GetSubsystemByName("monitor")
+        state_log = plant_station.GetSubsystemByName("truth_log")
+    else:
+        monitor = builder.AddNamedSystem("monitor", FallMonitor(robot))
+        builder.Connect(estimator.state_output, monitor.state_input)
+        state_log = estimate_log
     diagram = builder.Build()
     diagram.set_name(scenario.name or scenario.robot)
-    return BuiltDiagram(diagram, robot, station, monitor, state_log, command, walking)
+    return BuiltDiagram(diagram, robot, station, monitor, state_log, estimate_log, command, walking,
+                        plant_station, robot_sim, estimator)
+
+
+def _add_estimator(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, station,
+                   known_start: bool):
+    """The scenario's estimator, fed by the station; the Kalman filter starts at the sim's
+    initial base position when it is known (simulation), else at its own default."""
+    if scenario.estimator.name == "kalman":
+        qb = robot.base_q_start
+        start = initial_positions(robot, scenario)[qb + 4:qb + 7] if known_start else None
+        estimator = builder.AddNamedSystem("estimator", KalmanEstimator(
+            robot, 1.0 / scenario.estimator.rate_hz, initial_base_position=start))
+        ports = ("joint_state", "imu", "foot_contact")
+    else:
+        estimator = builder.AddNamedSystem("estimator", GroundTruthEstimator(robot))
+        ports = ("joint_state", "base_pose", "base_velocity")
+    for port in ports:
+        builder.Connect(station.GetOutputPort(port), estimator.GetInputPort(port))
+    return estimator
 
 
 def _make_controller(name: str, robot: RobotModel, core: EmbeddingCore, period: float):

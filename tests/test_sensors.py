@@ -103,7 +103,7 @@ def rotation_vector_between(q_WA: np.ndarray, q_WB: np.ndarray) -> np.ndarray:
 
 def test_exact_measurements_while_standing():
     run = simulate(EXACT, standing=True)
-    # The last sample (t = 0.300) came after the plant's last step, so it measures the state now.
+    # Measurements are of the plant's current state (no hold of their own).
     run.simulator.AdvanceTo(0.3005)
     out = run.outputs()
     robot, x = run.robot, run.plant.GetPositionsAndVelocities(run.plant_context)
@@ -125,7 +125,7 @@ def test_exact_measurements_while_standing():
 def test_free_fall_reads_no_contact_and_no_specific_force():
     run = simulate(EXACT, standing=False, lift=0.3)
     run.simulator.Initialize()
-    # The initialisation sample precedes the plant's first step: it reads the robot as at rest.
+    # Before the plant's first step it reports zero acceleration: the IMU reads the robot as at rest.
     R_WB, _ = run.base_truth()
     np.testing.assert_allclose(run.outputs()["imu"][7:], R_WB.T @ G_UP, atol=1e-9)
     samples = run.samples(50)

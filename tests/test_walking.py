@@ -135,7 +135,7 @@ def test_g1_walks_forward_and_lands_on_its_targets():
     built = build_diagram(scenario)
     simulator = Simulator(built.diagram)
     context = simulator.get_mutable_context()
-    plant = built.station.GetSubsystemByName("plant")
+    plant = built.plant_station.GetSubsystemByName("plant")
     plant.SetPositions(plant.GetMyMutableContextFromRoot(context), built.robot.nominal.q)
     loop = built.walking
     machine_ctx = loop.state_machine.GetMyContextFromRoot(context)

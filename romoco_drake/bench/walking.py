@@ -10,8 +10,15 @@ from pydrake.systems.analysis import Simulator
 from romoco_drake.bench.rom import percentiles
 from romoco_drake.errors import RomocoError
 from romoco_drake.rom.types import WalkCommand
-from romoco_drake.runner import initial_positions, run_scenario
-from romoco_drake.scenario import Scenario, build_diagram, load_scenario, scenario_names, with_overrides
+from romoco_drake.runner import run_scenario
+from romoco_drake.scenario import (
+    Scenario,
+    build_diagram,
+    initial_positions,
+    load_scenario,
+    scenario_names,
+    with_overrides,
+)
 
 WALKING_ROBOTS = ("g1", "cassie", "h1")
 
@@ -58,8 +65,8 @@ def bench_tick(scenario: Scenario, warmup: float = 2.0, ticks: int = 500) -> dic
         raise RomocoError(f"scenario '{scenario.name}' has no walking controller to time")
     simulator = Simulator(built.diagram)
     root = simulator.get_mutable_context()
-    plant = built.station.GetSubsystemByName("plant")
-    plant.SetPositions(plant.GetMyMutableContextFromRoot(root), initial_positions(built, scenario))
+    plant = built.plant_station.GetSubsystemByName("plant")
+    plant.SetPositions(plant.GetMyMutableContextFromRoot(root), initial_positions(built.robot, scenario))
     simulator.Initialize()
     simulator.AdvanceTo(warmup)
     diagram, loop = built.diagram, built.walking

@@ -110,21 +110,21 @@ class SimulatedSensors(LeafSystem):
     | joint_state                | out | 2·nj       | [q_j (rad); v_j (rad/s)], joint_names order   |
     | imu                        | out | 10         | q_WB (w x y z); ω_B (rad/s); f_B (m/s²)       |
     | foot_contact               | out | 2          | [left, right], 1.0 above the force threshold  |
+    | base_pose                  | out | 7          | exact [qw qx qy qz x y z] (motion capture)    |
+    | base_velocity              | out | 6          | exact [ω_WB; v_WB] in world (motion capture)  |
 
     The IMU sits at the base frame origin Bo with its axes along B: ω_B = R_WBᵀ ω_WB and
     f_B = R_WBᵀ (a_WBo − g_W) with the plant's gravity g_W. A foot is in contact when the normal
-    force on its body exceeds ``contact_threshold_fraction`` of the robot's weight.
+    force on its body exceeds ``contact_threshold_fraction`` of the robot's weight. The discrete
+    (SAP) plant reports the accelerations (Δv/h) and contact results of its most recent step
+    (zero and none before the first).
 
-    Outputs are discrete state, sampled every 1/``rate_hz`` s from t = 0 and once at
-    initialisation, so they have no direct feedthrough. The discrete (SAP) plant reports the
-    accelerations (Δv/h) and contact results of its most recent step; the initialisation sample
-    comes before any step, so it reads zero acceleration (f_B = −R_WBᵀ g_W) and no contact.
-
-    Noise: sample k draws one standard-normal vector from ``default_rng([seed, 0, k])`` with the
-    sample counter k kept in discrete state, so a sample depends only on (seed, k) and a cloned or
-    reset context replays the same measurements (resume a cloned context with initialisation
-    events suppressed, or the extra initialisation sample shifts k); a Drake RandomSource would
-    keep its generator in the context too, but needs one source and gain per channel. IMU biases come from
+    Outputs are computed from the plant's current (discrete) state, without a hold of their
+    own: a held sample is one plant step older than the state the controller would otherwise
+    see, and that step of delay made Cassie fall while standing. The noise is a sampled process
+    all the same: sample k = ⌊t·rate_hz⌋ draws its vectors from ``default_rng([seed, port, k])``,
+    so a measurement depends only on the state, the seed and k (deterministic, replayable, and
+    constant within a sample period however often it is evaluated). IMU biases come from
     ``default_rng([seed, 1])`` when not given and are constant for the run (``gyro_bias``,
     ``accel_bias``).
     """
@@ -151,31 +151,36 @@ class SimulatedSensors(LeafSystem):
         self._contact_threshold = (
             config.contact_threshold_fraction * robot.total_mass * np.linalg.norm(self._g_W))
 
-        self._seed = config.seed
+        self._seed, self._rate = config.seed, config.rate_hz
         bias_rng = np.random.default_rng([config.seed, 1])
         self.gyro_bias = self._bias(config.gyro_bias, config.gyro_bias_std, bias_rng)
         self.accel_bias = self._bias(config.accel_bias, config.accel_bias_std, bias_rng)
-        # Noise vector layout: q_j, v_j, orientation θ_B, gyro, accel.
-        self._noise_std = np.concatenate([
-            np.full(nj, config.encoder_noise_std), np.full(nj, config.joint_velocity_noise_std),
-            np.full(3, config.orientation_noise_std), np.full(3, config.gyro_noise_std),
-            np.full(3, config.accel_noise_std)])
+        self._joint_std = np.concatenate([np.full(nj, config.encoder_noise_std),
+                                          np.full(nj, config.joint_velocity_noise_std)])
+        # IMU noise vector layout: orientation θ_B, gyro, accel.
+        self._imu_std = np.repeat([config.orientation_noise_std, config.gyro_noise_std,
+                                   config.accel_noise_std], 3)
 
         self.plant_state_input = self.DeclareVectorInputPort("plant_state", plant.num_multibody_states())
         self.accelerations_input = self.DeclareAbstractInputPort(
             "body_spatial_accelerations", plant.get_body_spatial_accelerations_output_port().Allocate())
         self.contact_results_input = self.DeclareAbstractInputPort(
             "contact_results", plant.get_contact_results_output_port().Allocate())
-
-        self._counter = self.DeclareDiscreteState(1)
-        self._joint_state = self.DeclareDiscreteState(2 * nj)
-        self._imu = self.DeclareDiscreteState(np.concatenate([[1.0, 0, 0, 0, 0, 0, 0], -self._g_W]))
-        self._foot_contact = self.DeclareDiscreteState(2)
-        self.joint_state_output = self.DeclareStateOutputPort("joint_state", self._joint_state)
-        self.imu_output = self.DeclareStateOutputPort("imu", self._imu)
-        self.foot_contact_output = self.DeclareStateOutputPort("foot_contact", self._foot_contact)
-        self.DeclareInitializationDiscreteUpdateEvent(self._sample)
-        self.DeclarePeriodicDiscreteUpdateEvent(1.0 / config.rate_hz, 0.0, self._sample)
+        state, time = self.input_port_ticket(self.plant_state_input.get_index()), self.time_ticket()
+        self.joint_state_output = self.DeclareVectorOutputPort(
+            "joint_state", 2 * nj, self._joint_state, prerequisites_of_calc={state, time})
+        self.imu_output = self.DeclareVectorOutputPort(
+            "imu", 10, self._imu, prerequisites_of_calc={
+                state, time, self.input_port_ticket(self.accelerations_input.get_index())})
+        self.foot_contact_output = self.DeclareVectorOutputPort(
+            "foot_contact", 2, self._foot_contact,
+            prerequisites_of_calc={self.input_port_ticket(self.contact_results_input.get_index())})
+        self.base_pose_output = self.DeclareVectorOutputPort(
+            "base_pose", 7, lambda c, out: out.SetFromVector(
+                self.plant_state_input.Eval(c)[self._base_q:self._base_q + 7]), prerequisites_of_calc={state})
+        self.base_velocity_output = self.DeclareVectorOutputPort(
+            "base_velocity", 6, lambda c, out: out.SetFromVector(
+                self.plant_state_input.Eval(c)[self._base_v:self._base_v + 6]), prerequisites_of_calc={state})
 
     @staticmethod
     def _bias(given: list[float] | None, std: float, rng: np.random.Generator) -> np.ndarray:
@@ -184,28 +189,31 @@ class SimulatedSensors(LeafSystem):
         bias.flags.writeable = False
         return bias
 
-    def _sample(self, context, discrete_state) -> None:
-        k = context.get_discrete_state(self._counter).GetAtIndex(0)
-        rng = np.random.default_rng([self._seed, 0, int(k)])
-        noise = self._noise_std * rng.standard_normal(self._noise_std.size)
-        n_joint = self._joint_index.size
-        theta, gyro_noise, accel_noise = noise[n_joint:].reshape(3, 3)
+    def _noise(self, context, port: int, std: np.ndarray) -> np.ndarray:
+        """Sample ⌊t·rate⌋'s noise for ``port`` (0 encoders, 2 IMU): a function of (seed, port, k)."""
+        k = int(np.floor(context.get_time() * self._rate + 1e-6))
+        return std * np.random.default_rng([self._seed, port, k]).standard_normal(std.size)
 
+    def _joint_state(self, context, out) -> None:
+        x = self.plant_state_input.Eval(context)
+        out.SetFromVector(x[self._joint_index] + self._noise(context, 0, self._joint_std))
+
+    def _imu(self, context, out) -> None:
+        theta, gyro_noise, accel_noise = self._noise(context, 2, self._imu_std).reshape(3, 3)
         x = self.plant_state_input.Eval(context)
         q_WB = x[self._base_q:self._base_q + 4] / np.linalg.norm(x[self._base_q:self._base_q + 4])
         R_WB = RotationMatrix(Quaternion(wxyz=q_WB)).matrix()
         w_WB_W = x[self._base_v:self._base_v + 3]
         a_WBo_W = self.accelerations_input.Eval(context)[self._base].translational()
-        forces = foot_normal_forces(self.contact_results_input.Eval(context), self._feet)
-
-        discrete_state.set_value(self._counter, [k + 1])
-        discrete_state.set_value(self._joint_state, x[self._joint_index] + noise[:n_joint])
-        discrete_state.set_value(self._imu, np.concatenate([
+        out.SetFromVector(np.concatenate([
             perturb_quaternion(q_WB, theta),
             R_WB.T @ w_WB_W + self.gyro_bias + gyro_noise,
             specific_force(R_WB, a_WBo_W, self._g_W) + self.accel_bias + accel_noise,
         ]))
-        discrete_state.set_value(self._foot_contact, (forces > self._contact_threshold).astype(float))
+
+    def _foot_contact(self, context, out) -> None:
+        forces = foot_normal_forces(self.contact_results_input.Eval(context), self._feet)
+        out.SetFromVector((forces > self._contact_threshold).astype(float))
 
 
 def add_sensors(

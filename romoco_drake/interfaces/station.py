@@ -1,16 +1,23 @@
-"""The simulated station: robot plant, scene graph and (optionally) Meshcat.
+"""The simulated station: robot plant, its sensors, scene graph and (optionally) Meshcat.
 
-Exported ports (the LCM hardware station exports the same names and sizes):
+Exported ports (the LCM hardware station, :mod:`~romoco_drake.interfaces.hardware`, exports the
+same names and sizes):
 
 | port            | dir | size   | meaning                                                      |
 |-----------------|-----|--------|--------------------------------------------------------------|
 | actuation       | in  | nu     | joint torques (N·m), in RobotModel.actuator_names order       |
-| joint_state     | out | 2·nj   | [q_j; v_j] of every 1-DoF joint, RobotModel.joint_names order |
-| base_pose       | out | 7      | [qw qx qy qz x y z] of the floating base in world            |
-| base_velocity   | out | 6      | [ω_WB; v_WB] expressed in world (rad/s, m/s)                  |
+| joint_state     | out | 2·nj   | encoders [q_j; v_j], RobotModel.joint_names order             |
+| imu             | out | 10     | base IMU: [qw qx qy qz] R_WB; gyro ω_B; specific force f_B    |
+| foot_contact    | out | 2      | [left, right] contact switches, 1.0 when loaded               |
+| base_pose       | out | 7      | [qw qx qy qz x y z] of the floating base (motion capture)     |
+| base_velocity   | out | 6      | [ω_WB; v_WB] expressed in world (motion capture)              |
+
+All are sampled together by :class:`~romoco_drake.interfaces.sensors.SimulatedSensors` (noise and
+rate from ``sensors``); the base pose and velocity are exact, as a motion-capture system (or the
+simulator's truth) gives them.
 
 With ``motor_pd=True`` (robots driven through their motors' own position loops, for the IK
-controllers) the station also takes
+controllers and the LCM robot) the station also takes
 
 | motor_command   | in  | 5·nu   | blocks q_d, v_d, τ_ff, K_p, K_d per actuator                   |
 
@@ -18,39 +25,27 @@ and runs each motor's PD loop implicitly inside the plant step (SAP PD-controlle
 as the motor's own loop would, rather than holding a PD torque over a control tick. The
 command's own gains are honoured by moving the setpoints (:class:`MotorCommandAdapter`).
 τ_ff is added to ``actuation``.
+
+The station also watches the plant's true state, for scoring runs whatever the estimator
+believes: subsystem ``truth_log`` logs it every ``truth_log_period`` s and subsystem
+``monitor`` (:class:`~romoco_drake.interfaces.monitor.FallMonitor`) records falls.
 """
 
 from __future__ import annotations
 
-import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import Adder, MatrixGain
+from pydrake.systems.primitives import Adder, LogVectorOutput
 
+from romoco_drake.interfaces.monitor import FallMonitor
 from romoco_drake.interfaces.motors import MotorCommandAdapter
+from romoco_drake.interfaces.sensors import SensorConfig, add_sensors
 from romoco_drake.robots.model import RobotModel
 
 
-def selection_matrix(indices: np.ndarray, size: int) -> np.ndarray:
-    S = np.zeros((len(indices), size))
-    S[np.arange(len(indices)), indices] = 1.0
-    return S
-
-
-def state_selections(robot: RobotModel) -> dict[str, np.ndarray]:
-    """Matrices picking each measured output out of the plant state [q; v]."""
-    nx = robot.nq + robot.nv
-    qb, vb = robot.base_q_start, robot.nq + robot.base_v_start
-    joints = np.concatenate([robot.joint_q_index, robot.nq + robot.joint_v_index])
-    return {
-        "joint_state": selection_matrix(joints, nx),
-        "base_pose": selection_matrix(np.arange(qb, qb + 7), nx),
-        "base_velocity": selection_matrix(np.arange(vb, vb + 6), nx),
-    }
-
-
 def make_station(
-    robot: RobotModel, time_step: float = 0.001, meshcat: Meshcat | None = None, motor_pd: bool = False
+    robot: RobotModel, time_step: float = 0.001, meshcat: Meshcat | None = None, motor_pd: bool = False,
+    sensors: SensorConfig | None = None, truth_log_period: float = 0.01,
 ) -> Diagram:
     """Builds the simulated station for ``robot`` (see the module docstring for ports)."""
     builder = DiagramBuilder()
@@ -67,10 +62,13 @@ def make_station(
         builder.Connect(total.get_output_port(), plant.get_actuation_input_port())
     else:
         builder.ExportInput(plant.get_actuation_input_port(), "actuation")
-    for name, S in state_selections(robot).items():
-        gain = builder.AddNamedSystem(name, MatrixGain(S))
-        builder.Connect(plant.get_state_output_port(), gain.get_input_port())
-        builder.ExportOutput(gain.get_output_port(), name)
+    sensor_system = add_sensors(builder, plant, robot, sensors)
+    for name in ("joint_state", "imu", "foot_contact", "base_pose", "base_velocity"):
+        builder.ExportOutput(sensor_system.GetOutputPort(name), name)
+    truth = LogVectorOutput(plant.get_state_output_port(), builder, truth_log_period)
+    truth.set_name("truth_log")
+    monitor = builder.AddNamedSystem("monitor", FallMonitor(robot))
+    builder.Connect(plant.get_state_output_port(), monitor.state_input)
     if meshcat is not None:
         MeshcatVisualizer.AddToBuilder(
             builder, scene_graph, meshcat,

@@ -1,0 +1,370 @@
+"""The LCM hardware station: the controller's side of the robot link, with the sim station's ports.
+
+``make_hardware_station`` exports exactly the ports of the simulated station
+(:func:`~romoco_drake.interfaces.station.make_station`), so the controller diagram does not
+change when a robot replaces the simulator:
+
+| port          | dir | size | source / sink                                                  |
+|---------------|-----|------|----------------------------------------------------------------|
+| actuation     | in  | nu   | joint torques, sent as τ_ff of the motor command (K_p = K_d = 0) |
+| motor_command | in  | 5·nu | (``motor_pd`` only) q_d, v_d, τ_ff, K_p, K_d; actuation adds to τ_ff |
+| joint_state   | out | 2·nj | ROMOCO_PROPRIOCEPTION q, v                                      |
+| imu           | out | 10   | ROMOCO_PROPRIOCEPTION quaternion, gyro, accelerometer           |
+| foot_contact  | out | 2    | ROMOCO_PROPRIOCEPTION contact flags                             |
+| base_pose     | out | 7    | ROMOCO_BASE_STATE (motion capture) quaternion, position          |
+| base_velocity | out | 6    | ROMOCO_BASE_STATE angular, linear velocity (world)              |
+
+Safety at the interface (each counted, see :func:`link_summary`):
+
+- **stale proprioception**: no new message for ``timeout_s`` → the command becomes damping
+  (q_d = q, v_d = 0, τ_ff = 0, K_p = 0, K_d from the robot YAML) until messages resume;
+  ``stale_events`` counts fresh → stale transitions. Before the first message the robot is
+  also sent damping (not counted: nothing was lost yet).
+- **rejected messages**: bytes that do not decode, the wrong joint count, NaN/Inf, non-unit
+  quaternions, times that go backwards (:mod:`~romoco_drake.interfaces.lcm_codec`) are dropped
+  and the last good values kept; a non-finite command from the controller is not sent
+  (damping instead). Each is one ``rejected_messages``.
+- **clamping**: q_d to the joint limits, τ_ff to the effort limits, v_d to ``max_joint_speed``,
+  K_p and K_d to [0, ``max_gain_factor`` × the YAML gains]; ``clamped_commands`` counts the
+  commands that needed it.
+- **E-stop**: an engaged ROMOCO_ESTOP message latches damping for the rest of the run;
+  ``estop`` counts engagements.
+
+Before their first message the measurement ports hold the robot's nominal standing pose at
+rest, so the controller starts from a sane state while the robot is still sent damping.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.lcm import DrakeLcmInterface
+from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
+
+from romoco_drake.interfaces.lcm_codec import (
+    BASE_STATE_CHANNEL,
+    ESTOP_CHANNEL,
+    MOTOR_COMMAND_CHANNEL,
+    PROPRIOCEPTION_CHANNEL,
+    ControllerStatus,
+    MessageRejected,
+    MotorCommand,
+    RawBytesSerializer,
+    decode_base_state,
+    decode_estop,
+    decode_proprioception,
+    encode_controller_status,
+    encode_motor_command,
+)
+from romoco_drake.robots.model import RobotModel
+
+LINK_COUNTERS = ("stale_events", "rejected_messages", "clamped_commands", "estop")
+
+
+@dataclass
+class LinkConfig:
+    """Timing and limits of the LCM link (both the controller's and the robot's side)."""
+
+    timeout_s: float = 0.02  # no new message for this long: the stream is stale
+    receive_rate_hz: float = 1000.0  # how often received messages are checked and taken over
+    max_joint_speed: float = 30.0  # rad/s, |v_d| limit of a sent command
+    max_gain_factor: float = 3.0  # K_p, K_d at most this times the robot YAML's gains
+
+    def __post_init__(self):
+        for name in ("timeout_s", "receive_rate_hz", "max_joint_speed", "max_gain_factor"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
+
+
+def nominal_measurements(robot: RobotModel) -> dict[str, np.ndarray]:
+    """The station outputs of the robot standing still in its nominal pose (the start values)."""
+    q = robot.nominal.q
+    nj = len(robot.joint_names)
+    qb = robot.base_q_start
+    return {
+        "joint_state": np.concatenate([q[robot.joint_q_index], np.zeros(nj)]),
+        "imu": np.concatenate([q[qb:qb + 4], np.zeros(3), [0.0, 0.0, 9.81]]),
+        "foot_contact": np.ones(2),
+        "base_pose": q[qb:qb + 7].copy(),
+        "base_velocity": np.zeros(6),
+    }
+
+
+def damping_command(robot: RobotModel, q: np.ndarray) -> np.ndarray:
+    """[q_d; v_d; τ_ff; K_p; K_d] holding nothing: joint damping −K_d v about the measured q."""
+    nu = robot.nu
+    return np.concatenate([q, np.zeros(2 * nu), np.zeros(nu), robot.kd])
+
+
+def latch_estop(data: bytes, latched: float) -> tuple[float, bool, bool]:
+    """(latched, newly engaged, rejected) after the E-stop channel's current ``data``.
+
+    Once latched it stays latched (a robot's E-stop needs a reset, not a message); a
+    malformed message is rejected and leaves the latch as it was.
+    """
+    if not data or latched:
+        return latched, False, False
+    try:
+        engaged = decode_estop(data).engaged
+    except MessageRejected:
+        return latched, False, True
+    return (1.0, True, False) if engaged else (latched, False, False)
+
+
+class Inbox:
+    """Takes over new messages from a raw-bytes subscriber port inside a periodic update.
+
+    Per channel, discrete state keeps the last good values, the last good message's utime, the
+    time it arrived and whether any arrived; abstract state the last bytes seen, so one bad
+    message counts once however long it stays on the port.
+    """
+
+    def __init__(self, system: LeafSystem, channel: str, decode, default: np.ndarray):
+        self.decode = decode
+        self.port = system.DeclareAbstractInputPort(channel, AbstractValue.Make(b""))
+        self.values = system.DeclareDiscreteState(default)
+        self.meta = system.DeclareDiscreteState([-1.0, -np.inf, 0.0])  # utime, arrival time, received
+        self.seen = system.DeclareAbstractState(AbstractValue.Make(b""))
+
+    def take(self, context, state) -> bool:
+        """Takes the port's message if it is new; False if it was rejected (and new)."""
+        data = self.port.Eval(context)
+        if not data or data == context.get_abstract_state(int(self.seen)).get_value():
+            return True
+        state.get_mutable_abstract_state(int(self.seen)).set_value(data)
+        utime, _, _ = context.get_discrete_state(self.meta).value()
+        try:
+            msg_utime, values = self.decode(data)
+        except MessageRejected:
+            return False
+        if msg_utime <= utime:  # a repeat or out of order
+            return False
+        discrete = state.get_mutable_discrete_state()
+        discrete.get_mutable_vector(int(self.meta)).SetFromVector([msg_utime, context.get_time(), 1.0])
+        discrete.get_mutable_vector(int(self.values)).SetFromVector(values)
+        return True
+
+    def fresh(self, context, state, timeout: float) -> bool:
+        """Whether, after this update's ``take``, a message arrived within ``timeout``."""
+        _, arrival, received = state.get_discrete_state().get_vector(int(self.meta)).value()
+        return bool(received) and context.get_time() - arrival <= timeout
+
+
+class MeasurementReceiver(LeafSystem):
+    """Proprioception and motion-capture messages → the station's measurement ports.
+
+    | port            | dir | size     | meaning                                              |
+    |-----------------|-----|----------|------------------------------------------------------|
+    | proprioception  | in  | abstract | raw bytes of ROMOCO_PROPRIOCEPTION                    |
+    | base_state      | in  | abstract | raw bytes of ROMOCO_BASE_STATE                        |
+    | joint_state, imu, foot_contact, base_pose, base_velocity | out | as the station | last good values |
+    | link            | out | 1        | 1 while proprioception is fresh, else 0               |
+    | stats           | out | 2        | rejected messages, stale events                       |
+    """
+
+    def __init__(self, robot: RobotModel, config: LinkConfig):
+        super().__init__()
+        self.config = config
+        nj = len(robot.joint_names)
+        start = nominal_measurements(robot)
+
+        def proprioception(data):
+            m = decode_proprioception(data, nj)
+            return m.utime, np.concatenate([m.q, m.v, m.imu, m.foot_contact])
+
+        def base_state(data):
+            m = decode_base_state(data)
+            return m.utime, np.concatenate([m.quaternion, m.position, m.angular_velocity, m.linear_velocity])
+
+        first = np.concatenate([start["joint_state"], start["imu"], start["foot_contact"]])
+        self.proprioception = Inbox(self, "proprioception", proprioception, first)
+        self.base_state = Inbox(self, "base_state", base_state,
+                                np.concatenate([start["base_pose"], start["base_velocity"]]))
+        self._link = self.DeclareDiscreteState(1)
+        self._stats = self.DeclareDiscreteState(2)
+        layout = {"joint_state": (self.proprioception, 0, 2 * nj),
+                  "imu": (self.proprioception, 2 * nj, 2 * nj + 10),
+                  "foot_contact": (self.proprioception, 2 * nj + 10, 2 * nj + 12),
+                  "base_pose": (self.base_state, 0, 7), "base_velocity": (self.base_state, 7, 13)}
+        for name, (inbox, a, b) in layout.items():
+            self.DeclareVectorOutputPort(
+                name, b - a, lambda context, out, inbox=inbox, a=a, b=b:
+                out.SetFromVector(context.get_discrete_state(inbox.values).value()[a:b]),
+                prerequisites_of_calc={self.discrete_state_ticket(inbox.values)})
+        self.link_port = self.DeclareStateOutputPort("link", self._link)
+        self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.receive_rate_hz, 0.0, self._update)
+
+    def _update(self, context, state) -> None:
+        rejected, stale_events = context.get_discrete_state(self._stats).value()
+        for inbox in (self.proprioception, self.base_state):
+            rejected += not inbox.take(context, state)
+        link = float(self.proprioception.fresh(context, state, self.config.timeout_s))
+        was = context.get_discrete_state(self._link).GetAtIndex(0)
+        stale_events += was == 1.0 and link == 0.0
+        state.get_mutable_discrete_state().get_mutable_vector(int(self._link)).SetFromVector([link])
+        state.get_mutable_discrete_state().get_mutable_vector(int(self._stats)).SetFromVector(
+            [rejected, stale_events])
+
+
+class CommandSender(LeafSystem):
+    """The controller's actuation or motor command → a checked ROMOCO_MOTOR_COMMAND message.
+
+    | port          | dir | size     | meaning                                                |
+    |---------------|-----|----------|--------------------------------------------------------|
+    | actuation     | in  | nu       | joint torques (N·m), added to τ_ff                     |
+    | motor_command | in  | 5·nu     | (``motor_pd`` only) q_d, v_d, τ_ff, K_p, K_d             |
+    | joint_state   | in  | 2·nj     | measured joints (damping holds these)                  |
+    | link          | in  | 1        | 1 while proprioception is fresh                        |
+    | estop         | in  | abstract | raw bytes of ROMOCO_ESTOP                              |
+    | message       | out | abstract | encoded biped_motor_command_t of the last update       |
+    | command       | out | 5·nu     | the command sent                                        |
+    | stats         | out | 3        | rejected (non-finite) commands, clamped commands, E-stop engagements |
+
+    One update every ``period`` (the controller's rate): damping while the link is not fresh
+    or the E-stop is latched, else the controller's command, clamped (module docstring).
+    """
+
+    def __init__(self, robot: RobotModel, period: float, motor_pd: bool, config: LinkConfig):
+        super().__init__()
+        self.robot, self.motor_pd = robot, motor_pd
+        nu, nj = robot.nu, len(robot.joint_names)
+        self._joint_of_actuator = np.array(
+            [robot.joint_names.index(name) for name in robot.actuator_names], dtype=int)
+        q_lo, q_hi = robot.q_lower[robot.actuated_q_index], robot.q_upper[robot.actuated_q_index]
+        speed, effort = np.full(nu, config.max_joint_speed), robot.effort_limits
+        gain = config.max_gain_factor
+        self._lower = np.concatenate([q_lo, -speed, -effort, np.zeros(2 * nu)])
+        self._upper = np.concatenate([q_hi, speed, effort, gain * robot.kp, gain * robot.kd])
+        self.actuation_port = self.DeclareVectorInputPort("actuation", nu)
+        self.motor_command_port = self.DeclareVectorInputPort("motor_command", 5 * nu) if motor_pd else None
+        self.joint_state_port = self.DeclareVectorInputPort("joint_state", 2 * nj)
+        self.link_port = self.DeclareVectorInputPort("link", 1)
+        self.estop_port = self.DeclareAbstractInputPort("estop", AbstractValue.Make(b""))
+        self._command = self.DeclareDiscreteState(
+            damping_command(robot, robot.nominal.q[robot.actuated_q_index]))
+        self._stats = self.DeclareDiscreteState(3)
+        self._estop = self.DeclareDiscreteState(1)
+        self.command_port = self.DeclareStateOutputPort("command", self._command)
+        self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
+        self.message_port = self.DeclareAbstractOutputPort(
+            "message", lambda: AbstractValue.Make(b""), self._message,
+            prerequisites_of_calc={self.discrete_state_ticket(self._command)})
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+
+    def _controller_command(self, context) -> np.ndarray:
+        nu = self.robot.nu
+        if self.motor_pd:
+            command = self.motor_command_port.Eval(context).copy()
+        else:
+            command = np.zeros(5 * nu)
+            command[:nu] = self.joint_state_port.Eval(context)[self._joint_of_actuator]
+        command[2 * nu:3 * nu] += self.actuation_port.Eval(context)
+        return command
+
+    def _update(self, context, discrete_state) -> None:
+        rejected, clamped, estops = context.get_discrete_state(self._stats).value()
+        latched, engaged, bad = latch_estop(self.estop_port.Eval(context),
+                                            context.get_discrete_state(self._estop).GetAtIndex(0))
+        estops, rejected = estops + engaged, rejected + bad
+        q = self.joint_state_port.Eval(context)[self._joint_of_actuator]
+        command = damping_command(self.robot, q)
+        if self.link_port.Eval(context)[0] == 1.0 and not latched:
+            wanted = self._controller_command(context)
+            if not np.all(np.isfinite(wanted)):
+                rejected += 1
+            else:
+                command = np.clip(wanted, self._lower, self._upper)
+                clamped += bool(np.any(command != wanted))
+        discrete_state.set_value(self._command, command)
+        discrete_state.set_value(self._stats, [rejected, clamped, estops])
+        discrete_state.set_value(self._estop, [latched])
+
+    def _message(self, context, out) -> None:
+        q_d, v_d, tau_ff, kp, kd = context.get_discrete_state(self._command).value().reshape(5, self.robot.nu)
+        utime = int(round(context.get_time() * 1e6))
+        out.set_value(encode_motor_command(MotorCommand(utime, q_d, v_d, tau_ff, kp, kd)))
+
+
+def subscribe(builder: DiagramBuilder, lcm: DrakeLcmInterface, channel: str, port) -> None:
+    """Feeds ``port`` the raw bytes of the newest message on ``channel``."""
+    sub = builder.AddNamedSystem(f"{channel.lower()}_subscriber",
+                                 LcmSubscriberSystem(channel, RawBytesSerializer(), lcm))
+    builder.Connect(sub.get_output_port(), port)
+
+
+def publish(builder: DiagramBuilder, lcm: DrakeLcmInterface, channel: str, port, period: float) -> None:
+    """Publishes the bytes on ``port`` to ``channel`` every ``period`` s."""
+    pub = builder.AddNamedSystem(f"{channel.lower()}_publisher",
+                                 LcmPublisherSystem(channel, RawBytesSerializer(), lcm, period))
+    builder.Connect(port, pub.get_input_port())
+
+
+def make_hardware_station(robot: RobotModel, lcm: DrakeLcmInterface, period: float, motor_pd: bool = False,
+                          config: LinkConfig | None = None) -> Diagram:
+    """The controller's side of the LCM link, with the simulated station's ports (module docstring).
+
+    ``period`` is the controller's tick: commands are sent at that rate.
+    """
+    config = config or LinkConfig()
+    builder = DiagramBuilder()
+    builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
+    receiver = builder.AddNamedSystem("receiver", MeasurementReceiver(robot, config))
+    sender = builder.AddNamedSystem("sender", CommandSender(robot, period, motor_pd, config))
+    subscribe(builder, lcm, PROPRIOCEPTION_CHANNEL, receiver.GetInputPort("proprioception"))
+    subscribe(builder, lcm, BASE_STATE_CHANNEL, receiver.GetInputPort("base_state"))
+    subscribe(builder, lcm, ESTOP_CHANNEL, sender.estop_port)
+    publish(builder, lcm, MOTOR_COMMAND_CHANNEL, sender.message_port, period)
+    builder.Connect(receiver.GetOutputPort("joint_state"), sender.joint_state_port)
+    builder.Connect(receiver.link_port, sender.link_port)
+    if motor_pd:
+        builder.ExportInput(sender.motor_command_port, "motor_command")
+    builder.ExportInput(sender.actuation_port, "actuation")
+    for name in ("joint_state", "imu", "foot_contact", "base_pose", "base_velocity"):
+        builder.ExportOutput(receiver.GetOutputPort(name), name)
+    diagram = builder.Build()
+    diagram.set_name(f"{robot.name}_hardware_station")
+    return diagram
+
+
+def link_summary(station: Diagram, context) -> dict:
+    """The safety counters of a hardware station (``context``: the root context)."""
+    receiver, sender = station.GetSubsystemByName("receiver"), station.GetSubsystemByName("sender")
+    rejected_in, stale = receiver.stats_port.Eval(receiver.GetMyContextFromRoot(context))
+    rejected_out, clamped, estops = sender.stats_port.Eval(sender.GetMyContextFromRoot(context))
+    return {"stale_events": int(stale), "rejected_messages": int(rejected_in + rejected_out),
+            "clamped_commands": int(clamped), "estop": int(estops)}
+
+
+class StatusSender(LeafSystem):
+    """The controller's mode, command, state estimate and tracking errors → ROMOCO_STATUS bytes.
+
+    | port           | dir | size     | meaning                                        |
+    |----------------|-----|----------|------------------------------------------------|
+    | state          | in  | nq+nv    | the controller's state estimate                |
+    | mode           | in  | 1        | index into MODES                               |
+    | command        | in  | ≥ 3      | walking command (vx, vy, wz first)             |
+    | tracking_error | in  | k        | per-group output tracking errors               |
+    | message        | out | abstract | encoded controller_status_t (utime = sim time) |
+
+    What a log needs to be plotted and scored without the simulator (``romoco plot``).
+    """
+
+    def __init__(self, robot: RobotModel, command_size: int, num_errors: int):
+        super().__init__()
+        self.robot = robot
+        self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
+        self.mode_port = self.DeclareVectorInputPort("mode", 1)
+        self.command_port = self.DeclareVectorInputPort("command", command_size)
+        self.tracking_error_port = self.DeclareVectorInputPort("tracking_error", num_errors)
+        self.message_port = self.DeclareAbstractOutputPort("message", lambda: AbstractValue.Make(b""),
+                                                           self._message)
+
+    def _message(self, context, out) -> None:
+        out.set_value(encode_controller_status(ControllerStatus(
+            int(round(context.get_time() * 1e6)), self.robot.name, int(self.mode_port.Eval(context)[0]),
+            self.command_port.Eval(context)[:3], self.state_port.Eval(context),
+            self.tracking_error_port.Eval(context))))

@@ -1,0 +1,180 @@
+"""A simulated robot behind LCM: the stand-in for hardware that ``romoco robot-sim`` runs.
+
+It is the robot's side of the link the hardware station talks to
+(:mod:`~romoco_drake.interfaces.hardware`): the simulated station with motor PD loops, its
+sensors published as ROMOCO_PROPRIOCEPTION and its base as ROMOCO_BASE_STATE (what a
+motion-capture system would send), and ROMOCO_MOTOR_COMMAND applied to the motors.
+
+Like a robot's own firmware it protects itself: a command stream that stops (no new command
+within ``timeout_s``), a rejected command, or an engaged ROMOCO_ESTOP puts the motors in
+damping (K_p = 0, the YAML's K_d); the E-stop latches. Counted in ``robot_summary``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.geometry import Meshcat
+from pydrake.lcm import DrakeLcmInterface
+from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.lcm import LcmInterfaceSystem
+from pydrake.systems.primitives import ConstantVectorSource
+
+from romoco_drake.interfaces.hardware import (
+    Inbox,
+    LinkConfig,
+    damping_command,
+    latch_estop,
+    publish,
+    subscribe,
+)
+from romoco_drake.interfaces.lcm_codec import (
+    BASE_STATE_CHANNEL,
+    ESTOP_CHANNEL,
+    MOTOR_COMMAND_CHANNEL,
+    PROPRIOCEPTION_CHANNEL,
+    BaseState,
+    Proprioception,
+    decode_motor_command,
+    encode_base_state,
+    encode_proprioception,
+)
+from romoco_drake.interfaces.sensors import SensorConfig
+from romoco_drake.interfaces.station import make_station
+from romoco_drake.robots.model import RobotModel
+
+
+class CommandReceiver(LeafSystem):
+    """ROMOCO_MOTOR_COMMAND (and ROMOCO_ESTOP) → the motors' command, damping when unsafe.
+
+    | port          | dir | size     | meaning                                              |
+    |---------------|-----|----------|------------------------------------------------------|
+    | command       | in  | abstract | raw bytes of ROMOCO_MOTOR_COMMAND                      |
+    | estop         | in  | abstract | raw bytes of ROMOCO_ESTOP                              |
+    | joint_state   | in  | 2·nj     | measured joints (damping holds these)                 |
+    | motor_command | out | 5·nu     | q_d, v_d, τ_ff, K_p, K_d for the station               |
+    | stats         | out | 3        | rejected messages, stale events, E-stop engagements   |
+    """
+
+    def __init__(self, robot: RobotModel, config: LinkConfig):
+        super().__init__()
+        self.robot, self.config = robot, config
+        nu = robot.nu
+        self._joint_of_actuator = np.array(
+            [robot.joint_names.index(name) for name in robot.actuator_names], dtype=int)
+
+        def command(data):
+            m = decode_motor_command(data, nu)
+            return m.utime, np.concatenate([m.q_d, m.v_d, m.tau_ff, m.kp, m.kd])
+
+        self.inbox = Inbox(self, "command", command, damping_command(robot, np.zeros(nu)))
+        self.estop_port = self.DeclareAbstractInputPort("estop", AbstractValue.Make(b""))
+        self.joint_state_port = self.DeclareVectorInputPort("joint_state", 2 * len(robot.joint_names))
+        self._output = self.DeclareDiscreteState(
+            damping_command(robot, robot.nominal.q[robot.actuated_q_index]))
+        self._link = self.DeclareDiscreteState(1)
+        self._stats = self.DeclareDiscreteState(3)
+        self._estop = self.DeclareDiscreteState(1)
+        self.motor_command_port = self.DeclareStateOutputPort("motor_command", self._output)
+        self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.receive_rate_hz, 0.0, self._update)
+
+    def _update(self, context, state) -> None:
+        rejected, stale_events, estops = context.get_discrete_state(self._stats).value()
+        rejected += not self.inbox.take(context, state)
+        latched, engaged, bad = latch_estop(self.estop_port.Eval(context),
+                                            context.get_discrete_state(self._estop).GetAtIndex(0))
+        estops, rejected = estops + engaged, rejected + bad
+        link = float(self.inbox.fresh(context, state, self.config.timeout_s))
+        stale_events += context.get_discrete_state(self._link).GetAtIndex(0) == 1.0 and link == 0.0
+        if link and not latched:
+            command = state.get_discrete_state().get_vector(int(self.inbox.values)).value()
+        else:
+            q = self.joint_state_port.Eval(context)[self._joint_of_actuator]
+            command = damping_command(self.robot, q)
+        discrete = state.get_mutable_discrete_state()
+        discrete.get_mutable_vector(int(self._output)).SetFromVector(command)
+        discrete.get_mutable_vector(int(self._link)).SetFromVector([link])
+        discrete.get_mutable_vector(int(self._stats)).SetFromVector([rejected, stale_events, estops])
+        discrete.get_mutable_vector(int(self._estop)).SetFromVector([latched])
+
+
+class MeasurementSender(LeafSystem):
+    """The station's measurements → ROMOCO_PROPRIOCEPTION and ROMOCO_BASE_STATE bytes.
+
+    | port          | dir | size     | meaning                                                   |
+    |---------------|-----|----------|-----------------------------------------------------------|
+    | joint_state, imu, foot_contact, base_pose, base_velocity | in | as the station | measurements |
+    | motor_command | in  | 5·nu     | the command being applied (its torque is reported as τ)  |
+    | proprioception| out | abstract | encoded biped_proprioception_t (utime = sim time)        |
+    | base_state    | out | abstract | encoded base_state_t                                     |
+
+    τ is the motor's own estimate K_p (q_d − q) + K_d (v_d − v) + τ_ff (as a current-sensing
+    driver reports it), zero for passive joints.
+    """
+
+    def __init__(self, robot: RobotModel):
+        super().__init__()
+        self.robot = robot
+        nj = len(robot.joint_names)
+        self._actuated = np.array([robot.joint_names.index(n) for n in robot.actuator_names], dtype=int)
+        sizes = {"joint_state": 2 * nj, "imu": 10, "foot_contact": 2, "base_pose": 7, "base_velocity": 6,
+                 "motor_command": 5 * robot.nu}
+        self.inputs = {name: self.DeclareVectorInputPort(name, n) for name, n in sizes.items()}
+        for name, calc in (("proprioception", self._proprioception), ("base_state", self._base_state)):
+            self.DeclareAbstractOutputPort(name, lambda: AbstractValue.Make(b""), calc)
+
+    def _utime(self, context) -> int:
+        return int(round(context.get_time() * 1e6))
+
+    def _proprioception(self, context, out) -> None:
+        nj = len(self.robot.joint_names)
+        js = self.inputs["joint_state"].Eval(context)
+        q_d, v_d, tau_ff, kp, kd = self.inputs["motor_command"].Eval(context).reshape(5, self.robot.nu)
+        q, v = js[:nj], js[nj:]
+        tau = np.zeros(nj)
+        tau[self._actuated] = kp * (q_d - q[self._actuated]) + kd * (v_d - v[self._actuated]) + tau_ff
+        out.set_value(encode_proprioception(Proprioception(
+            self._utime(context), q, v, tau, self.inputs["imu"].Eval(context),
+            self.inputs["foot_contact"].Eval(context))))
+
+    def _base_state(self, context, out) -> None:
+        pose, velocity = self.inputs["base_pose"].Eval(context), self.inputs["base_velocity"].Eval(context)
+        out.set_value(encode_base_state(BaseState(self._utime(context), pose[:4], pose[4:], velocity[:3],
+                                                  velocity[3:])))
+
+
+def make_robot_sim(robot: RobotModel, lcm: DrakeLcmInterface, time_step: float = 0.001,
+                   sensors: SensorConfig | None = None, meshcat: Meshcat | None = None,
+                   config: LinkConfig | None = None, publish_period: float = 0.001) -> Diagram:
+    """The simulated robot behind LCM (module docstring); no exported ports.
+
+    Measurements are published every ``publish_period`` s (the robot's own rate).
+    """
+    config = config or LinkConfig()
+    builder = DiagramBuilder()
+    builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
+    station = builder.AddNamedSystem("station", make_station(robot, time_step, meshcat, True, sensors))
+    receiver = builder.AddNamedSystem("receiver", CommandReceiver(robot, config))
+    sender = builder.AddNamedSystem("sender", MeasurementSender(robot))
+    subscribe(builder, lcm, MOTOR_COMMAND_CHANNEL, receiver.GetInputPort("command"))
+    subscribe(builder, lcm, ESTOP_CHANNEL, receiver.estop_port)
+    builder.Connect(station.GetOutputPort("joint_state"), receiver.joint_state_port)
+    builder.Connect(receiver.motor_command_port, station.GetInputPort("motor_command"))
+    zero = builder.AddNamedSystem("no_extra_torque", ConstantVectorSource(np.zeros(robot.nu)))
+    builder.Connect(zero.get_output_port(), station.GetInputPort("actuation"))
+    for name in ("joint_state", "imu", "foot_contact", "base_pose", "base_velocity"):
+        builder.Connect(station.GetOutputPort(name), sender.GetInputPort(name))
+    builder.Connect(receiver.motor_command_port, sender.GetInputPort("motor_command"))
+    publish(builder, lcm, PROPRIOCEPTION_CHANNEL, sender.GetOutputPort("proprioception"), publish_period)
+    publish(builder, lcm, BASE_STATE_CHANNEL, sender.GetOutputPort("base_state"), publish_period)
+    diagram = builder.Build()
+    diagram.set_name(f"{robot.name}_robot_sim")
+    return diagram
+
+
+def robot_summary(robot_sim: Diagram, context) -> dict:
+    """The robot side's safety counters (``context``: the root context)."""
+    receiver = robot_sim.GetSubsystemByName("receiver")
+    rejected, stale, estops = receiver.stats_port.Eval(receiver.GetMyContextFromRoot(context))
+    return {"stale_events": int(stale), "rejected_messages": int(rejected), "estop": int(estops)}
