@@ -88,7 +88,7 @@ class EstimatorConfig:
     capture on hardware); ``kalman``: encoders, IMU and contact switches only."""
 
     name: Literal["ground_truth", "kalman"] = "ground_truth"
-    rate_hz: float = 1000.0
+    rate_hz: float | None = None  # Kalman update rate; None: the controller's rate
 
 
 @dataclass
@@ -134,7 +134,7 @@ def load_scenario(name_or_path: str) -> Scenario:
         raise ConfigError(path, "robot", f"unknown robot '{scenario.robot}' (known: {known})")
     for key, value in (("duration_s", scenario.duration_s), ("time_step", scenario.time_step),
                        ("controller.rate_hz", scenario.controller.rate_hz),
-                       ("estimator.rate_hz", scenario.estimator.rate_hz)):
+                       ("estimator.rate_hz", scenario.estimator.rate_hz or 1.0)):
         if value <= 0:
             raise ConfigError(path, key, f"must be positive, got {value}")
     return scenario
@@ -293,8 +293,9 @@ def _add_estimator(builder: DiagramBuilder, scenario: Scenario, robot: RobotMode
     if scenario.estimator.name == "kalman":
         qb = robot.base_q_start
         start = initial_positions(robot, scenario)[qb + 4:qb + 7] if known_start else None
-        estimator = builder.AddNamedSystem("estimator", KalmanEstimator(
-            robot, 1.0 / scenario.estimator.rate_hz, initial_base_position=start))
+        rate = scenario.estimator.rate_hz or scenario.controller.rate_hz
+        estimator = builder.AddNamedSystem("estimator",
+                                           KalmanEstimator(robot, 1.0 / rate, initial_base_position=start))
         ports = ("joint_state", "imu", "foot_contact")
     else:
         estimator = builder.AddNamedSystem("estimator", GroundTruthEstimator(robot))

@@ -308,7 +308,8 @@ def test_controller_system_ticks_damps_and_counts(kind):
     if kind != "id":
         command = system.motor_command_port.Eval(context)
         np.testing.assert_allclose(tau, system.torque(command, x), atol=1e-9)
-        np.testing.assert_allclose(command[3 * robot.nu:], np.concatenate([robot.kp, robot.kd]))
+        # With the inverse-dynamics feedforward the joint PD's K_p is a quarter of the motors'.
+        np.testing.assert_allclose(command[3 * robot.nu:], np.concatenate([0.25 * robot.kp, robot.kd]))
 
     # NaN references: a failure, the last good command is kept.
     bad = dataclasses.replace(refs, y_des=np.full(len(refs.y), np.nan))

@@ -27,10 +27,13 @@ Feedforward τ_ff, chosen by ``feedforward``:
 
 - ``inverse_dynamics`` (default): the torque of :class:`~romoco_drake.control.inverse_dynamics.
   InverseDynamics` for the same references, i.e. computed torque with joint PD around the IK
-  targets. The joint PD then only corrects what the model misses. Measured on G1 at vx 0.3
-  with its motor gains (hip 200/5, ankle 60/2 N·m/rad, N·m·s/rad): POS-IK with gravity
-  feedforward walked backwards (vx rms error 0.60 m/s; the swing foot lagged its target by
-  6-8 cm) and VEL-IK fell at 2.7 s; with this feedforward both track within 0.03 m/s.
+  targets. The joint PD then only corrects what the model misses, so its K_p is the YAML's
+  scaled by ``position_gain_scale`` (0.25; K_d unscaled). Measured on G1 at vx 0.3 with its
+  motor gains (hip 200/5, ankle 60/2 N·m/rad, N·m·s/rad): POS-IK with gravity feedforward
+  walked backwards (vx rms error 0.60 m/s; the swing foot lagged its target by 6-8 cm) and
+  VEL-IK fell at 2.7 s; with this feedforward both track within 0.03 m/s. On H1 at 0.6 m/s
+  the full K_p held the walk to 0.33 m/s (the PD fights the computed torque at speed), a
+  quarter of it to 0.45 (ID alone: 0.49).
 - ``gravity``: gravity balanced against the domain's contacts: both soles in double support,
   one force at the stance sole's centroid in single support (the ROM's pivot, so the CoP
   stays there rather than under the CoM, usually off the sole), a held base in the air.
@@ -224,7 +227,8 @@ class IkController(LeafSystem):
     def __init__(self, robot: RobotModel, period: float, kind: Literal["velocity", "position"] = "velocity",
                  contact: ContactModel | None = None, gains: tuple[TaskGain, ...] = DEFAULT_TASK_GAINS,
                  max_stale_ticks: int = 20, max_lead: float = 0.2,
-                 feedforward: Literal["inverse_dynamics", "gravity"] = "inverse_dynamics"):
+                 feedforward: Literal["inverse_dynamics", "gravity"] = "inverse_dynamics",
+                 position_gain_scale: float = 0.25):
         super().__init__()
         if kind not in ("velocity", "position"):
             raise ValueError(f"unknown IK kind '{kind}' (velocity or position)")
@@ -237,6 +241,7 @@ class IkController(LeafSystem):
                        else PositionIK(robot, self.contact, gains))
         self.dynamics = (InverseDynamics(robot, self.contact, gains) if feedforward == "inverse_dynamics"
                          else None)
+        self._kp = robot.kp * (position_gain_scale if self.dynamics is not None else 1.0)
         self._context = robot.plant.CreateDefaultContext()
         self._q_limits = (robot.q_lower[robot.actuated_q_index], robot.q_upper[robot.actuated_q_index])
         self._ankles = {side: _ankle_actuators(robot, side) for side in ("left", "right")}
@@ -279,10 +284,10 @@ class IkController(LeafSystem):
             solution = self.solver.solve(self._context, refs)
             q_d, v_d = solution.q[r.actuated_q_index], solution.v[r.actuated_v_index]
         tau_ff = self._feedforward(refs)
-        kp = r.kp
+        kp = self._kp
         if refs.domain in self._ankles:
             # No position feedback at the stance ankle: it acts as the pivot the ROM assumes
-            # (joint damping and the gravity feedforward stay).
+            # (joint damping and the feedforward stay).
             kp = kp.copy()
             kp[self._ankles[refs.domain]] = 0.0
         return np.concatenate([q_d, v_d, tau_ff, kp, r.kd])
