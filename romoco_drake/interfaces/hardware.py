@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.lcm import DrakeLcmInterface
-from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem, ValueProducer
 from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
 
 from romoco_drake.interfaces.lcm_codec import (
@@ -115,11 +115,14 @@ def latch_estop(data: bytes, latched: float) -> tuple[float, bool, bool]:
 
 
 class Inbox:
-    """Takes over new messages from a raw-bytes subscriber port inside a periodic update.
+    """Reads a raw-bytes subscriber port: the newest good message's values, and bookkeeping.
 
-    Per channel, discrete state keeps the last good values, the last good message's utime, the
-    time it arrived and whether any arrived; abstract state the last bytes seen, so one bad
-    message counts once however long it stays on the port.
+    ``latest`` (a cache entry) is the port's current message decoded, if it decodes and is not
+    older than the last one taken, else the last good values: the newest measurement reaches
+    the controller without waiting for a periodic update. ``take``, run inside the owner's
+    periodic update, keeps in discrete state the last good values, the last good message's
+    utime, the time it arrived and whether any arrived, and in abstract state the last bytes
+    seen, so one bad message is counted once however long it stays on the port.
     """
 
     def __init__(self, system: LeafSystem, channel: str, decode, default: np.ndarray):
@@ -128,6 +131,23 @@ class Inbox:
         self.values = system.DeclareDiscreteState(default)
         self.meta = system.DeclareDiscreteState([-1.0, -np.inf, 0.0])  # utime, arrival time, received
         self.seen = system.DeclareAbstractState(AbstractValue.Make(b""))
+        self.latest = system.DeclareCacheEntry(
+            f"newest good {channel}", ValueProducer(allocate=lambda: AbstractValue.Make(default.copy()),
+                                                    calc=self._latest),
+            {system.input_port_ticket(self.port.get_index()), system.discrete_state_ticket(self.values),
+             system.discrete_state_ticket(self.meta)})
+
+    def _latest(self, context, value) -> None:
+        data = self.port.Eval(context)
+        if data:
+            try:
+                utime, values = self.decode(data)
+                if utime >= context.get_discrete_state(self.meta).GetAtIndex(0):
+                    value.set_value(values)
+                    return
+            except MessageRejected:
+                pass
+        value.set_value(context.get_discrete_state(self.values).value().copy())
 
     def take(self, context, state) -> bool:
         """Takes the port's message if it is new; False if it was rejected (and new)."""
@@ -160,7 +180,7 @@ class MeasurementReceiver(LeafSystem):
     |-----------------|-----|----------|------------------------------------------------------|
     | proprioception  | in  | abstract | raw bytes of ROMOCO_PROPRIOCEPTION                    |
     | base_state      | in  | abstract | raw bytes of ROMOCO_BASE_STATE                        |
-    | joint_state, imu, foot_contact, base_pose, base_velocity | out | as the station | last good values |
+    | joint_state, imu, foot_contact, base_pose, base_velocity | out | as the station | newest good values |
     | link            | out | 1        | 1 while proprioception is fresh, else 0               |
     | stats           | out | 2        | rejected messages, stale events                       |
     """
@@ -192,8 +212,8 @@ class MeasurementReceiver(LeafSystem):
         for name, (inbox, a, b) in layout.items():
             self.DeclareVectorOutputPort(
                 name, b - a, lambda context, out, inbox=inbox, a=a, b=b:
-                out.SetFromVector(context.get_discrete_state(inbox.values).value()[a:b]),
-                prerequisites_of_calc={self.discrete_state_ticket(inbox.values)})
+                out.SetFromVector(inbox.latest.Eval(context)[a:b]),
+                prerequisites_of_calc={inbox.latest.ticket()})
         self.link_port = self.DeclareStateOutputPort("link", self._link)
         self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.receive_rate_hz, 0.0, self._update)
@@ -224,8 +244,10 @@ class CommandSender(LeafSystem):
     | command       | out | 5·nu     | the command sent                                        |
     | stats         | out | 3        | rejected (non-finite) commands, clamped commands, E-stop engagements |
 
-    One update every ``period`` (the controller's rate): damping while the link is not fresh
-    or the E-stop is latched, else the controller's command, clamped (module docstring).
+    The command is computed from the current inputs, so the message published at a tick
+    carries the controller's command of that tick: damping while the link is not fresh or the
+    E-stop is latched, else the controller's command, clamped (module docstring). The periodic
+    update (every ``period``, the controller's rate) latches the E-stop and counts.
     """
 
     def __init__(self, robot: RobotModel, period: float, motor_pd: bool, config: LinkConfig):
@@ -244,47 +266,44 @@ class CommandSender(LeafSystem):
         self.joint_state_port = self.DeclareVectorInputPort("joint_state", 2 * nj)
         self.link_port = self.DeclareVectorInputPort("link", 1)
         self.estop_port = self.DeclareAbstractInputPort("estop", AbstractValue.Make(b""))
-        self._command = self.DeclareDiscreteState(
-            damping_command(robot, robot.nominal.q[robot.actuated_q_index]))
         self._stats = self.DeclareDiscreteState(3)
         self._estop = self.DeclareDiscreteState(1)
-        self.command_port = self.DeclareStateOutputPort("command", self._command)
+        self.command_port = self.DeclareVectorOutputPort("command", 5 * nu, self._command)
         self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
         self.message_port = self.DeclareAbstractOutputPort(
-            "message", lambda: AbstractValue.Make(b""), self._message,
-            prerequisites_of_calc={self.discrete_state_ticket(self._command)})
+            "message", lambda: AbstractValue.Make(b""), self._message)
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
 
-    def _controller_command(self, context) -> np.ndarray:
+    def _checked(self, context, latched: float) -> tuple[np.ndarray, bool, bool]:
+        """(command to send, rejected as non-finite, clamped) for the current inputs."""
         nu = self.robot.nu
+        q = self.joint_state_port.Eval(context)[self._joint_of_actuator]
+        if self.link_port.Eval(context)[0] != 1.0 or latched:
+            return damping_command(self.robot, q), False, False
         if self.motor_pd:
-            command = self.motor_command_port.Eval(context).copy()
+            wanted = self.motor_command_port.Eval(context).copy()
         else:
-            command = np.zeros(5 * nu)
-            command[:nu] = self.joint_state_port.Eval(context)[self._joint_of_actuator]
-        command[2 * nu:3 * nu] += self.actuation_port.Eval(context)
-        return command
+            wanted = np.concatenate([q, np.zeros(4 * nu)])
+        wanted[2 * nu:3 * nu] += self.actuation_port.Eval(context)
+        if not np.all(np.isfinite(wanted)):
+            return damping_command(self.robot, q), True, False
+        command = np.clip(wanted, self._lower, self._upper)
+        return command, False, bool(np.any(command != wanted))
+
+    def _command(self, context, out) -> None:
+        out.SetFromVector(self._checked(context, context.get_discrete_state(self._estop).GetAtIndex(0))[0])
 
     def _update(self, context, discrete_state) -> None:
         rejected, clamped, estops = context.get_discrete_state(self._stats).value()
         latched, engaged, bad = latch_estop(self.estop_port.Eval(context),
                                             context.get_discrete_state(self._estop).GetAtIndex(0))
-        estops, rejected = estops + engaged, rejected + bad
-        q = self.joint_state_port.Eval(context)[self._joint_of_actuator]
-        command = damping_command(self.robot, q)
-        if self.link_port.Eval(context)[0] == 1.0 and not latched:
-            wanted = self._controller_command(context)
-            if not np.all(np.isfinite(wanted)):
-                rejected += 1
-            else:
-                command = np.clip(wanted, self._lower, self._upper)
-                clamped += bool(np.any(command != wanted))
-        discrete_state.set_value(self._command, command)
-        discrete_state.set_value(self._stats, [rejected, clamped, estops])
+        _, non_finite, clipped = self._checked(context, latched)
+        counts = [rejected + bad + non_finite, clamped + clipped, estops + engaged]
+        discrete_state.set_value(self._stats, counts)
         discrete_state.set_value(self._estop, [latched])
 
     def _message(self, context, out) -> None:
-        q_d, v_d, tau_ff, kp, kd = context.get_discrete_state(self._command).value().reshape(5, self.robot.nu)
+        q_d, v_d, tau_ff, kp, kd = self.command_port.Eval(context).reshape(5, self.robot.nu)
         utime = int(round(context.get_time() * 1e6))
         out.set_value(encode_motor_command(MotorCommand(utime, q_d, v_d, tau_ff, kp, kd)))
 

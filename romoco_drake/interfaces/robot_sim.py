@@ -52,7 +52,7 @@ class CommandReceiver(LeafSystem):
     | command       | in  | abstract | raw bytes of ROMOCO_MOTOR_COMMAND                      |
     | estop         | in  | abstract | raw bytes of ROMOCO_ESTOP                              |
     | joint_state   | in  | 2·nj     | measured joints (damping holds these)                 |
-    | motor_command | out | 5·nu     | q_d, v_d, τ_ff, K_p, K_d for the station               |
+    | motor_command | out | 5·nu     | newest q_d, v_d, τ_ff, K_p, K_d for the station (or damping) |
     | stats         | out | 3        | rejected messages, stale events, E-stop engagements   |
     """
 
@@ -70,14 +70,25 @@ class CommandReceiver(LeafSystem):
         self.inbox = Inbox(self, "command", command, damping_command(robot, np.zeros(nu)))
         self.estop_port = self.DeclareAbstractInputPort("estop", AbstractValue.Make(b""))
         self.joint_state_port = self.DeclareVectorInputPort("joint_state", 2 * len(robot.joint_names))
-        self._output = self.DeclareDiscreteState(
-            damping_command(robot, robot.nominal.q[robot.actuated_q_index]))
         self._link = self.DeclareDiscreteState(1)
         self._stats = self.DeclareDiscreteState(3)
         self._estop = self.DeclareDiscreteState(1)
-        self.motor_command_port = self.DeclareStateOutputPort("motor_command", self._output)
+        self.motor_command_port = self.DeclareVectorOutputPort(
+            "motor_command", 5 * nu, self._motor_command,
+            prerequisites_of_calc={self.inbox.latest.ticket(), self.discrete_state_ticket(self._link),
+                                   self.discrete_state_ticket(self._estop),
+                                   self.input_port_ticket(self.joint_state_port.get_index())})
         self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.receive_rate_hz, 0.0, self._update)
+
+    def _motor_command(self, context, out) -> None:
+        """The newest command while the stream is fresh and the E-stop is off, else damping."""
+        if context.get_discrete_state(self._link).GetAtIndex(0) and not context.get_discrete_state(
+                self._estop).GetAtIndex(0):
+            out.SetFromVector(self.inbox.latest.Eval(context))
+        else:
+            q = self.joint_state_port.Eval(context)[self._joint_of_actuator]
+            out.SetFromVector(damping_command(self.robot, q))
 
     def _update(self, context, state) -> None:
         rejected, stale_events, estops = context.get_discrete_state(self._stats).value()
@@ -87,13 +98,7 @@ class CommandReceiver(LeafSystem):
         estops, rejected = estops + engaged, rejected + bad
         link = float(self.inbox.fresh(context, state, self.config.timeout_s))
         stale_events += context.get_discrete_state(self._link).GetAtIndex(0) == 1.0 and link == 0.0
-        if link and not latched:
-            command = state.get_discrete_state().get_vector(int(self.inbox.values)).value()
-        else:
-            q = self.joint_state_port.Eval(context)[self._joint_of_actuator]
-            command = damping_command(self.robot, q)
         discrete = state.get_mutable_discrete_state()
-        discrete.get_mutable_vector(int(self._output)).SetFromVector(command)
         discrete.get_mutable_vector(int(self._link)).SetFromVector([link])
         discrete.get_mutable_vector(int(self._stats)).SetFromVector([rejected, stale_events, estops])
         discrete.get_mutable_vector(int(self._estop)).SetFromVector([latched])
