@@ -25,3 +25,12 @@ def test_custom_planner_example():
     summary = module["main"](4.0)
     assert summary["fell"] is False and summary["planner"] == "hlip_clamped"
     assert summary["mean_velocity"][0] > 0.1
+
+
+def test_walk_over_lcm_example():
+    """The E-stop message latches damping on both sides of the link and is counted once each."""
+    module = runpy.run_path(str(EXAMPLES / "walk_over_lcm.py"))
+    summary = module["main"](2.0)
+    assert summary["controller_side"]["estop"] == 1 and summary["robot_side"]["estop"] == 1
+    assert summary["controller_side"]["rejected_messages"] == 0
+    assert summary["command_kp_after_estop"] == 0.0
