@@ -142,7 +142,7 @@ class Inbox:
         if data:
             try:
                 utime, values = self.decode(data)
-                if utime >= context.get_discrete_state(self.meta).GetAtIndex(0):
+                if utime > context.get_discrete_state(self.meta).GetAtIndex(0):  # else: taken or stale
                     value.set_value(values)
                     return
             except MessageRejected:
@@ -283,7 +283,8 @@ class CommandSender(LeafSystem):
         if self.motor_pd:
             wanted = self.motor_command_port.Eval(context).copy()
         else:
-            wanted = np.concatenate([q, np.zeros(4 * nu)])
+            # Torque mode: K_p = 0, so q_d only has to be valid (within limits, not counted).
+            wanted = np.concatenate([np.clip(q, self._lower[:nu], self._upper[:nu]), np.zeros(4 * nu)])
         wanted[2 * nu:3 * nu] += self.actuation_port.Eval(context)
         if not np.all(np.isfinite(wanted)):
             return damping_command(self.robot, q), True, False

@@ -5,8 +5,9 @@ It is the robot's side of the link the hardware station talks to
 sensors published as ROMOCO_PROPRIOCEPTION and its base as ROMOCO_BASE_STATE (what a
 motion-capture system would send), and ROMOCO_MOTOR_COMMAND applied to the motors.
 
-Like a robot's own firmware it protects itself: a command stream that stops (no new command
-within ``timeout_s``), a rejected command, or an engaged ROMOCO_ESTOP puts the motors in
+Like a robot's own firmware it protects itself: a command stream that stops, or carries only
+rejected messages (no good new command within ``timeout_s``; a single rejected message leaves
+the last good command in force until then), or an engaged ROMOCO_ESTOP puts the motors in
 damping (K_p = 0, the YAML's K_d); the E-stop latches. Counted in ``robot_summary``.
 """
 
