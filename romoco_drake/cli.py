@@ -155,7 +155,7 @@ def _cmd_robot_sim(args) -> int:
 
     meshcat = _live_meshcat(args.meshcat)
     summary = run_robot_sim(load_scenario(args.scenario), args.duration, args.lcm_url, meshcat,
-                            progress=stderr_progress)
+                            progress=stderr_progress, wait_s=args.wait)
     if args.json:
         print(json.dumps(summary))
     else:
@@ -308,6 +308,8 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--lcm-url", help="LCM URL (default: Drake's UDP multicast)")
     p.add_argument("--duration", type=float, default=None, help="seconds to run (default: the scenario's)")
     p.add_argument("--meshcat", action="store_true", help="serve a live Meshcat view")
+    p.add_argument("--wait", type=float, default=60.0, metavar="S",
+                   help="seconds to wait for the controller's first command before starting")
     p.add_argument("--json", action="store_true", help="print the summary as JSON (last line)")
     p.set_defaults(func=_cmd_robot_sim)
     p = sub.add_parser("plot", help="plot a run from its LCM log (romoco run --lcm-log)")

@@ -123,21 +123,32 @@ def run_scenario(
 
 
 def run_robot_sim(scenario: Scenario, duration: float | None = None, lcm_url: str | None = None,
-                  meshcat: Meshcat | None = None, progress=None) -> dict:
-    """Runs ``scenario``'s robot behind LCM at real time (``romoco robot-sim``) and summarises it."""
+                  meshcat: Meshcat | None = None, progress=None, wait_s: float = 60.0) -> dict:
+    """Runs ``scenario``'s robot behind LCM at real time (``romoco robot-sim``) and summarises it.
+
+    The simulation starts when the first motor command arrives (waiting up to ``wait_s`` of
+    wall time), so the robot does not collapse in damping before a controller is up.
+    """
     duration = scenario.duration_s if duration is None else duration
     if duration <= 0:
         raise RomocoError(f"--duration must be positive, got {duration}")
     lcm = make_lcm(lcm_url)
     robot = load_robot(scenario.robot)
-    robot_sim = make_robot_sim(robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link)
+    robot_sim = make_robot_sim(robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link,
+                               wait_for_commands_s=wait_s)
     simulator = Simulator(robot_sim)
     context = simulator.get_mutable_context()
     station = robot_sim.GetSubsystemByName("station")
     plant = station.GetSubsystemByName("plant")
     plant.SetPositions(plant.GetMyMutableContextFromRoot(context), initial_positions(robot, scenario))
     simulator.set_target_realtime_rate(1.0)
-    simulator.Initialize()
+    if progress is not None:
+        progress(f"[robot-sim {robot.name}] waiting up to {wait_s:g} s for commands on {lcm.get_lcm_url()}")
+    try:
+        simulator.Initialize()
+    except RuntimeError as e:
+        raise RomocoError(f"robot-sim: no motor command within {wait_s:g} s "
+                          f"({str(e).splitlines()[0][:120]})") from None
     last_print = time.perf_counter()
     while context.get_time() < duration - 1e-9:
         simulator.AdvanceTo(min(duration, context.get_time() + 0.1))

@@ -309,10 +309,12 @@ class CommandSender(LeafSystem):
         out.set_value(encode_motor_command(MotorCommand(utime, q_d, v_d, tau_ff, kp, kd)))
 
 
-def subscribe(builder: DiagramBuilder, lcm: DrakeLcmInterface, channel: str, port) -> None:
-    """Feeds ``port`` the raw bytes of the newest message on ``channel``."""
-    sub = builder.AddNamedSystem(f"{channel.lower()}_subscriber",
-                                 LcmSubscriberSystem(channel, RawBytesSerializer(), lcm))
+def subscribe(builder: DiagramBuilder, lcm: DrakeLcmInterface, channel: str, port,
+              wait_s: float = 0.0) -> None:
+    """Feeds ``port`` the raw bytes of the newest message on ``channel``; with ``wait_s`` > 0 the
+    simulation's initialization waits up to that long (wall time) for the first message."""
+    sub = builder.AddNamedSystem(f"{channel.lower()}_subscriber", LcmSubscriberSystem(
+        channel, RawBytesSerializer(), lcm, wait_for_message_on_initialization_timeout=wait_s))
     builder.Connect(sub.get_output_port(), port)
 
 

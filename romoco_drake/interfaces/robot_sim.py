@@ -152,10 +152,13 @@ class MeasurementSender(LeafSystem):
 
 def make_robot_sim(robot: RobotModel, lcm: DrakeLcmInterface, time_step: float = 0.001,
                    sensors: SensorConfig | None = None, meshcat: Meshcat | None = None,
-                   config: LinkConfig | None = None, publish_period: float = 0.001) -> Diagram:
+                   config: LinkConfig | None = None, publish_period: float = 0.001,
+                   wait_for_commands_s: float = 0.0) -> Diagram:
     """The simulated robot behind LCM (module docstring); no exported ports.
 
-    Measurements are published every ``publish_period`` s (the robot's own rate).
+    Measurements are published every ``publish_period`` s (the robot's own rate). With
+    ``wait_for_commands_s`` > 0, initialization waits (wall time) for the first command, as a
+    robot hangs in its gantry until the controller is up; otherwise it starts in damping.
     """
     config = config or LinkConfig()
     builder = DiagramBuilder()
@@ -163,7 +166,7 @@ def make_robot_sim(robot: RobotModel, lcm: DrakeLcmInterface, time_step: float =
     station = builder.AddNamedSystem("station", make_station(robot, time_step, meshcat, True, sensors))
     receiver = builder.AddNamedSystem("receiver", CommandReceiver(robot, config))
     sender = builder.AddNamedSystem("sender", MeasurementSender(robot))
-    subscribe(builder, lcm, MOTOR_COMMAND_CHANNEL, receiver.GetInputPort("command"))
+    subscribe(builder, lcm, MOTOR_COMMAND_CHANNEL, receiver.GetInputPort("command"), wait_for_commands_s)
     subscribe(builder, lcm, ESTOP_CHANNEL, receiver.estop_port)
     builder.Connect(station.GetOutputPort("joint_state"), receiver.joint_state_port)
     builder.Connect(receiver.motor_command_port, station.GetInputPort("motor_command"))
