@@ -322,3 +322,17 @@ def test_foot_kinematics_velocity_matches_finite_differences():
     h = 1e-6
     fd = (kinematics(h)[0] - kinematics(-h)[0]) / (2 * h)
     np.testing.assert_allclose(kinematics(0.0)[1], fd, atol=1e-6)
+
+
+def test_g1_walks_on_the_kalman_estimate():
+    """Closed loop on encoders, IMU and contact switches only (with the sensors' default noise):
+    G1 stays up, walks forward as commanded, and the base velocity estimate tracks the truth."""
+    from romoco_drake.runner import run_scenario
+    from romoco_drake.scenario import load_scenario, with_overrides
+
+    scenario = with_overrides(load_scenario("g1_walk"), estimator="kalman", command="0:0,0,0;0.5:0.3,0,0")
+    summary = run_scenario(scenario, duration=3.0)
+    assert not summary["fell"] and summary["steps"] >= 6
+    assert summary["estimator_rejected_updates"] == 0
+    assert summary["velocity_estimate_rms_error"] < 0.05
+    assert summary["velocity_rms_error"][0] < 0.1 and summary["mean_velocity"][0] > 0.1
