@@ -55,6 +55,11 @@ STATE_LOG_PERIOD = 0.01  # s, the state samples summaries and plots are computed
 ESTIMATORS = ("ground_truth", "kalman")
 LINKS = ("sim", "hardware", "via_lcm")
 STATUS_PERIOD = 0.01  # s, controller status messages on LCM links (for logs)
+# On LCM links the controller ticks this long after the robot's step (after the robot's
+# message, robot_sim.PUBLISH_DELAY), as a controller woken by the robot's state message does:
+# it acts on the measurement of that step. Ticking on the robot's step read the previous step's
+# message, one plant step (2 ms on G1) of extra delay.
+LINK_TICK_OFFSET = 1e-4  # s, less than any plant step
 
 
 @dataclass
@@ -243,27 +248,28 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
     builder = DiagramBuilder()
     motor_pd = scenario.controller.name in MOTOR_COMMAND_CONTROLLERS
     period = 1.0 / scenario.controller.rate_hz
+    offset = 0.0 if link == "sim" else LINK_TICK_OFFSET
     plant_station = robot_sim = None
     if link == "sim":
         station = make_station(robot, scenario.time_step, meshcat, motor_pd, scenario.sensors)
         plant_station = builder.AddNamedSystem("station", station)
     else:
         station = builder.AddNamedSystem(
-            "station", make_hardware_station(robot, lcm, period, motor_pd, scenario.link))
+            "station", make_hardware_station(robot, lcm, period, motor_pd, scenario.link, offset))
         if link == "via_lcm":
             robot_sim = builder.AddNamedSystem("robot", make_robot_sim(
-                robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link))
+                robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link, motor_pd=motor_pd))
             plant_station = robot_sim.GetSubsystemByName("station")
-    estimator = _add_estimator(builder, scenario, robot, station, known_start=link != "hardware")
+    estimator = _add_estimator(builder, scenario, robot, station, link != "hardware", offset)
     walking = command = None
     if scenario.controller.name == "standing":
-        controller = builder.AddNamedSystem("controller", StandingController(robot, period=period))
+        controller = builder.AddNamedSystem("controller", StandingController(robot, period, offset))
         builder.Connect(estimator.state_output, controller.state_input)
         builder.Connect(controller.actuation_output, station.GetInputPort("actuation"))
     else:
         command = builder.AddNamedSystem("command", CommandSource(command_segments(scenario, robot)))
         walking = _add_walking_loop(builder, scenario, robot, estimator.state_output, command, station,
-                                    period, law)
+                                    period, offset, law)
         if link != "sim":
             status = builder.AddNamedSystem("status", StatusSender(
                 robot, command.command_port.size(), walking.embedding.tracking_error_port.size()))
@@ -271,7 +277,7 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
             builder.Connect(walking.state_machine.mode_port, status.mode_port)
             builder.Connect(command.command_port, status.command_port)
             builder.Connect(walking.embedding.tracking_error_port, status.tracking_error_port)
-            publish(builder, lcm, STATUS_CHANNEL, status.message_port, STATUS_PERIOD)
+            publish(builder, lcm, STATUS_CHANNEL, status.message_port, STATUS_PERIOD, offset)
     estimate_log = LogVectorOutput(estimator.state_output, builder, STATE_LOG_PERIOD)
     if plant_station is not None:
         monitor = plant_station.GetSubsystemByName("monitor")
@@ -287,15 +293,15 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
 
 
 def _add_estimator(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, station,
-                   known_start: bool):
+                   known_start: bool, offset: float):
     """The scenario's estimator, fed by the station; the Kalman filter starts at the sim's
     initial base position when it is known (simulation), else at its own default."""
     if scenario.estimator.name == "kalman":
         qb = robot.base_q_start
         start = initial_positions(robot, scenario)[qb + 4:qb + 7] if known_start else None
         rate = scenario.estimator.rate_hz or scenario.controller.rate_hz
-        estimator = builder.AddNamedSystem("estimator",
-                                           KalmanEstimator(robot, 1.0 / rate, initial_base_position=start))
+        estimator = builder.AddNamedSystem("estimator", KalmanEstimator(
+            robot, 1.0 / rate, initial_base_position=start, offset=offset))
         ports = ("joint_state", "imu", "foot_contact")
     else:
         estimator = builder.AddNamedSystem("estimator", GroundTruthEstimator(robot))
@@ -305,34 +311,35 @@ def _add_estimator(builder: DiagramBuilder, scenario: Scenario, robot: RobotMode
     return estimator
 
 
-def _make_controller(name: str, robot: RobotModel, core: EmbeddingCore, period: float):
+def _make_controller(name: str, robot: RobotModel, core: EmbeddingCore, period: float, offset: float):
     """The whole-body controller system called ``name``; all share the TscQpController ports."""
     if name == "tscqp":
-        return TscQpController(robot, period, TscQp(robot, core.contact))
+        return TscQpController(robot, period, TscQp(robot, core.contact), offset=offset)
     if name == "id":
-        return InverseDynamicsController(robot, period, InverseDynamics(robot, core.contact))
+        return InverseDynamicsController(robot, period, InverseDynamics(robot, core.contact), offset=offset)
     kind = "velocity" if name == "velik" else "position"
-    return IkController(robot, period, kind=kind, contact=core.contact)
+    return IkController(robot, period, kind=kind, contact=core.contact, offset=offset)
 
 
 def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, state,
-                      command: CommandSource, station, period: float,
+                      command: CommandSource, station, period: float, offset: float,
                       law: FootPlacementLaw | None) -> WalkingLoop:
     """State machine → planner → output embedding → whole-body controller, all at ``period``."""
     if law is None:
         cfg = scenario.planner
         law = make_planner(cfg.name, PlannerParams(mass=robot.total_mass, t_ds=robot.config.walking.t_ds,
                                                    gain=cfg.gain, alpha=cfg.alpha))
-    heading = builder.AddNamedSystem("heading", HeadingHold(robot, period))
+    heading = builder.AddNamedSystem("heading", HeadingHold(robot, period, offset=offset))
     builder.Connect(command.command_port, heading.command_in_port)
     builder.Connect(state, heading.state_port)
-    machine = builder.AddNamedSystem("state_machine", GaitStateMachine(robot, period, law.t_ds))
+    machine = builder.AddNamedSystem("state_machine",
+                                     GaitStateMachine(robot, period, law.t_ds, offset=offset))
     rom_state = builder.AddNamedSystem("rom_state", RomStateFromRobot(robot))
     planner = builder.AddNamedSystem("planner", FootPlacementPlanner(law))
     core = EmbeddingCore(robot)
-    embedding = builder.AddNamedSystem("embedding", OutputEmbedding(robot, period, core))
+    embedding = builder.AddNamedSystem("embedding", OutputEmbedding(robot, period, core, offset))
     controller = builder.AddNamedSystem("controller", _make_controller(scenario.controller.name, robot, core,
-                                                                       period))
+                                                                       period, offset))
     builder.Connect(state, machine.state_port)
     builder.Connect(command.command_port, machine.command_port)
     builder.Connect(state, rom_state.state_port)

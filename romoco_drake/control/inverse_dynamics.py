@@ -205,5 +205,6 @@ class InverseDynamicsController(TscQpController):
     | ``tick_ms`` | out | 1 | wall time of the last update [ms] (instrumentation, not control) |
     """
 
-    def __init__(self, robot: RobotModel, period: float, solver: InverseDynamics, max_stale_ticks: int = 20):
-        super().__init__(robot, period, solver, max_stale_ticks)
+    def __init__(self, robot: RobotModel, period: float, solver: InverseDynamics, max_stale_ticks: int = 20,
+                 offset: float = 0.0):
+        super().__init__(robot, period, solver, max_stale_ticks, offset)

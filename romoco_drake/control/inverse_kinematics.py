@@ -232,7 +232,7 @@ class IkController(LeafSystem):
                  contact: ContactModel | None = None, gains: tuple[TaskGain, ...] = DEFAULT_TASK_GAINS,
                  max_stale_ticks: int = 20, max_lead: float | None = None,
                  feedforward: Literal["inverse_dynamics", "gravity"] = "inverse_dynamics",
-                 position_gain_scale: float = 0.25):
+                 position_gain_scale: float = 0.25, offset: float = 0.0):
         super().__init__()
         if kind not in ("velocity", "position"):
             raise ValueError(f"unknown IK kind '{kind}' (velocity or position)")
@@ -262,7 +262,7 @@ class IkController(LeafSystem):
         self.motor_command_port = self.DeclareStateOutputPort("motor_command", self._command)
         self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
         self.tick_ms_port = self.DeclareStateOutputPort("tick_ms", self._tick)
-        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
 
     def torque(self, command: np.ndarray, x: np.ndarray) -> np.ndarray:
         """τ the motor command gives at state x, clipped to the effort limits."""

@@ -24,14 +24,14 @@ class StandingController(LeafSystem):
     at initialization so the first tick does not start from zero.
     """
 
-    def __init__(self, robot: RobotModel, period: float = 0.001):
+    def __init__(self, robot: RobotModel, period: float = 0.001, offset: float = 0.0):
         super().__init__()
         self._robot = robot
         self._context = robot.plant.CreateDefaultContext()
         self._q0 = robot.nominal.q[robot.actuated_q_index]
         self.state_input = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
         u = self.DeclareDiscreteState(robot.nu)
-        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
         self.DeclareInitializationDiscreteUpdateEvent(self._update)
         self.actuation_output = self.DeclareStateOutputPort("actuation", u)
 

@@ -178,7 +178,8 @@ class TscQpController(LeafSystem):
     | ``tick_ms`` | out | 1 | wall time of the last update [ms] (instrumentation, not control) |
     """
 
-    def __init__(self, robot: RobotModel, period: float, qp: TscQp, max_stale_ticks: int = 20):
+    def __init__(self, robot: RobotModel, period: float, qp: TscQp, max_stale_ticks: int = 20,
+                 offset: float = 0.0):
         super().__init__()
         self.robot, self.qp, self.max_stale_ticks = robot, qp, max_stale_ticks
         self._context = robot.plant.CreateDefaultContext()
@@ -192,7 +193,7 @@ class TscQpController(LeafSystem):
         self.actuation_port = self.DeclareStateOutputPort("actuation", self._tau)
         self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
         self.tick_ms_port = self.DeclareStateOutputPort("tick_ms", self._tick)
-        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
 
     def _damping(self, v: np.ndarray) -> np.ndarray:
         r = self.robot

@@ -41,7 +41,8 @@ class OutputEmbedding(LeafSystem):
     :class:`StandState` latched on entering standing, else nothing.
     """
 
-    def __init__(self, robot: RobotModel, period: float, core: EmbeddingCore | None = None):
+    def __init__(self, robot: RobotModel, period: float, core: EmbeddingCore | None = None,
+                 offset: float = 0.0):
         super().__init__()
         self.robot = robot
         self.core = core or EmbeddingCore(robot)
@@ -57,7 +58,7 @@ class OutputEmbedding(LeafSystem):
         self.tracking_error_port = self.DeclareVectorOutputPort(
             "tracking_error", len(ERROR_GROUPS), self._calc_tracking_error)
         self.DeclareInitializationUnrestrictedUpdateEvent(self._update_swing)
-        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update_swing)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, offset, self._update_swing)
 
     def _default_references(self) -> AbstractValue:
         self.robot.plant.SetPositions(self._plant_context, self.robot.nominal.q)

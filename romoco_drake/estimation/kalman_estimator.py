@@ -56,7 +56,7 @@ class KalmanEstimator(LeafSystem):
     """
 
     def __init__(self, robot: RobotModel, period: float = 0.002, params: KalmanParams | None = None,
-                 initial_base_position: np.ndarray | None = None):
+                 initial_base_position: np.ndarray | None = None, offset: float = 0.0):
         super().__init__()
         self._robot = robot
         self._period = period
@@ -75,7 +75,7 @@ class KalmanEstimator(LeafSystem):
         self._started_index = self.DeclareDiscreteState(1)
         self._contact_time_index = self.DeclareDiscreteState(2)
         self._rejected_index = self.DeclareDiscreteState(1)
-        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
         self.state_output = self.DeclareVectorOutputPort("state", robot.nq + robot.nv, self._calc_state)
 
     # ------------------------------------------------------------------ kinematics

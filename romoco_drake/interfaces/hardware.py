@@ -250,7 +250,8 @@ class CommandSender(LeafSystem):
     update (every ``period``, the controller's rate) latches the E-stop and counts.
     """
 
-    def __init__(self, robot: RobotModel, period: float, motor_pd: bool, config: LinkConfig):
+    def __init__(self, robot: RobotModel, period: float, motor_pd: bool, config: LinkConfig,
+                 offset: float = 0.0):
         super().__init__()
         self.robot, self.motor_pd = robot, motor_pd
         nu, nj = robot.nu, len(robot.joint_names)
@@ -272,7 +273,7 @@ class CommandSender(LeafSystem):
         self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
         self.message_port = self.DeclareAbstractOutputPort(
             "message", lambda: AbstractValue.Make(b""), self._message)
-        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
 
     def _checked(self, context, latched: float) -> tuple[np.ndarray, bool, bool]:
         """(command to send, rejected as non-finite, clamped) for the current inputs."""
@@ -318,28 +319,29 @@ def subscribe(builder: DiagramBuilder, lcm: DrakeLcmInterface, channel: str, por
     builder.Connect(sub.get_output_port(), port)
 
 
-def publish(builder: DiagramBuilder, lcm: DrakeLcmInterface, channel: str, port, period: float) -> None:
-    """Publishes the bytes on ``port`` to ``channel`` every ``period`` s."""
+def publish(builder: DiagramBuilder, lcm: DrakeLcmInterface, channel: str, port, period: float,
+            offset: float = 0.0) -> None:
+    """Publishes the bytes on ``port`` to ``channel`` every ``period`` s (from ``offset``)."""
     pub = builder.AddNamedSystem(f"{channel.lower()}_publisher",
-                                 LcmPublisherSystem(channel, RawBytesSerializer(), lcm, period))
+                                 LcmPublisherSystem(channel, RawBytesSerializer(), lcm, period, offset))
     builder.Connect(port, pub.get_input_port())
 
 
 def make_hardware_station(robot: RobotModel, lcm: DrakeLcmInterface, period: float, motor_pd: bool = False,
-                          config: LinkConfig | None = None) -> Diagram:
+                          config: LinkConfig | None = None, offset: float = 0.0) -> Diagram:
     """The controller's side of the LCM link, with the simulated station's ports (module docstring).
 
-    ``period`` is the controller's tick: commands are sent at that rate.
+    ``period`` and ``offset`` are the controller's tick: commands are sent then.
     """
     config = config or LinkConfig()
     builder = DiagramBuilder()
     builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
     receiver = builder.AddNamedSystem("receiver", MeasurementReceiver(robot, config))
-    sender = builder.AddNamedSystem("sender", CommandSender(robot, period, motor_pd, config))
+    sender = builder.AddNamedSystem("sender", CommandSender(robot, period, motor_pd, config, offset))
     subscribe(builder, lcm, PROPRIOCEPTION_CHANNEL, receiver.GetInputPort("proprioception"))
     subscribe(builder, lcm, BASE_STATE_CHANNEL, receiver.GetInputPort("base_state"))
     subscribe(builder, lcm, ESTOP_CHANNEL, sender.estop_port)
-    publish(builder, lcm, MOTOR_COMMAND_CHANNEL, sender.message_port, period)
+    publish(builder, lcm, MOTOR_COMMAND_CHANNEL, sender.message_port, period, offset)
     builder.Connect(receiver.GetOutputPort("joint_state"), sender.joint_state_port)
     builder.Connect(receiver.link_port, sender.link_port)
     if motor_pd:

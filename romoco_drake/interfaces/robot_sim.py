@@ -44,6 +44,11 @@ from romoco_drake.interfaces.sensors import SensorConfig
 from romoco_drake.interfaces.station import make_station
 from romoco_drake.robots.model import RobotModel
 
+# Measurements leave this long after the robot's step: a publish event at the step's own instant
+# carries the state from before the step (Drake publishes before the plant's discrete update
+# shows), one plant step stale.
+PUBLISH_DELAY = 2e-5  # s
+
 
 class CommandReceiver(LeafSystem):
     """ROMOCO_MOTOR_COMMAND (and ROMOCO_ESTOP) → the motors' command, damping when unsafe.
@@ -54,6 +59,7 @@ class CommandReceiver(LeafSystem):
     | estop         | in  | abstract | raw bytes of ROMOCO_ESTOP                              |
     | joint_state   | in  | 2·nj     | measured joints (damping holds these)                 |
     | motor_command | out | 5·nu     | newest q_d, v_d, τ_ff, K_p, K_d for the station (or damping) |
+    | torque        | out | nu       | that command as torque at the measured joints (torque drives) |
     | stats         | out | 3        | rejected messages, stale events, E-stop engagements   |
     """
 
@@ -79,8 +85,19 @@ class CommandReceiver(LeafSystem):
             prerequisites_of_calc={self.inbox.latest.ticket(), self.discrete_state_ticket(self._link),
                                    self.discrete_state_ticket(self._estop),
                                    self.input_port_ticket(self.joint_state_port.get_index())})
+        self.torque_port = self.DeclareVectorOutputPort("torque", nu, self._torque)
         self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.receive_rate_hz, 0.0, self._update)
+
+    def _torque(self, context, out) -> None:
+        """The motor command as a drive's torque at the measured joints, within the effort limits."""
+        r = self.robot
+        q_d, v_d, tau_ff, kp, kd = self.motor_command_port.Eval(context).reshape(5, r.nu)
+        js = self.joint_state_port.Eval(context)
+        nj = len(r.joint_names)
+        q, v = js[self._joint_of_actuator], js[nj + self._joint_of_actuator]
+        tau = kp * (q_d - q) + kd * (v_d - v) + tau_ff
+        out.SetFromVector(np.clip(tau, -r.effort_limits, r.effort_limits))
 
     def _motor_command(self, context, out) -> None:
         """The newest command while the stream is fresh and the E-stop is off, else damping."""
@@ -153,30 +170,40 @@ class MeasurementSender(LeafSystem):
 def make_robot_sim(robot: RobotModel, lcm: DrakeLcmInterface, time_step: float = 0.001,
                    sensors: SensorConfig | None = None, meshcat: Meshcat | None = None,
                    config: LinkConfig | None = None, publish_period: float = 0.001,
-                   wait_for_commands_s: float = 0.0) -> Diagram:
+                   wait_for_commands_s: float = 0.0, motor_pd: bool = True) -> Diagram:
     """The simulated robot behind LCM (module docstring); no exported ports.
 
     Measurements are published every ``publish_period`` s (the robot's own rate). With
     ``wait_for_commands_s`` > 0, initialization waits (wall time) for the first command, as a
     robot hangs in its gantry until the controller is up; otherwise it starts in damping.
+
+    ``motor_pd`` picks how the motors apply the command's PD: inside the plant step, as a
+    position-controlled motor's own fast loop does (for position-commanding controllers), or
+    as a torque K_p (q_d − q) + K_d (v_d − v) + τ_ff computed from the encoders and held over
+    the plant step, as a torque-controlled drive does (for torque controllers: with K_p = K_d = 0
+    the implicit loop still acts as a damper, K_p⁰·h, and an inertia, K_d⁰·h, at every joint,
+    and G1 walked 8 % fast and kept stepping after the stop over LCM).
     """
     config = config or LinkConfig()
     builder = DiagramBuilder()
     builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
-    station = builder.AddNamedSystem("station", make_station(robot, time_step, meshcat, True, sensors))
+    station = builder.AddNamedSystem("station", make_station(robot, time_step, meshcat, motor_pd, sensors))
     receiver = builder.AddNamedSystem("receiver", CommandReceiver(robot, config))
     sender = builder.AddNamedSystem("sender", MeasurementSender(robot))
     subscribe(builder, lcm, MOTOR_COMMAND_CHANNEL, receiver.GetInputPort("command"), wait_for_commands_s)
     subscribe(builder, lcm, ESTOP_CHANNEL, receiver.estop_port)
     builder.Connect(station.GetOutputPort("joint_state"), receiver.joint_state_port)
-    builder.Connect(receiver.motor_command_port, station.GetInputPort("motor_command"))
-    zero = builder.AddNamedSystem("no_extra_torque", ConstantVectorSource(np.zeros(robot.nu)))
-    builder.Connect(zero.get_output_port(), station.GetInputPort("actuation"))
+    if motor_pd:
+        builder.Connect(receiver.motor_command_port, station.GetInputPort("motor_command"))
+        zero = builder.AddNamedSystem("no_extra_torque", ConstantVectorSource(np.zeros(robot.nu)))
+        builder.Connect(zero.get_output_port(), station.GetInputPort("actuation"))
+    else:
+        builder.Connect(receiver.torque_port, station.GetInputPort("actuation"))
     for name in ("joint_state", "imu", "foot_contact", "base_pose", "base_velocity"):
         builder.Connect(station.GetOutputPort(name), sender.GetInputPort(name))
     builder.Connect(receiver.motor_command_port, sender.GetInputPort("motor_command"))
-    publish(builder, lcm, PROPRIOCEPTION_CHANNEL, sender.GetOutputPort("proprioception"), publish_period)
-    publish(builder, lcm, BASE_STATE_CHANNEL, sender.GetOutputPort("base_state"), publish_period)
+    for channel, port in ((PROPRIOCEPTION_CHANNEL, "proprioception"), (BASE_STATE_CHANNEL, "base_state")):
+        publish(builder, lcm, channel, sender.GetOutputPort(port), publish_period, PUBLISH_DELAY)
     diagram = builder.Build()
     diagram.set_name(f"{robot.name}_robot_sim")
     return diagram

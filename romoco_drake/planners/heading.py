@@ -35,7 +35,8 @@ class HeadingHold(LeafSystem):
     Discrete state: ψ_d, updated every ``period``.
     """
 
-    def __init__(self, robot: RobotModel, period: float, gain: float = 1.0, max_correction: float = 0.3):
+    def __init__(self, robot: RobotModel, period: float, gain: float = 1.0, max_correction: float = 0.3,
+                 offset: float = 0.0):
         super().__init__()
         self.robot, self.period, self.gain, self.max_correction = robot, period, gain, max_correction
         self.command_in_port = self.DeclareVectorInputPort("command_in", COMMAND_SIZE)
@@ -43,7 +44,7 @@ class HeadingHold(LeafSystem):
         self._psi = self.DeclareDiscreteState(1)
         self.command_port = self.DeclareVectorOutputPort("command", COMMAND_SIZE, self._calc)
         self.DeclareInitializationDiscreteUpdateEvent(self._initialize)
-        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._integrate)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._integrate)
 
     def _initialize(self, context, discrete_state) -> None:
         psi = float(base_yaw(self.robot, self.state_port.Eval(context)))

@@ -61,7 +61,7 @@ class GaitStateMachine(LeafSystem):
 
     def __init__(self, robot: RobotModel, period: float, t_ds: float, balance_speed: float = 0.1,
                  stop_steps: int = 2, fall_height: float = 0.5, fall_tilt: float = math.pi / 4,
-                 touchdown_height: float = 0.01):
+                 touchdown_height: float = 0.01, offset: float = 0.0):
         super().__init__()
         self.robot, self.t_ds = robot, t_ds
         self.balance_speed, self.stop_steps = balance_speed, stop_steps
@@ -83,7 +83,7 @@ class GaitStateMachine(LeafSystem):
             "schedule", lambda: AbstractValue.Make(initial),
             lambda c, v: v.set_value(self.schedule(c)),
             prerequisites_of_calc={self.abstract_state_ticket(self._schedule)})
-        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, offset, self._update)
 
     def schedule(self, context) -> GaitSchedule:
         return context.get_abstract_state(self._schedule).get_value()
