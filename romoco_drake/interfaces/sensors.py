@@ -9,6 +9,8 @@ is constant for the run.
 
 from __future__ import annotations
 
+import functools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -190,8 +192,14 @@ class SimulatedSensors(LeafSystem):
 
     def _noise(self, context, port: int, std: np.ndarray) -> np.ndarray:
         """Sample ⌊t·rate⌋'s noise for ``port`` (0 encoders, 2 IMU): a function of (seed, port, k)."""
-        k = int(np.floor(context.get_time() * self._rate + 1e-6))
-        return std * np.random.default_rng([self._seed, port, k]).standard_normal(std.size)
+        k = math.floor(context.get_time() * self._rate + 1e-6)
+        return std * self._standard_normal(port, k, std.size)
+
+    @functools.lru_cache(maxsize=8)  # noqa: B019 (a memo of a pure function; outputs are re-evaluated per state)
+    def _standard_normal(self, port: int, k: int, size: int) -> np.ndarray:
+        draw = np.random.default_rng([self._seed, port, k]).standard_normal(size)
+        draw.flags.writeable = False
+        return draw
 
     def _joint_state(self, context, out) -> None:
         x = self.plant_state_input.Eval(context)
