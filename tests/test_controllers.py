@@ -10,11 +10,7 @@ from pydrake.solvers import ClarabelSolver
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.control.gravity import contact_gravity_compensation
-from romoco_drake.control.inverse_dynamics import (
-    InverseDynamics,
-    InverseDynamicsController,
-    load_split_forces,
-)
+from romoco_drake.control.inverse_dynamics import InverseDynamics, InverseDynamicsController
 from romoco_drake.control.inverse_kinematics import (
     IkController,
     PositionIK,
@@ -22,6 +18,7 @@ from romoco_drake.control.inverse_kinematics import (
     gravity_compensation,
     integrate_configuration,
 )
+from romoco_drake.control.tasks import load_split_forces
 from romoco_drake.control.tscqp import TscQp
 from romoco_drake.embedding.references import MODES, EmbeddingCore
 from romoco_drake.robots.model import load_robot
@@ -180,7 +177,7 @@ def test_inverse_dynamics_agrees_with_tscqp_when_no_inequality_is_active(name, m
         refs = dataclasses.replace(refs, y_des=refs.y.copy(), ydot_des=refs.J @ v,
                                    yddot_des=np.zeros_like(refs.y))
     ours = InverseDynamics(robot, core.contact, load_split_weight=0.0).solve(context, refs)
-    qp = TscQp(robot, core.contact)
+    qp = TscQp(robot, core.contact, load_split_weight=0.0)
     # Double support leaves τ weakly determined (ε_τ = 1e-7), so solve to tight gaps here.
     for option, value in (("equilibrate_enable", True), ("tol_gap_abs", 1e-10), ("tol_gap_rel", 1e-10)):
         qp.options.SetOption(ClarabelSolver.id(), option, value)

@@ -31,14 +31,14 @@ about its sole centroid (TSC-QP's pivot weight). The regularisation is not cosme
 the pendulum by the ROM) would be held still by ankle torque and large internal forces.
 
 In double support the cost also pulls the point forces toward a load split between the feet
-(``InverseDynamics._load_split``: the commanded CoM acceleration's force, shared by where its
-LIP zero-moment point lies between the feet), with a small weight. Without it, the tasks at Cassie's
-first double support asked for a net wrench only a pulling trailing foot gives (−870 N, then
-a fall), and G1 twisted in place after stopping. Targeting only the internal forces (zero net
-wrench) was tried and does not help: the pull is in the net wrench. So the target trades a
-little task accuracy in double support for forces the ground can give, the equality-only
-counterpart of TSC-QP's unilateral constraints; ``load_split_weight=0`` gives the pure
-projection method (exact tracking of feasible task accelerations).
+(:func:`~romoco_drake.control.tasks.load_split_target`: the commanded CoM acceleration's force,
+shared by where its LIP zero-moment point lies), with a small weight. Without it, the tasks at
+Cassie's first double support asked for a net wrench only a pulling trailing foot gives (−870
+N, then a fall), and G1 twisted in place after stopping. Targeting only the internal forces
+(zero net wrench) was tried and does not help: the pull is in the net wrench. So the target
+trades a little task accuracy in double support for forces the ground can give, the
+equality-only counterpart of TSC-QP's unilateral constraints; ``load_split_weight=0`` gives the
+pure projection method (exact tracking of feasible task accelerations).
 
 No friction, CoP or torque limits: the controller clips τ to the effort limits, and contact
 forces may still leave their friction cones or pull on the ground when the tasks demand it
@@ -53,6 +53,7 @@ from romoco_drake.control.tasks import (
     DEFAULT_TASK_GAINS,
     TaskGain,
     TaskStack,
+    load_split_target,
     pivot_moment_map,
     subspace_basis,
     weighted_least_squares,
@@ -61,33 +62,6 @@ from romoco_drake.control.tscqp import QpSolution, TscQpController
 from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.embedding.references import TaskReferences
 from romoco_drake.robots.model import RobotModel
-
-GRAVITY = 9.81  # m/s²
-
-
-def load_split_forces(contact_points: np.ndarray, p_zmp: np.ndarray, force: np.ndarray) -> np.ndarray:
-    """Double-support point forces (3k,) carrying the total ``force`` with its ZMP at ``p_zmp``.
-
-    ``contact_points`` (k×3, world) are the left foot's points then the right foot's, as in
-    the double-support rows of J_h. The right foot's share is where the ZMP projects on the
-    segment between the two foot centroids (clipped to [0, 1]). The ZMP's offset from that
-    segment shifts both feet's centres of pressure: each foot spreads its share over its
-    points with the (clipped, non-negative) barycentric weights of its shifted CoP.
-    """
-    half = len(contact_points) // 2
-    feet = contact_points[:half], contact_points[half:]
-    c_l, c_r = (p.mean(axis=0)[:2] for p in feet)
-    d = c_r - c_l
-    share_r = float(np.clip((p_zmp[:2] - c_l) @ d / max(d @ d, 1e-12), 0.0, 1.0))
-    offset = p_zmp[:2] - (c_l + share_r * d)
-    f = np.empty_like(contact_points)
-    for rows, points, share in ((slice(0, half), feet[0], 1.0 - share_r),
-                                (slice(half, None), feet[1], share_r)):
-        rel = points[:, :2] - points[:, :2].mean(axis=0)
-        A = np.vstack([np.ones(len(points)), rel.T])
-        w = np.clip(np.linalg.lstsq(A, np.array([1.0, *offset]), rcond=None)[0], 0.0, None)
-        f[rows] = np.outer(w / w.sum(), force * share)
-    return f.ravel()
 
 
 class InverseDynamics:
@@ -117,27 +91,6 @@ class InverseDynamics:
         except np.linalg.LinAlgError:  # non-finite inputs: the SVDs do not converge
             r = self.robot
             return QpSolution(np.zeros(r.nu), np.zeros(r.nv), np.zeros(len(refs.holonomic.y)), False)
-
-    def _load_split(self, context, refs: TaskReferences, a_cmd: np.ndarray) -> np.ndarray:
-        """The double-support force target: the commanded CoM acceleration, LIP-style.
-
-        The CoM acceleration commanded by the active ``com_*`` tasks (zero where there is
-        none: walking's double support regulates only the height) sets the total force
-        m (a − g) and, through the LIP relation p_zmp = p_com − z_c a_xy / (g + a_z), where
-        the normal load sits between the feet. So the target agrees with the tasks whenever
-        their demand is feasible and pulls it back into the support when it is not.
-        """
-        n_f = refs.num_contact_forces
-        points = refs.holonomic.y[:n_f].reshape(-1, 3)
-        active = [n for n, on in zip(refs.names, refs.active, strict=True) if on]
-        a_com = np.array([a_cmd[active.index(n)] if n in active else 0.0
-                          for n in ("com_x", "com_y", "com_z")])
-        p_com = self.robot.plant.CalcCenterOfMassPositionInWorld(context)
-        g_plus_az = max(GRAVITY + a_com[2], 0.1 * GRAVITY)
-        z_c = p_com[2] - points[:, 2].mean()
-        p_zmp = p_com[:2] - z_c * a_com[:2] / g_plus_az
-        force = self.robot.total_mass * np.array([a_com[0], a_com[1], g_plus_az])
-        return load_split_forces(points, p_zmp, force)
 
     def _solve(self, context, refs: TaskReferences) -> QpSolution:
         r, plant = self.robot, self.robot.plant
@@ -178,7 +131,7 @@ class InverseDynamics:
             weights.append(np.full(2, self.w_pivot))
         if refs.domain == "double" and self.w_split > 0.0:
             n_f = refs.num_contact_forces
-            f_split = self._load_split(context, refs, a_cmd)
+            f_split = load_split_target(self.robot, context, refs, a_cmd)
             rows.append(L[:n_f])
             targets.append(f_split - lam_p[:n_f])
             weights.append(np.full(n_f, self.w_split))

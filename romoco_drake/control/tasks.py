@@ -35,6 +35,8 @@ class TaskGain:
     weight: float
 
 
+GRAVITY = 9.81  # m/s²
+
 DEFAULT_TASK_GAINS = (
     TaskGain("com_[xy]", 30.0, 12.0, 10.0),  # standing: gentle, the support polygon is small
     TaskGain("com_*", 100.0, 20.0, 10.0),
@@ -170,6 +172,53 @@ def pivot_moment_map(contact: ContactModel, context, refs: TaskReferences) -> np
     G[0, 1::3], G[0, 2::3] = -r[:, 2], r[:, 1]
     G[1, 0::3], G[1, 2::3] = r[:, 2], -r[:, 0]
     return G
+
+
+def load_split_forces(contact_points: np.ndarray, p_zmp: np.ndarray, force: np.ndarray) -> np.ndarray:
+    """Double-support point forces (3k,) carrying the total ``force`` with its ZMP at ``p_zmp``.
+
+    ``contact_points`` (k×3, world) are the left foot's points then the right foot's, as in
+    the double-support rows of J_h. The right foot's share is where the ZMP projects on the
+    segment between the two foot centroids (clipped to [0, 1]). The ZMP's offset from that
+    segment shifts both feet's centres of pressure: each foot spreads its share over its
+    points with the (clipped, non-negative) barycentric weights of its shifted CoP.
+    """
+    half = len(contact_points) // 2
+    feet = contact_points[:half], contact_points[half:]
+    c_l, c_r = (p.mean(axis=0)[:2] for p in feet)
+    d = c_r - c_l
+    share_r = float(np.clip((p_zmp[:2] - c_l) @ d / max(d @ d, 1e-12), 0.0, 1.0))
+    offset = p_zmp[:2] - (c_l + share_r * d)
+    f = np.empty_like(contact_points)
+    for rows, points, share in ((slice(0, half), feet[0], 1.0 - share_r),
+                                (slice(half, None), feet[1], share_r)):
+        rel = points[:, :2] - points[:, :2].mean(axis=0)
+        A = np.vstack([np.ones(len(points)), rel.T])
+        w = np.clip(np.linalg.lstsq(A, np.array([1.0, *offset]), rcond=None)[0], 0.0, None)
+        f[rows] = np.outer(w / w.sum(), force * share)
+    return f.ravel()
+
+
+def load_split_target(robot: RobotModel, context, refs: TaskReferences, a_cmd: np.ndarray) -> np.ndarray:
+    """The double-support point-force target: the commanded CoM acceleration, LIP-style.
+
+    ``a_cmd`` holds the commanded accelerations of the active outputs (then the locked joints).
+    The CoM acceleration commanded by the active ``com_*`` tasks (zero where there is none:
+    walking's double support regulates only the height) sets the total force m (a − g) and,
+    through the LIP relation p_zmp = p_com − z_c a_xy / (g + a_z), where the normal load sits
+    between and under the feet (:func:`load_split_forces`). So the target agrees with the tasks
+    whenever their demand is feasible and pulls it back into the support when it is not.
+    """
+    n_f = refs.num_contact_forces
+    points = refs.holonomic.y[:n_f].reshape(-1, 3)
+    active = [n for n, on in zip(refs.names, refs.active, strict=True) if on]
+    a_com = np.array([a_cmd[active.index(n)] if n in active else 0.0 for n in ("com_x", "com_y", "com_z")])
+    p_com = robot.plant.CalcCenterOfMassPositionInWorld(context)
+    g_plus_az = max(GRAVITY + a_com[2], 0.1 * GRAVITY)
+    z_c = p_com[2] - points[:, 2].mean()
+    p_zmp = p_com[:2] - z_c * a_com[:2] / g_plus_az
+    force = robot.total_mass * np.array([a_com[0], a_com[1], g_plus_az])
+    return load_split_forces(points, p_zmp, force)
 
 
 def placeholder_references(robot: RobotModel) -> TaskReferences:

@@ -29,7 +29,8 @@ class GroundTruthEstimator(LeafSystem):
         self.base_pose_input = self.DeclareVectorInputPort("base_pose", 7)
         self.base_velocity_input = self.DeclareVectorInputPort("base_velocity", 6)
         self.state_output = self.DeclareVectorOutputPort(
-            "state", robot.nq + robot.nv, self._calc_state)
+            "state", robot.nq + robot.nv, self._calc_state,
+            prerequisites_of_calc={self.all_input_ports_ticket()})
 
     def _calc_state(self, context, output: BasicVector) -> None:
         r = self._robot

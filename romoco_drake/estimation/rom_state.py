@@ -33,7 +33,8 @@ class RomStateFromRobot(LeafSystem):
         self._soles = {side: sole_frame(robot, side) for side in ("left", "right")}
         self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
         self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
-        self.rom_state_port = self.DeclareVectorOutputPort("rom_state", ROM_STATE_SIZE, self._calc)
+        self.rom_state_port = self.DeclareVectorOutputPort(
+            "rom_state", ROM_STATE_SIZE, self._calc, prerequisites_of_calc={self.all_input_ports_ticket()})
 
     def compute(self, x: np.ndarray, side: str) -> np.ndarray:
         plant, ctx = self.robot.plant, self._context
