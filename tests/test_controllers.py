@@ -339,3 +339,17 @@ def test_controller_system_ticks_damps_and_counts(kind):
     if kind == "velocity":
         q_d = system.motor_command_port.Eval(context)[:robot.nu]
         np.testing.assert_allclose(q_d, shifted[robot.actuated_q_index], atol=0.01)
+
+
+@pytest.mark.parametrize("k", [2, 3, 5])
+def test_cop_weights_are_the_least_norm_solution(k):
+    """The closed form matches least squares for line (k = 2, rank-deficient) and plane feet."""
+    from romoco_drake.control.tasks import _cop_weights
+
+    rng = np.random.default_rng(k)
+    points = rng.standard_normal((k, 2))
+    rel = points - points.mean(axis=0)
+    offset = 0.05 * rng.standard_normal(2)
+    A = np.vstack([np.ones(k), rel.T])
+    expected = np.linalg.lstsq(A, np.concatenate([[1.0], offset]), rcond=None)[0]
+    np.testing.assert_allclose(_cop_weights(rel, offset), expected, atol=1e-12)

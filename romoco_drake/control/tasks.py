@@ -192,11 +192,26 @@ def load_split_forces(contact_points: np.ndarray, p_zmp: np.ndarray, force: np.n
     f = np.empty_like(contact_points)
     for rows, points, share in ((slice(0, half), feet[0], 1.0 - share_r),
                                 (slice(half, None), feet[1], share_r)):
-        rel = points[:, :2] - points[:, :2].mean(axis=0)
-        A = np.vstack([np.ones(len(points)), rel.T])
-        w = np.clip(np.linalg.lstsq(A, np.array([1.0, *offset]), rcond=None)[0], 0.0, None)
+        w = np.clip(_cop_weights(points[:, :2] - points[:, :2].mean(axis=0), offset), 0.0, None)
         f[rows] = np.outer(w / w.sum(), force * share)
     return f.ravel()
+
+
+def _cop_weights(rel: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """Least-norm point weights w with Σw = 1 and Σ w_i rel_i = offset (``rel``: k×2, centred).
+
+    Centred points are orthogonal to the ones vector, so w = 1/k + rel G⁺ offset with the 2×2
+    G = relᵀ rel; G is rank 1 for a line foot, where G⁺ = G / trace(G)². Closed form because
+    ``np.linalg.lstsq`` cost 0.15 ms a foot, in every standing tick.
+    """
+    G = rel.T @ rel
+    trace = G[0, 0] + G[1, 1]
+    det = G[0, 0] * G[1, 1] - G[0, 1] ** 2
+    if det > 1e-9 * trace**2:
+        G_pinv = np.array([[G[1, 1], -G[0, 1]], [-G[0, 1], G[0, 0]]]) / det
+    else:
+        G_pinv = G / max(trace, 1e-12) ** 2
+    return 1.0 / len(rel) + rel @ (G_pinv @ offset)
 
 
 def load_split_target(robot: RobotModel, context, refs: TaskReferences, a_cmd: np.ndarray) -> np.ndarray:
