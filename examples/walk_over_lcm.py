@@ -12,6 +12,7 @@ counters report it.
 
 import sys
 
+import numpy as np
 from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 
@@ -45,11 +46,17 @@ def main(duration: float = 4.0) -> dict:
     simulator.AdvanceTo(duration)
     summary = {"controller_side": link_summary(built.station, context),
                "robot_side": robot_summary(built.robot_sim, context)}
-    sender = built.station.GetSubsystemByName("sender")
-    kp = sender.command_port.Eval(sender.GetMyContextFromRoot(context))[3 * built.robot.nu:4 * built.robot.nu]
-    summary["command_kp_after_estop"] = float(abs(kp).max())
+    # What each side now applies: damping is τ_ff = 0, K_p = 0 and the robot's own K_d.
+    nu = built.robot.nu
+    for side, system, port in (("sent", built.station.GetSubsystemByName("sender"), "command"),
+                               ("applied", built.robot_sim.GetSubsystemByName("receiver"), "motor_command")):
+        command = system.GetOutputPort(port).Eval(system.GetMyContextFromRoot(context))
+        _, _, tau_ff, kp, kd = command.reshape(5, nu)
+        damping = not tau_ff.any() and not kp.any() and np.all(kd == built.robot.kd)
+        summary[f"{side}_is_damping"] = bool(damping)
     print(f"E-stop at {duration / 2:.1f} s: controller side {summary['controller_side']}, "
-          f"robot side {summary['robot_side']}, largest K_p sent since: {summary['command_kp_after_estop']}")
+          f"robot side {summary['robot_side']}; command sent is damping: {summary['sent_is_damping']}, "
+          f"applied: {summary['applied_is_damping']}")
     return summary
 
 

@@ -68,22 +68,24 @@ def run_scenario(
     last_print = wall0
     chunk = min(0.1, duration)
     t, diverged = 0.0, None
-    while t < duration - 1e-9:
-        t = min(duration, t + chunk)
-        try:
-            simulator.AdvanceTo(t)
-        except RuntimeError as e:
-            # The contact solver gives up on a state that has already blown up (a fall the
-            # monitor may not have sampled yet): end the run and report it, no traceback.
-            diverged = (context.get_time(), str(e).split(".")[0])
-            break
-        now = time.perf_counter()
-        if progress is not None and now - last_print > PROGRESS_WALL_S:
-            progress(f"[{scenario.name}] t = {t:.1f}/{duration:.1f} s ({100 * t / duration:.0f}%)")
-            last_print = now
+    try:  # the log is closed however the run ends (Ctrl-C on --hardware included)
+        while t < duration - 1e-9:
+            t = min(duration, t + chunk)
+            try:
+                simulator.AdvanceTo(t)
+            except RuntimeError as e:
+                # The contact solver gives up on a state that has already blown up (a fall the
+                # monitor may not have sampled yet): end the run and report it, no traceback.
+                diverged = (context.get_time(), str(e).split(".")[0])
+                break
+            now = time.perf_counter()
+            if progress is not None and now - last_print > PROGRESS_WALL_S:
+                progress(f"[{scenario.name}] t = {t:.1f}/{duration:.1f} s ({100 * t / duration:.0f}%)")
+                last_print = now
+    finally:
+        if recorder is not None:
+            recorder.close()
     wall = time.perf_counter() - wall0
-    if recorder is not None:
-        recorder.close()
     if record is not None:
         meshcat.StopRecording()
         meshcat.PublishRecording()

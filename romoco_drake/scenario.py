@@ -33,7 +33,13 @@ from romoco_drake.errors import ConfigError, RomocoError
 from romoco_drake.estimation.ground_truth import GroundTruthEstimator
 from romoco_drake.estimation.kalman_estimator import KalmanEstimator
 from romoco_drake.estimation.rom_state import RomStateFromRobot
-from romoco_drake.interfaces.hardware import LinkConfig, StatusSender, make_hardware_station, publish
+from romoco_drake.interfaces.hardware import (
+    PUBLISH_DELAY,
+    LinkConfig,
+    StatusSender,
+    make_hardware_station,
+    publish,
+)
 from romoco_drake.interfaces.lcm_codec import STATUS_CHANNEL
 from romoco_drake.interfaces.monitor import FallMonitor
 from romoco_drake.interfaces.robot_sim import make_robot_sim
@@ -56,7 +62,7 @@ ESTIMATORS = ("ground_truth", "kalman")
 LINKS = ("sim", "hardware", "via_lcm")
 STATUS_PERIOD = 0.01  # s, controller status messages on LCM links (for logs)
 # On LCM links the controller ticks this long after the robot's step (after the robot's
-# message, robot_sim.PUBLISH_DELAY), as a controller woken by the robot's state message does:
+# message, hardware.PUBLISH_DELAY), as a controller woken by the robot's state message does:
 # it acts on the measurement of that step. Ticking on the robot's step read the previous step's
 # message, one plant step (2 ms on G1) of extra delay.
 LINK_TICK_OFFSET = 1e-4  # s, less than any plant step
@@ -139,7 +145,8 @@ def load_scenario(name_or_path: str) -> Scenario:
         raise ConfigError(path, "robot", f"unknown robot '{scenario.robot}' (known: {known})")
     for key, value in (("duration_s", scenario.duration_s), ("time_step", scenario.time_step),
                        ("controller.rate_hz", scenario.controller.rate_hz),
-                       ("estimator.rate_hz", scenario.estimator.rate_hz or 1.0)):
+                       ("estimator.rate_hz", 1.0 if scenario.estimator.rate_hz is None
+                        else scenario.estimator.rate_hz)):
         if value <= 0:
             raise ConfigError(path, key, f"must be positive, got {value}")
     return scenario
@@ -255,7 +262,8 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
         plant_station = builder.AddNamedSystem("station", station)
     else:
         station = builder.AddNamedSystem(
-            "station", make_hardware_station(robot, lcm, period, motor_pd, scenario.link, offset))
+            "station", make_hardware_station(robot, lcm, period, motor_pd, scenario.link, offset,
+                                             require_base_state=scenario.estimator.name == "ground_truth"))
         if link == "via_lcm":
             robot_sim = builder.AddNamedSystem("robot", make_robot_sim(
                 robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link, motor_pd=motor_pd))
@@ -277,7 +285,7 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
             builder.Connect(walking.state_machine.mode_port, status.mode_port)
             builder.Connect(command.command_port, status.command_port)
             builder.Connect(walking.embedding.tracking_error_port, status.tracking_error_port)
-            publish(builder, lcm, STATUS_CHANNEL, status.message_port, STATUS_PERIOD, offset)
+            publish(builder, lcm, STATUS_CHANNEL, status.message_port, STATUS_PERIOD, offset + PUBLISH_DELAY)
     estimate_log = LogVectorOutput(estimator.state_output, builder, STATE_LOG_PERIOD)
     if plant_station is not None:
         monitor = plant_station.GetSubsystemByName("monitor")

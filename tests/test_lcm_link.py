@@ -82,10 +82,12 @@ class Listener:
 class ControllerSide:
     """A hardware station on memq:// with a fixed actuation and the test playing the robot."""
 
-    def __init__(self, robot, actuation: np.ndarray, config: LinkConfig | None = None):
+    def __init__(self, robot, actuation: np.ndarray, config: LinkConfig | None = None,
+                 require_base_state: bool = False):
         self.robot, self.lcm = robot, DrakeLcm("memq://")
         self.config = config or LinkConfig()
-        self.station = make_hardware_station(robot, self.lcm, TICK, config=self.config)
+        self.station = make_hardware_station(robot, self.lcm, TICK, config=self.config,
+                                             require_base_state=require_base_state)
         self.simulator = Simulator(self.station)
         self.context = self.simulator.get_mutable_context()
         self.station.GetInputPort("actuation").FixValue(self.context, actuation)
@@ -294,13 +296,17 @@ class SenderBench:
         self.sender.link_port.FixValue(self.context, [1.0])
         self.sender.estop_port.FixValue(self.context, b"")
         self.sender.actuation_port.FixValue(self.context, np.zeros(robot.nu))
+        self.simulator = Simulator(self.sender, self.context)
+        self.ticks = 0
 
     def tick(self, actuation=None, motor_command=None) -> dict:
         if actuation is not None:
             self.sender.actuation_port.FixValue(self.context, actuation)
         if motor_command is not None:
             self.sender.motor_command_port.FixValue(self.context, np.concatenate(motor_command))
-        self.context.SetDiscreteState(self.sender.EvalUniquePeriodicDiscreteUpdate(self.context))
+        # One periodic (unrestricted) update: the one at the next multiple of the period.
+        self.simulator.AdvanceTo(self.context.get_time() + 0.002 if self.ticks else 1e-6)
+        self.ticks += 1
         sent = _decode_command(self.robot, self.sender.message_port.Eval(self.context))
         np.testing.assert_array_equal(np.concatenate(list(sent.values())),
                                       self.sender.command_port.Eval(self.context))
@@ -542,3 +548,47 @@ def test_cli_lcm_log_without_an_lcm_link_is_a_one_line_error(tmp_path, capsys):
     lines = [line for line in err.splitlines() if line.strip()]
     assert len(lines) == 1 and "--lcm-log" in lines[0] and "--via-lcm" in lines[0]
     assert "Traceback" not in err and not (tmp_path / "x.log").exists()
+
+
+def _actuated(robot, q: np.ndarray) -> np.ndarray:
+    return q[[robot.joint_names.index(name) for name in robot.actuator_names]]
+
+
+def test_malformed_estop_engages_once_and_fails_safe(g1):
+    """Garbage on the E-stop channel is not guessed about: it engages the E-stop (damping from that
+    tick on) and counts once as rejected, however long it stays the newest message."""
+    side = ControllerSide(g1, np.full(g1.nu, 1.0))
+    q = _inside_limits(g1, 0.0)
+    side.advance(0.01, lambda utime: _proprioception(g1, utime, q))
+    assert np.all(side.last_command()["tau_ff"] == 1.0)
+    side.lcm.Publish(codec.ESTOP_CHANNEL, b"not an estop_t")
+    side.advance(0.02, lambda utime: _proprioception(g1, utime, q))
+    summary = side.summary()
+    assert summary["estop"] == 1 and summary["rejected_messages"] == 1
+    _assert_damping(g1, side.last_command(), _actuated(g1, q))
+
+
+def test_motion_capture_is_part_of_the_link_when_the_estimator_reads_it(g1):
+    """With the ground-truth estimator on hardware, a missing or stalled ROMOCO_BASE_STATE stream
+    means damping (and a stale event), as a stalled proprioception stream does."""
+    side = ControllerSide(g1, np.full(g1.nu, 1.0), require_base_state=True)
+    q = _inside_limits(g1, 0.0)
+    pose = nominal_measurements(g1)["base_pose"]
+
+    def run(duration: float, with_base: bool) -> None:
+        end = side.time + duration
+        while side.time < end - 1e-9:
+            utime = round(side.time * 1e6)
+            side.lcm.Publish(codec.PROPRIOCEPTION_CHANNEL, _proprioception(g1, utime, q))
+            if with_base:
+                side.lcm.Publish(codec.BASE_STATE_CHANNEL, codec.encode_base_state(
+                    codec.BaseState(utime, pose[:4], pose[4:], np.zeros(3), np.zeros(3))))
+            side.simulator.AdvanceTo(min(end, side.time + TICK))
+
+    run(0.01, with_base=False)
+    _assert_damping(g1, side.last_command(), _actuated(g1, q))
+    run(0.01, with_base=True)
+    assert np.all(side.last_command()["tau_ff"] == 1.0)
+    run(side.config.timeout_s + 0.005, with_base=False)
+    _assert_damping(g1, side.last_command(), _actuated(g1, q))
+    assert side.summary()["stale_events"] == 1

@@ -16,7 +16,8 @@ change when a robot replaces the simulator:
 
 Safety at the interface (each counted, see :func:`link_summary`):
 
-- **stale proprioception**: no new message for ``timeout_s`` → the command becomes damping
+- **stale proprioception** (and motion capture, when the estimator reads it): no new message
+  for ``timeout_s`` → the command becomes damping
   (q_d = q, v_d = 0, τ_ff = 0, K_p = 0, K_d from the robot YAML) until messages resume;
   ``stale_events`` counts fresh → stale transitions. Before the first message the robot is
   also sent damping (not counted: nothing was lost yet).
@@ -27,8 +28,8 @@ Safety at the interface (each counted, see :func:`link_summary`):
 - **clamping**: q_d to the joint limits, τ_ff to the effort limits, v_d to ``max_joint_speed``,
   K_p and K_d to [0, ``max_gain_factor`` × the YAML gains]; ``clamped_commands`` counts the
   commands that needed it.
-- **E-stop**: an engaged ROMOCO_ESTOP message latches damping for the rest of the run;
-  ``estop`` counts engagements.
+- **E-stop**: an engaged (or undecodable: fail safe) ROMOCO_ESTOP message latches damping for
+  the rest of the run from the tick it arrives; ``estop`` counts engagements.
 
 Before their first message the measurement ports hold the robot's nominal standing pose at
 rest, so the controller starts from a sane state while the robot is still sent damping.
@@ -62,6 +63,9 @@ from romoco_drake.interfaces.lcm_codec import (
 from romoco_drake.robots.model import RobotModel
 
 LINK_COUNTERS = ("stale_events", "rejected_messages", "clamped_commands", "estop")
+# Messages leave this long after the step or tick they report: a publish event at the step's
+# own instant sees the state from before that step's updates (the previous step's values).
+PUBLISH_DELAY = 2e-5  # s, less than any plant step
 
 
 @dataclass
@@ -99,19 +103,44 @@ def damping_command(robot: RobotModel, q: np.ndarray) -> np.ndarray:
     return np.concatenate([q, np.zeros(2 * nu), np.zeros(nu), robot.kd])
 
 
-def latch_estop(data: bytes, latched: float) -> tuple[float, bool, bool]:
-    """(latched, newly engaged, rejected) after the E-stop channel's current ``data``.
+class EstopLatch:
+    """A system's E-stop input: engaged messages latch it for the rest of the run.
 
-    Once latched it stays latched (a robot's E-stop needs a reset, not a message); a
-    malformed message is rejected and leaves the latch as it was.
+    A message that does not decode also engages it (fail safe: the E-stop channel is not one to
+    guess about), and is counted as rejected. The last bytes seen are abstract state, so a
+    message counts once however long it stays on the port; the latch is discrete state.
+    ``engaged`` also reads the current message, so the E-stop acts on the tick it arrives.
     """
-    if not data or latched:
-        return latched, False, False
-    try:
-        engaged = decode_estop(data).engaged
-    except MessageRejected:
-        return latched, False, True
-    return (1.0, True, False) if engaged else (latched, False, False)
+
+    def __init__(self, system: LeafSystem):
+        self.port = system.DeclareAbstractInputPort("estop", AbstractValue.Make(b""))
+        self.latched = system.DeclareDiscreteState(1)
+        self.seen = system.DeclareAbstractState(AbstractValue.Make(b""))
+
+    @staticmethod
+    def _engages(data: bytes) -> tuple[bool, bool]:
+        """(engages, rejected) for one non-empty message."""
+        try:
+            return decode_estop(data).engaged, False
+        except MessageRejected:
+            return True, True
+
+    def engaged(self, context) -> bool:
+        data = self.port.Eval(context)
+        return bool(context.get_discrete_state(self.latched).GetAtIndex(0)) or (
+            bool(data) and self._engages(data)[0])
+
+    def take(self, context, state) -> tuple[bool, bool]:
+        """(newly engaged, rejected) after this update's message; call in an unrestricted update."""
+        data = self.port.Eval(context)
+        if not data or data == context.get_abstract_state(int(self.seen)).get_value():
+            return False, False
+        state.get_mutable_abstract_state(int(self.seen)).set_value(data)
+        engages, rejected = self._engages(data)
+        newly = engages and not context.get_discrete_state(self.latched).GetAtIndex(0)
+        if newly:
+            state.get_mutable_discrete_state().get_mutable_vector(int(self.latched)).SetFromVector([1.0])
+        return newly, rejected
 
 
 class Inbox:
@@ -181,13 +210,15 @@ class MeasurementReceiver(LeafSystem):
     | proprioception  | in  | abstract | raw bytes of ROMOCO_PROPRIOCEPTION                    |
     | base_state      | in  | abstract | raw bytes of ROMOCO_BASE_STATE                        |
     | joint_state, imu, foot_contact, base_pose, base_velocity | out | as the station | newest good values |
-    | link            | out | 1        | 1 while proprioception is fresh, else 0               |
+    | link            | out | 1        | 1 while the needed streams are fresh, else 0          |
     | stats           | out | 2        | rejected messages, stale events                       |
     """
 
-    def __init__(self, robot: RobotModel, config: LinkConfig):
+    def __init__(self, robot: RobotModel, config: LinkConfig, require_base_state: bool = False):
+        """``require_base_state``: the estimator reads the base ports (ground truth from motion
+        capture), so a stale or missing ROMOCO_BASE_STATE stream breaks the link too."""
         super().__init__()
-        self.config = config
+        self.config, self.require_base_state = config, require_base_state
         nj = len(robot.joint_names)
         start = nominal_measurements(robot)
 
@@ -222,7 +253,9 @@ class MeasurementReceiver(LeafSystem):
         rejected, stale_events = context.get_discrete_state(self._stats).value()
         for inbox in (self.proprioception, self.base_state):
             rejected += not inbox.take(context, state)
-        link = float(self.proprioception.fresh(context, state, self.config.timeout_s))
+        timeout = self.config.timeout_s
+        link = float(self.proprioception.fresh(context, state, timeout) and (
+            not self.require_base_state or self.base_state.fresh(context, state, timeout)))
         was = context.get_discrete_state(self._link).GetAtIndex(0)
         stale_events += was == 1.0 and link == 0.0
         state.get_mutable_discrete_state().get_mutable_vector(int(self._link)).SetFromVector([link])
@@ -244,10 +277,11 @@ class CommandSender(LeafSystem):
     | command       | out | 5·nu     | the command sent                                        |
     | stats         | out | 3        | rejected (non-finite) commands, clamped commands, E-stop engagements |
 
-    The command is computed from the current inputs, so the message published at a tick
-    carries the controller's command of that tick: damping while the link is not fresh or the
-    E-stop is latched, else the controller's command, clamped (module docstring). The periodic
-    update (every ``period``, the controller's rate) latches the E-stop and counts.
+    The command is computed from the current inputs: damping while the link is not fresh or the
+    E-stop is engaged (:class:`EstopLatch`), else the controller's command, clamped (module
+    docstring). It is published ``PUBLISH_DELAY`` after each controller tick, because a publish
+    at the tick's own instant sees the state from before that tick's updates, i.e. the previous
+    tick's command. The periodic update (every ``period``) latches the E-stop and counts.
     """
 
     def __init__(self, robot: RobotModel, period: float, motor_pd: bool, config: LinkConfig,
@@ -266,16 +300,16 @@ class CommandSender(LeafSystem):
         self.motor_command_port = self.DeclareVectorInputPort("motor_command", 5 * nu) if motor_pd else None
         self.joint_state_port = self.DeclareVectorInputPort("joint_state", 2 * nj)
         self.link_port = self.DeclareVectorInputPort("link", 1)
-        self.estop_port = self.DeclareAbstractInputPort("estop", AbstractValue.Make(b""))
+        self.estop = EstopLatch(self)
+        self.estop_port = self.estop.port
         self._stats = self.DeclareDiscreteState(3)
-        self._estop = self.DeclareDiscreteState(1)
         self.command_port = self.DeclareVectorOutputPort("command", 5 * nu, self._command)
         self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
         self.message_port = self.DeclareAbstractOutputPort(
             "message", lambda: AbstractValue.Make(b""), self._message)
-        self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, offset, self._update)
 
-    def _checked(self, context, latched: float) -> tuple[np.ndarray, bool, bool]:
+    def _checked(self, context, latched: bool) -> tuple[np.ndarray, bool, bool]:
         """(command to send, rejected as non-finite, clamped) for the current inputs."""
         nu = self.robot.nu
         q = self.joint_state_port.Eval(context)[self._joint_of_actuator]
@@ -293,16 +327,14 @@ class CommandSender(LeafSystem):
         return command, False, bool(np.any(command != wanted))
 
     def _command(self, context, out) -> None:
-        out.SetFromVector(self._checked(context, context.get_discrete_state(self._estop).GetAtIndex(0))[0])
+        out.SetFromVector(self._checked(context, self.estop.engaged(context))[0])
 
-    def _update(self, context, discrete_state) -> None:
+    def _update(self, context, state) -> None:
         rejected, clamped, estops = context.get_discrete_state(self._stats).value()
-        latched, engaged, bad = latch_estop(self.estop_port.Eval(context),
-                                            context.get_discrete_state(self._estop).GetAtIndex(0))
-        _, non_finite, clipped = self._checked(context, latched)
+        engaged, bad = self.estop.take(context, state)
+        _, non_finite, clipped = self._checked(context, self.estop.engaged(context))
         counts = [rejected + bad + non_finite, clamped + clipped, estops + engaged]
-        discrete_state.set_value(self._stats, counts)
-        discrete_state.set_value(self._estop, [latched])
+        state.get_mutable_discrete_state().get_mutable_vector(int(self._stats)).SetFromVector(counts)
 
     def _message(self, context, out) -> None:
         q_d, v_d, tau_ff, kp, kd = self.command_port.Eval(context).reshape(5, self.robot.nu)
@@ -328,20 +360,22 @@ def publish(builder: DiagramBuilder, lcm: DrakeLcmInterface, channel: str, port,
 
 
 def make_hardware_station(robot: RobotModel, lcm: DrakeLcmInterface, period: float, motor_pd: bool = False,
-                          config: LinkConfig | None = None, offset: float = 0.0) -> Diagram:
+                          config: LinkConfig | None = None, offset: float = 0.0,
+                          require_base_state: bool = False) -> Diagram:
     """The controller's side of the LCM link, with the simulated station's ports (module docstring).
 
     ``period`` and ``offset`` are the controller's tick: commands are sent then.
+    ``require_base_state`` makes motion capture part of the link (see MeasurementReceiver).
     """
     config = config or LinkConfig()
     builder = DiagramBuilder()
     builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
-    receiver = builder.AddNamedSystem("receiver", MeasurementReceiver(robot, config))
+    receiver = builder.AddNamedSystem("receiver", MeasurementReceiver(robot, config, require_base_state))
     sender = builder.AddNamedSystem("sender", CommandSender(robot, period, motor_pd, config, offset))
     subscribe(builder, lcm, PROPRIOCEPTION_CHANNEL, receiver.GetInputPort("proprioception"))
     subscribe(builder, lcm, BASE_STATE_CHANNEL, receiver.GetInputPort("base_state"))
     subscribe(builder, lcm, ESTOP_CHANNEL, sender.estop_port)
-    publish(builder, lcm, MOTOR_COMMAND_CHANNEL, sender.message_port, period, offset)
+    publish(builder, lcm, MOTOR_COMMAND_CHANNEL, sender.message_port, period, offset + PUBLISH_DELAY)
     builder.Connect(receiver.GetOutputPort("joint_state"), sender.joint_state_port)
     builder.Connect(receiver.link_port, sender.link_port)
     if motor_pd:

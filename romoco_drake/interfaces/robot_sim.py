@@ -22,10 +22,11 @@ from pydrake.systems.lcm import LcmInterfaceSystem
 from pydrake.systems.primitives import ConstantVectorSource
 
 from romoco_drake.interfaces.hardware import (
+    PUBLISH_DELAY,
+    EstopLatch,
     Inbox,
     LinkConfig,
     damping_command,
-    latch_estop,
     publish,
     subscribe,
 )
@@ -43,11 +44,6 @@ from romoco_drake.interfaces.lcm_codec import (
 from romoco_drake.interfaces.sensors import SensorConfig
 from romoco_drake.interfaces.station import make_station
 from romoco_drake.robots.model import RobotModel
-
-# Measurements leave this long after the robot's step: a publish event at the step's own instant
-# carries the state from before the step (Drake publishes before the plant's discrete update
-# shows), one plant step stale.
-PUBLISH_DELAY = 2e-5  # s
 
 
 class CommandReceiver(LeafSystem):
@@ -75,16 +71,12 @@ class CommandReceiver(LeafSystem):
             return m.utime, np.concatenate([m.q_d, m.v_d, m.tau_ff, m.kp, m.kd])
 
         self.inbox = Inbox(self, "command", command, damping_command(robot, np.zeros(nu)))
-        self.estop_port = self.DeclareAbstractInputPort("estop", AbstractValue.Make(b""))
+        self.estop = EstopLatch(self)
+        self.estop_port = self.estop.port
         self.joint_state_port = self.DeclareVectorInputPort("joint_state", 2 * len(robot.joint_names))
         self._link = self.DeclareDiscreteState(1)
         self._stats = self.DeclareDiscreteState(3)
-        self._estop = self.DeclareDiscreteState(1)
-        self.motor_command_port = self.DeclareVectorOutputPort(
-            "motor_command", 5 * nu, self._motor_command,
-            prerequisites_of_calc={self.inbox.latest.ticket(), self.discrete_state_ticket(self._link),
-                                   self.discrete_state_ticket(self._estop),
-                                   self.input_port_ticket(self.joint_state_port.get_index())})
+        self.motor_command_port = self.DeclareVectorOutputPort("motor_command", 5 * nu, self._motor_command)
         self.torque_port = self.DeclareVectorOutputPort("torque", nu, self._torque)
         self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.receive_rate_hz, 0.0, self._update)
@@ -101,8 +93,7 @@ class CommandReceiver(LeafSystem):
 
     def _motor_command(self, context, out) -> None:
         """The newest command while the stream is fresh and the E-stop is off, else damping."""
-        if context.get_discrete_state(self._link).GetAtIndex(0) and not context.get_discrete_state(
-                self._estop).GetAtIndex(0):
+        if context.get_discrete_state(self._link).GetAtIndex(0) and not self.estop.engaged(context):
             out.SetFromVector(self.inbox.latest.Eval(context))
         else:
             q = self.joint_state_port.Eval(context)[self._joint_of_actuator]
@@ -111,15 +102,13 @@ class CommandReceiver(LeafSystem):
     def _update(self, context, state) -> None:
         rejected, stale_events, estops = context.get_discrete_state(self._stats).value()
         rejected += not self.inbox.take(context, state)
-        latched, engaged, bad = latch_estop(self.estop_port.Eval(context),
-                                            context.get_discrete_state(self._estop).GetAtIndex(0))
+        engaged, bad = self.estop.take(context, state)
         estops, rejected = estops + engaged, rejected + bad
         link = float(self.inbox.fresh(context, state, self.config.timeout_s))
         stale_events += context.get_discrete_state(self._link).GetAtIndex(0) == 1.0 and link == 0.0
         discrete = state.get_mutable_discrete_state()
         discrete.get_mutable_vector(int(self._link)).SetFromVector([link])
         discrete.get_mutable_vector(int(self._stats)).SetFromVector([rejected, stale_events, estops])
-        discrete.get_mutable_vector(int(self._estop)).SetFromVector([latched])
 
 
 class MeasurementSender(LeafSystem):
@@ -132,8 +121,8 @@ class MeasurementSender(LeafSystem):
     | proprioception| out | abstract | encoded biped_proprioception_t (utime = sim time)        |
     | base_state    | out | abstract | encoded base_state_t                                     |
 
-    τ is the motor's own estimate K_p (q_d − q) + K_d (v_d − v) + τ_ff (as a current-sensing
-    driver reports it), zero for passive joints.
+    τ is the motor's own estimate K_p (q_d − q) + K_d (v_d − v) + τ_ff within its effort limit
+    (as a current-sensing driver reports it), zero for passive joints.
     """
 
     def __init__(self, robot: RobotModel):
@@ -156,7 +145,8 @@ class MeasurementSender(LeafSystem):
         q_d, v_d, tau_ff, kp, kd = self.inputs["motor_command"].Eval(context).reshape(5, self.robot.nu)
         q, v = js[:nj], js[nj:]
         tau = np.zeros(nj)
-        tau[self._actuated] = kp * (q_d - q[self._actuated]) + kd * (v_d - v[self._actuated]) + tau_ff
+        drive = kp * (q_d - q[self._actuated]) + kd * (v_d - v[self._actuated]) + tau_ff
+        tau[self._actuated] = np.clip(drive, -self.robot.effort_limits, self.robot.effort_limits)
         out.set_value(encode_proprioception(Proprioception(
             self._utime(context), q, v, tau, self.inputs["imu"].Eval(context),
             self.inputs["foot_contact"].Eval(context))))

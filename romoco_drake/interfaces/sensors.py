@@ -39,7 +39,7 @@ class SensorConfig:
     AHRS units; it is applied as white noise, rougher than a real filter's slowly varying error.
     """
 
-    rate_hz: float = 1000.0  # sampling rate (Hz); every output is held between samples
+    rate_hz: float = 1000.0  # noise sampling rate (Hz): noise is held between samples, values are not
     gyro_noise_std: float = 2.7e-3  # rad/s per sample (0.007 °/s/√Hz · √500 Hz)
     gyro_bias_std: float = 4.8e-5  # rad/s (10 °/h); draws the bias when gyro_bias is not given
     gyro_bias: list[float] | None = None  # rad/s in the base frame, 3 values
