@@ -6,12 +6,12 @@ import math
 
 import numpy as np
 
-from romoco_drake.planners.command import CommandSource
+from romoco_drake.planners.command import CommandSource, reach_times
 from romoco_drake.planners.heading import base_yaw
 from romoco_drake.robots.model import RobotModel
 
 AVERAGE_WINDOW_S = 1.0
-SETTLE_S = 1.0  # each command segment's first second is not scored
+SETTLE_S = 1.0  # a command segment is scored from a second after the limited command reached it
 
 
 def heading_velocity(robot: RobotModel, times: np.ndarray, states: np.ndarray) -> np.ndarray:
@@ -33,12 +33,19 @@ def moving_average(times: np.ndarray, values: np.ndarray, window: float) -> np.n
 
 def velocity_tracking(robot: RobotModel, command: CommandSource, times: np.ndarray, states: np.ndarray
                       ) -> dict:
-    """RMS of the 1 s averaged velocity against the command, after each segment's first second."""
+    """RMS of the 1 s averaged velocity against the command, after each segment's first second.
+
+    The second counts from when the robot's command limiter (its ``walking.command_limits``) has
+    ramped to the segment's command, the segment's start for the small steps of the default
+    profiles. The error is against the command as asked, so a segment beyond the velocity
+    limits scores what was not walked.
+    """
     measured = moving_average(times, heading_velocity(robot, times, states), AVERAGE_WINDOW_S)
     starts = np.array([s.start for s in command.segments])
     segment = np.searchsorted(starts, times, side="right") - 1
     wanted = np.array([[c.vx, c.vy, c.wz] for c in (s.command for s in command.segments)])[segment]
-    scored = (times - starts[segment] >= max(SETTLE_S, AVERAGE_WINDOW_S))
+    reached = reach_times(command.segments, robot.config.walking.command_limits)
+    scored = (times - reached[segment] >= max(SETTLE_S, AVERAGE_WINDOW_S))
     err = (measured - wanted)[scored]
     rms = np.sqrt(np.mean(err**2, axis=0)) if len(err) else np.full(3, math.nan)
     return {

@@ -110,7 +110,10 @@ def run_scenario(
         summary["simulation_error"] = diverged[1]
         if not summary["fell"]:
             summary.update(fell=True, fall_time_s=diverged[0], fall_reason="simulation_diverged")
-    summary.update(_estimator_summary(built, context))
+    # What a run measured is scored up to a fall: after it the state (diverged, in the worst
+    # case) says nothing about tracking.
+    until = summary["fall_time_s"]
+    summary.update(_estimator_summary(built, context, until))
     if link != "sim":
         summary.update(link_summary(built.station, context))
     if built.robot_sim is not None:
@@ -118,7 +121,7 @@ def run_scenario(
     if recorder is not None:
         summary["lcm_log"] = {"path": str(recorder.path), "events": recorder.count}
     if built.walking is not None:
-        summary.update(_walking_summary(built, context, scenario, plot_dir))
+        summary.update(_walking_summary(built, context, scenario, plot_dir, until))
     if record is not None:
         summary["record"] = str(record)
     return summary
@@ -172,14 +175,24 @@ def make_lcm(url: str | None) -> DrakeLcm:
         raise RomocoError(f"cannot open LCM on {url or 'the default URL'}: {reason}") from None
 
 
-def _estimator_summary(built, context) -> dict:
+def _samples(log, until: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """A log's (times, data columns), up to time ``until`` if given."""
+    times, data = log.sample_times(), log.data()
+    if until is None:
+        return times, data
+    n = int(np.searchsorted(times, until, side="right"))
+    return times[:n], data[:, :n]
+
+
+def _estimator_summary(built, context, until: float | None) -> dict:
     """The Kalman estimator's health and, when the true state is known, its velocity error."""
     if not isinstance(built.estimator, KalmanEstimator):
         return {}
     out = {"estimator_rejected_updates": built.estimator.rejected_updates(
         built.estimator.GetMyContextFromRoot(context))}
     if built.plant_station is not None:
-        truth, estimate = built.state_log.FindLog(context).data(), built.estimate_log.FindLog(context).data()
+        truth = _samples(built.state_log.FindLog(context), until)[1]
+        estimate = _samples(built.estimate_log.FindLog(context), until)[1]
         n = min(truth.shape[1], estimate.shape[1])
         j = built.robot.nq + built.robot.base_v_start + 3
         error = np.linalg.norm(estimate[j:j + 3, :n] - truth[j:j + 3, :n], axis=0)
@@ -191,9 +204,9 @@ def stderr_progress(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
 
 
-def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None) -> dict:
-    log = built.state_log.FindLog(context)
-    tracking = velocity_tracking(built.robot, built.command, log.sample_times(), log.data())
+def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, until: float | None) -> dict:
+    times, states = _samples(built.state_log.FindLog(context), until)
+    tracking = velocity_tracking(built.robot, built.command, times, states)
     ticks = built.walking.tick_log.FindLog(context).data()[0, 1:]  # the first sample precedes any tick
     loop = built.walking
     schedule = loop.state_machine.schedule(loop.state_machine.GetMyContextFromRoot(context))
@@ -203,20 +216,20 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None) 
         "velocity_rms_error": finite_or_none(tracking["velocity_rms_error"]),
         "mean_velocity": finite_or_none(tracking["mean_velocity"]),
         "steps": schedule.steps,
+        "command_clipped_segments": sum(loop.limiter.clipped(seg.command) for seg in built.command.segments),
         "qp_failures": int(failures),
         "safe_mode_entries": schedule.safe_mode_entries,
         "safe_mode_ticks": int(safe_ticks),
         "controller_tick_ms": {"median": round(float(np.median(ticks)), 3),
                                "p99": round(float(np.percentile(ticks, 99)), 3)},
-    } | _plots(built, context, scenario, plot_dir, log, tracking)
+    } | _plots(built, context, scenario, plot_dir, times, tracking, until)
 
 
-def _plots(built, context, scenario: Scenario, plot_dir: Path | None, log, tracking) -> dict:
+def _plots(built, context, scenario: Scenario, plot_dir: Path | None, times, tracking, until) -> dict:
     if plot_dir is None:
         return {}
     from romoco_drake.plots import plot_walking_run
 
-    errors = built.walking.error_log.FindLog(context)
-    paths = plot_walking_run(Path(plot_dir), scenario.name, log.sample_times(), tracking,
-                             errors.sample_times(), errors.data())
+    error_times, errors = _samples(built.walking.error_log.FindLog(context), until)
+    paths = plot_walking_run(Path(plot_dir), scenario.name, times, tracking, error_times, errors)
     return {"plots": [str(p) for p in paths]}

@@ -45,7 +45,7 @@ from romoco_drake.interfaces.monitor import FallMonitor
 from romoco_drake.interfaces.robot_sim import make_robot_sim
 from romoco_drake.interfaces.sensors import SensorConfig
 from romoco_drake.interfaces.station import make_station
-from romoco_drake.planners.command import CommandSegment, CommandSource
+from romoco_drake.planners.command import CommandLimiter, CommandSegment, CommandSource
 from romoco_drake.planners.foot_placement import FootPlacementPlanner
 from romoco_drake.planners.heading import HeadingHold
 from romoco_drake.planners.state_machine import GaitStateMachine
@@ -180,6 +180,7 @@ class WalkingLoop:
     controller: TscQpController | IkController  # all expose actuation, stats and tick_ms
     tick_log: VectorLogSink  # controller update wall time, every tick
     error_log: VectorLogSink  # embedding tracking errors per group
+    limiter: CommandLimiter
 
 
 def parse_command(text: str) -> list[CommandPoint]:
@@ -332,13 +333,17 @@ def _make_controller(name: str, robot: RobotModel, core: EmbeddingCore, period: 
 def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, state,
                       command: CommandSource, station, period: float, offset: float,
                       law: FootPlacementLaw | None) -> WalkingLoop:
-    """State machine → planner → output embedding → whole-body controller, all at ``period``."""
+    """Command limiter → state machine → planner → output embedding → whole-body controller, all
+    at ``period``."""
     if law is None:
         cfg = scenario.planner
         law = make_planner(cfg.name, PlannerParams(mass=robot.total_mass, t_ds=robot.config.walking.t_ds,
                                                    gain=cfg.gain, alpha=cfg.alpha))
+    limiter = builder.AddNamedSystem("command_limiter", CommandLimiter(
+        robot.config.walking.command_limits, period, offset))
+    builder.Connect(command.command_port, limiter.command_in_port)
     heading = builder.AddNamedSystem("heading", HeadingHold(robot, period, offset=offset))
-    builder.Connect(command.command_port, heading.command_in_port)
+    builder.Connect(limiter.command_port, heading.command_in_port)
     builder.Connect(state, heading.state_port)
     machine = builder.AddNamedSystem("state_machine",
                                      GaitStateMachine(robot, period, law.t_ds, offset=offset))
@@ -349,7 +354,7 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     controller = builder.AddNamedSystem("controller", _make_controller(scenario.controller.name, robot, core,
                                                                        period, offset))
     builder.Connect(state, machine.state_port)
-    builder.Connect(command.command_port, machine.command_port)
+    builder.Connect(limiter.command_port, machine.command_port)
     builder.Connect(state, rom_state.state_port)
     builder.Connect(machine.gait_phase_port, rom_state.gait_phase_port)
     builder.Connect(rom_state.rom_state_port, planner.rom_state_port)
@@ -370,4 +375,4 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
         builder.Connect(controller.actuation_port, station.GetInputPort("actuation"))
     tick_log = LogVectorOutput(controller.tick_ms_port, builder, period)
     error_log = LogVectorOutput(embedding.tracking_error_port, builder, STATE_LOG_PERIOD)
-    return WalkingLoop(machine, planner, embedding, controller, tick_log, error_log)
+    return WalkingLoop(machine, planner, embedding, controller, tick_log, error_log, limiter)

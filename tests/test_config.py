@@ -70,6 +70,8 @@ def _robot_data():
         (lambda d: d.pop("walking"), "walking"),
         (lambda d: d.update(gains=[{"joints": "*hip*", "kp": 1.0, "kd": 0.1}]), "gains"),
         (lambda d: d["nominal"].update(com_height="high"), "nominal.com_height"),
+        (lambda d: d["walking"].update(command_limits={"ax": -1.0}), "walking.command_limits"),
+        (lambda d: d["walking"].update(command_limits={"vz": 1.0}), "walking.command_limits.vz"),
     ],
 )
 def test_bad_robot_yaml_names_file_and_key(tmp_path, edit, key):

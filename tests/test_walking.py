@@ -8,6 +8,7 @@ from romoco_drake.control.tscqp import TscQp
 from romoco_drake.embedding.references import MODES, EmbeddingCore
 from romoco_drake.planners.state_machine import GaitStateMachine
 from romoco_drake.robots.model import load_robot
+from romoco_drake.rom.planners import HlipLaw, PlannerParams
 from romoco_drake.rom.types import WalkCommand
 from romoco_drake.scenario import CommandPoint, build_diagram, load_scenario
 
@@ -219,9 +220,12 @@ def test_motor_command_gains_are_honoured_by_moving_the_setpoint(g1):
 
 
 @pytest.mark.parametrize("scenario, controller, planner", [("h1_walk", "id", "mlip"),
-                                                           ("cassie_walk", "tscqp", "dcm")])
+                                                           ("cassie_walk", "tscqp", "dcm"),
+                                                           ("g1_walk", "velik", "hlip"),
+                                                           ("g1_walk", "posik", "dcm")])
 def test_other_robots_walk_forward_in_closed_loop(scenario, controller, planner):
-    """H1 (line-modelled feet, ID) and Cassie (line feet, loops, double support): stay up, go forward."""
+    """H1 (line-modelled feet, ID), Cassie (line feet, loops, double support) and G1 under the IK
+    controllers (motor commands through the motors' own PD): stay up, go forward."""
     from romoco_drake.runner import run_scenario
     from romoco_drake.scenario import with_overrides
 
@@ -232,3 +236,39 @@ def test_other_robots_walk_forward_in_closed_loop(scenario, controller, planner)
     vx, vy, _ = summary["velocity_rms_error"]
     assert vx < 0.1 and vy < 0.1
     assert summary["mean_velocity"][0] > 0.1  # it went forward (the average includes the first second)
+
+
+def test_g1_survives_a_velocity_step_to_its_top_speed():
+    """0 → 1 m/s at once: the command limiter ramps it (0.5 m/s²), the robot gets there and stays up."""
+    from romoco_drake.runner import run_scenario
+    from romoco_drake.scenario import with_overrides
+
+    s = with_overrides(load_scenario("g1_walk"), command="0:0,0,0;1:1.0,0,0")
+    summary = run_scenario(s, duration=6.0)  # ramp done at 3 s, scored from 4 s
+    assert not summary["fell"] and summary["qp_failures"] == 0
+    assert summary["command_clipped_segments"] == 0
+    vx, vy, _ = summary["velocity_rms_error"]
+    assert vx < 0.1 and vy < 0.1, summary["velocity_rms_error"]
+
+
+class _OverreachingLaw(HlipLaw):
+    """Always steps 0.6 m ahead: G1 trips within a few steps."""
+
+    name = "overreach"
+
+    def _place(self, pre, stance_side, cmd):
+        _, u_y, orbit, nominal = super()._place(pre, stance_side, cmd)
+        return 0.6, u_y, orbit, nominal
+
+
+def test_a_fall_is_scored_up_to_the_fall():
+    """After a fall the (possibly diverged) state is not scored: the summary stays physical."""
+    from romoco_drake.runner import run_scenario
+    from romoco_drake.scenario import with_overrides
+
+    robot = load_robot("g1")
+    s = with_overrides(load_scenario("g1_walk"), command="0:0,0,0;0.5:0.3,0,0")
+    summary = run_scenario(s, duration=6.0, law=_OverreachingLaw(PlannerParams(mass=robot.total_mass)))
+    assert summary["fell"] and summary["fall_time_s"] < 6.0
+    assert summary["base_height_drift_m"] < robot.nominal.base_height
+    assert all(v is None or abs(v) < 3.0 for v in summary["mean_velocity"] + summary["velocity_rms_error"])

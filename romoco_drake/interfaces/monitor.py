@@ -22,7 +22,7 @@ FELL, FALL_TIME, REASON, MIN_HEIGHT, MAX_HEIGHT, LAST_HEIGHT = range(6)
 
 
 class FallMonitor(LeafSystem):
-    """Records falls and the base height range at ``period`` (no outputs).
+    """Records the first fall and the base height range up to it, at ``period`` (no outputs).
 
     | port  | dir | size    | meaning                       |
     |-------|-----|---------|-------------------------------|
@@ -63,12 +63,14 @@ class FallMonitor(LeafSystem):
 
     def _update(self, context, discrete_state) -> None:
         s = discrete_state.get_mutable_vector(self._state_index).get_mutable_value()
+        if s[FELL]:  # the height range and last height stay those up to the fall
+            return
         reason, height = self.check(self.state_input.Eval(context))
         s[LAST_HEIGHT] = height
         if np.isfinite(height):
             s[MIN_HEIGHT] = min(s[MIN_HEIGHT], height)
             s[MAX_HEIGHT] = max(s[MAX_HEIGHT], height)
-        if reason and not s[FELL]:
+        if reason:
             s[FELL] = 1.0
             s[FALL_TIME] = context.get_time()
             s[REASON] = FALL_REASONS.index(reason)

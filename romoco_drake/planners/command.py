@@ -1,13 +1,15 @@
-"""Piecewise-constant walking commands over time."""
+"""Walking commands: piecewise constant over time, and limited to what the robot can walk."""
 
 from __future__ import annotations
 
 import bisect
 from dataclasses import dataclass
 
+import numpy as np
 from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.errors import RomocoError
+from romoco_drake.robots.config import CommandLimits
 from romoco_drake.rom.types import COMMAND_SIZE, WalkCommand
 
 
@@ -44,3 +46,66 @@ class CommandSource(LeafSystem):
 
     def _calc(self, context, out) -> None:
         out.SetFromVector(self.command_at(context.get_time()).to_vector())
+
+
+def limited_velocity(held: np.ndarray, target: np.ndarray, limits: CommandLimits, dt: float) -> np.ndarray:
+    """The limited (vx, vy, wz) ``dt`` after ``held``: toward ``target`` clipped to the velocity
+    limits, at most at the acceleration limits (``held`` is inside the velocity limits)."""
+    v_max = np.array([limits.vx, limits.vy, limits.wz])
+    a_max = np.array([limits.ax, limits.ay, limits.wz_rate])
+    return held + np.clip(np.clip(target, -v_max, v_max) - held, -a_max * dt, a_max * dt)
+
+
+def reach_times(segments: list[CommandSegment], limits: CommandLimits) -> np.ndarray:
+    """When the limited command reaches each segment's (clipped) command: the segment's start
+    plus the ramp its accelerations need from where the previous segment's ramp had got to."""
+    a_max = np.array([limits.ax, limits.ay, limits.wz_rate])
+    held, previous, out = np.zeros(3), np.zeros(3), []
+    for i, segment in enumerate(segments):
+        if i:
+            held = limited_velocity(held, previous, limits, segment.start - segments[i - 1].start)
+        target = limited_velocity(held, segment.command.to_vector()[:3], limits, np.inf)
+        out.append(segment.start + float(np.max(np.abs(target - held) / a_max)))
+        previous = target
+    return np.array(out)
+
+
+class CommandLimiter(LeafSystem):
+    """Keeps the walking command inside the robot's envelope: clipped, then rate limited.
+
+    Each ``period`` the held (vx, vy, wz) moves toward the input's, clipped to ±the limits'
+    velocities, by at most the limits' accelerations times ``period``. The other entries (step
+    width, CoM height, step time) pass through. A non-finite velocity entry is taken as a stop
+    (target 0), so a bad command slows the robot down instead of reaching the planner.
+
+    | port | kind | size | meaning |
+    |---|---|---|---|
+    | ``command_in`` | in | 6 | :class:`WalkCommand` vector as asked |
+    | ``command`` | out | 6 | the same with the limited (vx, vy, wz) |
+
+    Discrete state: the limited (vx, vy, wz), from zero (the robot starts standing).
+    """
+
+    def __init__(self, limits: CommandLimits, period: float, offset: float = 0.0):
+        super().__init__()
+        self.period, self.limits = period, limits
+        self._max = np.array([limits.vx, limits.vy, limits.wz])
+        self.command_in_port = self.DeclareVectorInputPort("command_in", COMMAND_SIZE)
+        self._velocity = self.DeclareDiscreteState(3)
+        self.command_port = self.DeclareVectorOutputPort("command", COMMAND_SIZE, self._calc)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
+
+    def clipped(self, command: WalkCommand) -> bool:
+        """Whether ``command`` asks for more than the velocity limits."""
+        return bool(np.any(np.abs([command.vx, command.vy, command.wz]) > self._max))
+
+    def _update(self, context, discrete_state) -> None:
+        held = context.get_discrete_state(self._velocity).value()
+        target = np.nan_to_num(self.command_in_port.Eval(context)[:3], nan=0.0, posinf=0.0, neginf=0.0)
+        discrete_state.get_mutable_vector(self._velocity).SetFromVector(
+            limited_velocity(held, target, self.limits, self.period))
+
+    def _calc(self, context, out) -> None:
+        cmd = np.array(self.command_in_port.Eval(context))
+        cmd[:3] = context.get_discrete_state(self._velocity).value()
+        out.SetFromVector(cmd)

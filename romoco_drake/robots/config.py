@@ -86,6 +86,30 @@ class NominalConfig:
 
 
 @dataclasses.dataclass
+class CommandLimits:
+    """The velocity command envelope the walking loop accepts (heading frame).
+
+    Commands are clipped to |vx| ≤ ``vx``, |vy| ≤ ``vy`` [m/s], |wz| ≤ ``wz`` [rad/s] and reach
+    their targets at most at ``ax``, ``ay`` [m/s²] and ``wz_rate`` [rad/s²]: a deadbeat planner
+    answers a velocity step with the step that reaches the new orbit in two steps, which at
+    G1's 0 → 1 m/s is longer than its leg (a fall at 1.95 s; at 1 m/s² still a fall at 2.96 s,
+    at 0.5 m/s² none).
+    """
+
+    vx: float = 1.0
+    vy: float = 0.4
+    wz: float = 1.0
+    ax: float = 0.5
+    ay: float = 0.5
+    wz_rate: float = 2.0
+
+    def __post_init__(self):
+        for name in ("vx", "vy", "wz", "ax", "ay", "wz_rate"):
+            if getattr(self, name) <= 0.0:
+                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
+
+
+@dataclasses.dataclass
 class WalkingConfig:
     """Reduced-order walking parameters (RoMoCo's per-robot defaults)."""
 
@@ -94,6 +118,7 @@ class WalkingConfig:
     z0: float
     step_width: float
     swing_height: float
+    command_limits: CommandLimits = dataclasses.field(default_factory=CommandLimits)
 
 
 @dataclasses.dataclass
