@@ -355,6 +355,7 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
                                                                        period, offset))
     builder.Connect(state, machine.state_port)
     builder.Connect(limiter.command_port, machine.command_port)
+    builder.Connect(station.GetOutputPort("foot_contact"), machine.foot_contact_port)
     builder.Connect(state, rom_state.state_port)
     builder.Connect(machine.gait_phase_port, rom_state.gait_phase_port)
     builder.Connect(rom_state.rom_state_port, planner.rom_state_port)

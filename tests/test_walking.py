@@ -78,6 +78,7 @@ def _machine(robot):
     context = machine.CreateDefaultContext()
     x = np.concatenate([robot.nominal.q, np.zeros(robot.nv)])
     machine.state_port.FixValue(context, x)
+    machine.foot_contact_port.FixValue(context, [1.0, 1.0])
     w = robot.config.walking
     return machine, context, x, w
 
@@ -111,6 +112,31 @@ def test_state_machine_stand_walk_stand_and_damping(g1):
     simulator.AdvanceTo(context.get_time() + 0.01)
     s = machine.schedule(context)
     assert s.mode == "damping" and s.fall_reason == "invalid_state" and s.safe_mode_entries == 1
+
+
+def test_state_machine_in_air_until_both_feet_touch_down(g1):
+    """Lifted (no contact for lift_time) → in-air; one foot down is not enough; both → standing."""
+    robot = g1[0]
+    machine, context, x, w = _machine(robot)
+    machine.command_port.FixValue(context, _command(w))
+    simulator = Simulator(machine, context)
+    machine.foot_contact_port.FixValue(context, [0.0, 0.0])
+    simulator.AdvanceTo(0.04)
+    assert machine.schedule(context).mode == "standing"  # a contact dropout shorter than lift_time
+    simulator.AdvanceTo(0.06)
+    assert machine.schedule(context).mode == "in_air"
+    assert machine.mode_port.Eval(context)[0] == MODES.index("in_air")
+    machine.command_port.FixValue(context, _command(w, vx=0.3))  # no walking from the air
+    machine.foot_contact_port.FixValue(context, [1.0, np.nan])
+    simulator.AdvanceTo(0.2)
+    assert machine.schedule(context).mode == "in_air"
+    machine.command_port.FixValue(context, _command(w))
+    machine.foot_contact_port.FixValue(context, [1.0, 1.0])
+    simulator.AdvanceTo(0.21)
+    assert machine.schedule(context).mode == "standing"
+    machine.command_port.FixValue(context, _command(w, vx=0.3))
+    simulator.AdvanceTo(0.3)
+    assert machine.schedule(context).mode == "walking"
 
 
 def test_state_machine_waits_for_balance_and_leads_with_the_lateral_foot(g1):

@@ -89,7 +89,8 @@ def bench_tick(scenario: Scenario, warmup: float = 2.0, ticks: int = 500) -> dic
         cmd = WalkCommand.from_vector(heading.command_port.Eval(ctx["heading"]))
         machine = loop.state_machine
         t0 = time.perf_counter_ns()
-        machine.next_schedule(machine.schedule(ctx["state_machine"]), t, x, cmd)
+        contact = machine.foot_contact_port.Eval(ctx["state_machine"])
+        machine.next_schedule(machine.schedule(ctx["state_machine"]), t, x, cmd, contact)
         times["state_machine"].append(time.perf_counter_ns() - t0)
         t0 = time.perf_counter_ns()
         rom_state.rom_state_port.Eval(ctx["rom_state"])

@@ -1,4 +1,4 @@
-"""The gait state machine: mode (standing, walking, damping), stance side and step clock."""
+"""The gait state machine: mode (in-air, standing, walking, damping), stance side and step clock."""
 
 from __future__ import annotations
 
@@ -31,6 +31,7 @@ class GaitSchedule(SharedValue):
     idle_steps: int  # consecutive steps taken with a zero command
     safe_mode_entries: int
     fall_reason: str
+    air_since: float = math.nan  # since when neither foot switch has reported contact (s)
 
 
 def is_zero(cmd: WalkCommand) -> bool:
@@ -38,8 +39,12 @@ def is_zero(cmd: WalkCommand) -> bool:
 
 
 class GaitStateMachine(LeafSystem):
-    """Stand → walk → stand, with a time-based step clock and a damping safe mode.
+    """In-air → stand → walk → stand, with a time-based step clock and a damping safe mode.
 
+    - standing → in-air when neither foot contact switch has fired for ``lift_time`` (the robot
+      was lifted, or dropped: the contact-less references hold the legs at their nominal
+      joint angles); in-air → standing once both feet report contact (RoMoCo §VI's staged
+      start: hang the robot, lower it, let it stand, then walk).
     - standing → walking when the command is non-zero and the CoM is nearly still
       (|v_CoM| < ``balance_speed``); the first stance is the foot away from the lateral command.
     - walking: each step is T_SS (from the command, latched at the step start) plus ``t_ds``;
@@ -54,6 +59,7 @@ class GaitStateMachine(LeafSystem):
     |---|---|---|---|
     | ``state`` | in | nq+nv | robot state |
     | ``command`` | in | 6 | :class:`WalkCommand` vector |
+    | ``foot_contact`` | in | 2 | contact switches [left, right], 1.0 in contact |
     | ``mode`` | out | 1 | index into :data:`~romoco_drake.embedding.references.MODES` |
     | ``gait_phase`` | out | 2 | stance (+1 left, −1 right), time in step [s] |
     | ``schedule`` | out | abstract | :class:`GaitSchedule` |
@@ -61,16 +67,17 @@ class GaitStateMachine(LeafSystem):
 
     def __init__(self, robot: RobotModel, period: float, t_ds: float, balance_speed: float = 0.1,
                  stop_steps: int = 2, fall_height: float = 0.5, fall_tilt: float = math.pi / 4,
-                 touchdown_height: float = 0.01, offset: float = 0.0):
+                 touchdown_height: float = 0.01, lift_time: float = 0.05, offset: float = 0.0):
         super().__init__()
         self.robot, self.t_ds = robot, t_ds
         self.balance_speed, self.stop_steps = balance_speed, stop_steps
-        self.touchdown_height = touchdown_height
+        self.touchdown_height, self.lift_time = touchdown_height, lift_time
         self._min_base_z = fall_height * robot.nominal.base_height
         self._cos_tilt = math.cos(fall_tilt)
         self._context = robot.plant.CreateDefaultContext()
         self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
+        self.foot_contact_port = self.DeclareVectorInputPort("foot_contact", 2)
         initial = GaitSchedule("standing", "left", 0.0, robot.config.walking.t_ss, 0, 0, 0, "")
         self._schedule = self.DeclareAbstractState(AbstractValue.Make(initial))
         self.mode_port = self.DeclareVectorOutputPort(
@@ -93,7 +100,8 @@ class GaitStateMachine(LeafSystem):
         tau = context.get_time() - s.step_start if s.mode == "walking" else 0.0
         out.SetFromVector([1.0 if s.side == "left" else -1.0, tau])
 
-    def next_schedule(self, s: GaitSchedule, t: float, x: np.ndarray, cmd: WalkCommand) -> GaitSchedule:
+    def next_schedule(self, s: GaitSchedule, t: float, x: np.ndarray, cmd: WalkCommand,
+                      contact: np.ndarray) -> GaitSchedule:
         """One tick of the state machine at time t (the periodic update calls this)."""
         if cmd.problem() is not None:
             cmd = WalkCommand(step_width=cmd.step_width, com_height=cmd.com_height, step_time=s.t_ss)
@@ -101,7 +109,16 @@ class GaitStateMachine(LeafSystem):
             reason, _ = base_fault(self.robot, x, self._min_base_z, self._cos_tilt)
             if reason:
                 s = replace(s, mode="damping", fall_reason=reason, safe_mode_entries=s.safe_mode_entries + 1)
-        if s.mode == "standing" and not is_zero(cmd) and self._balanced(x):
+        on = np.asarray(contact) > 0.5  # a NaN switch reads as no contact
+        if on.any():
+            s = replace(s, air_since=math.nan)
+        elif math.isnan(s.air_since):
+            s = replace(s, air_since=t)
+        if s.mode == "standing" and t - s.air_since >= self.lift_time - 1e-9:
+            s = replace(s, mode="in_air")
+        elif s.mode == "in_air" and on.all():
+            s = replace(s, mode="standing")
+        elif s.mode == "standing" and not is_zero(cmd) and self._balanced(x):
             side = "right" if cmd.vy > 0.0 else "left"
             s = replace(s, mode="walking", side=side, step_start=t, t_ss=cmd.step_time, idle_steps=0)
         elif s.mode == "walking" and t - s.step_start >= s.t_ss + self.t_ds - 1e-9:
@@ -115,7 +132,8 @@ class GaitStateMachine(LeafSystem):
 
     def _update(self, context, state) -> None:
         s = self.next_schedule(self.schedule(context), context.get_time(), self.state_port.Eval(context),
-                               WalkCommand.from_vector(self.command_port.Eval(context)))
+                               WalkCommand.from_vector(self.command_port.Eval(context)),
+                               self.foot_contact_port.Eval(context))
         state.get_mutable_abstract_state(int(self._schedule)).set_value(s)
 
     def _feet_down(self, x: np.ndarray) -> bool:
