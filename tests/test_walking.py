@@ -298,3 +298,24 @@ def test_a_fall_is_scored_up_to_the_fall():
     assert summary["fell"] and summary["fall_time_s"] < 6.0
     assert summary["base_height_drift_m"] < robot.nominal.base_height
     assert all(v is None or abs(v) < 3.0 for v in summary["mean_velocity"] + summary["velocity_rms_error"])
+
+
+@pytest.mark.parametrize("scenario", ["g1_walk", "h1_walk", "cassie_walk"])
+def test_walks_then_stops_and_stands(scenario):
+    """A zero command after walking ends in standing (H1's heel-first landings included), upright."""
+    from romoco_drake.scenario import initial_positions, with_overrides
+
+    s = with_overrides(load_scenario(scenario), command="0:0,0,0;1:0.3,0,0;3:0,0,0")
+    built = build_diagram(s)
+    simulator = Simulator(built.diagram)
+    root = simulator.get_mutable_context()
+    plant = built.plant_station.GetSubsystemByName("plant")
+    plant.SetPositions(plant.GetMyMutableContextFromRoot(root), initial_positions(built.robot, s))
+    simulator.Initialize()
+    simulator.AdvanceTo(5.0)
+    machine = built.walking.state_machine
+    schedule = machine.schedule(machine.GetMyContextFromRoot(root))
+    assert not built.monitor.summary(built.monitor.GetMyContextFromRoot(root))["fell"]
+    assert schedule.mode == "standing" and schedule.steps >= 6 and schedule.safe_mode_entries == 0
+    v = plant.GetVelocities(plant.GetMyContextFromRoot(root))[built.robot.base_v_start + 3:][:3]
+    assert np.linalg.norm(v) < 0.1  # come to rest

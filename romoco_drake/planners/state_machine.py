@@ -51,7 +51,9 @@ class GaitStateMachine(LeafSystem):
       then the stance switches.
     - walking → standing after ``stop_steps`` steps in a row under a zero command, at a support
       switch where both soles are flat on the ground (every sole point below
-      ``touchdown_height``); otherwise it keeps stepping in place.
+      ``touchdown_height``). A sole that landed on its heel (H1's line-modelled feet land
+      1-2 cm toe-up) gets up to ``settle_time`` in double support to roll flat; if it does not,
+      the robot keeps stepping in place.
     - any mode → damping (latched) on a non-finite state, the base below ``fall_height`` of its
       nominal height, or a base tilt above ``fall_tilt`` rad; counted in ``safe_mode_entries``.
 
@@ -67,11 +69,12 @@ class GaitStateMachine(LeafSystem):
 
     def __init__(self, robot: RobotModel, period: float, t_ds: float, balance_speed: float = 0.1,
                  stop_steps: int = 2, fall_height: float = 0.5, fall_tilt: float = math.pi / 4,
-                 touchdown_height: float = 0.01, lift_time: float = 0.05, offset: float = 0.0):
+                 touchdown_height: float = 0.01, settle_time: float = 0.2, lift_time: float = 0.05,
+                 offset: float = 0.0):
         super().__init__()
         self.robot, self.t_ds = robot, t_ds
         self.balance_speed, self.stop_steps = balance_speed, stop_steps
-        self.touchdown_height, self.lift_time = touchdown_height, lift_time
+        self.touchdown_height, self.settle_time, self.lift_time = touchdown_height, settle_time, lift_time
         self._min_base_z = fall_height * robot.nominal.base_height
         self._cos_tilt = math.cos(fall_tilt)
         self._context = robot.plant.CreateDefaultContext()
@@ -123,9 +126,11 @@ class GaitStateMachine(LeafSystem):
             s = replace(s, mode="walking", side=side, step_start=t, t_ss=cmd.step_time, idle_steps=0)
         elif s.mode == "walking" and t - s.step_start >= s.t_ss + self.t_ds - 1e-9:
             idle = s.idle_steps + 1 if is_zero(cmd) else 0
-            if idle >= self.stop_steps and self._feet_down(x):
+            stopping = idle >= self.stop_steps
+            if stopping and self._feet_down(x):
                 s = replace(s, mode="standing", idle_steps=0, steps=s.steps + 1)
-            else:
+            elif not (stopping and t - s.step_start < s.t_ss + self.t_ds + self.settle_time):
+                # (otherwise the step is held in double support while the landed sole rolls flat)
                 s = replace(s, side=other_side(s.side), step_start=t, t_ss=cmd.step_time, steps=s.steps + 1,
                             idle_steps=idle)
         return s
