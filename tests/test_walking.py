@@ -121,9 +121,9 @@ def test_state_machine_in_air_until_both_feet_touch_down(g1):
     machine.command_port.FixValue(context, _command(w))
     simulator = Simulator(machine, context)
     machine.foot_contact_port.FixValue(context, [0.0, 0.0])
-    simulator.AdvanceTo(0.04)
+    simulator.AdvanceTo(0.006)
     assert machine.schedule(context).mode == "standing"  # a contact dropout shorter than lift_time
-    simulator.AdvanceTo(0.06)
+    simulator.AdvanceTo(0.02)
     assert machine.schedule(context).mode == "in_air"
     assert machine.mode_port.Eval(context)[0] == MODES.index("in_air")
     machine.command_port.FixValue(context, _command(w, vx=0.3))  # no walking from the air
@@ -137,6 +137,34 @@ def test_state_machine_in_air_until_both_feet_touch_down(g1):
     machine.command_port.FixValue(context, _command(w, vx=0.3))
     simulator.AdvanceTo(0.3)
     assert machine.schedule(context).mode == "walking"
+
+
+@pytest.mark.parametrize("scenario", ["g1_walk", "cassie_walk"])
+def test_dropped_robot_lands_stands_and_walks(scenario):
+    """Released 10 cm above the ground (0.14 s of free fall): in-air references (legs at their
+    nominal angles) until both feet touch down, then it stands and walks."""
+    from romoco_drake.scenario import initial_positions, with_overrides
+
+    s = with_overrides(load_scenario(scenario), command="0:0,0,0;1:0.3,0,0")
+    s.initial_height_offset = 0.1
+    built = build_diagram(s)
+    simulator = Simulator(built.diagram)
+    root = simulator.get_mutable_context()
+    plant = built.plant_station.GetSubsystemByName("plant")
+    plant.SetPositions(plant.GetMyMutableContextFromRoot(root), initial_positions(built.robot, s))
+    machine = built.walking.state_machine
+    machine_ctx = machine.GetMyContextFromRoot(root)
+    simulator.Initialize()
+    simulator.AdvanceTo(0.05)
+    assert machine.schedule(machine_ctx).mode == "in_air"
+    simulator.AdvanceTo(4.0)
+    assert not built.monitor.summary(built.monitor.GetMyContextFromRoot(root))["fell"]
+    schedule = machine.schedule(machine_ctx)
+    assert schedule.mode == "walking" and schedule.steps >= 6 and schedule.safe_mode_entries == 0
+    failures = built.walking.controller.stats_port.Eval(built.walking.controller.GetMyContextFromRoot(root))[0]
+    assert failures == 0
+    base = plant.GetPositions(plant.GetMyContextFromRoot(root))[built.robot.base_q_start + 4]
+    assert base > 0.3  # walked forward at about 0.3 m/s for most of 3 s
 
 
 def test_state_machine_waits_for_balance_and_leads_with_the_lateral_foot(g1):

@@ -44,7 +44,10 @@ class GaitStateMachine(LeafSystem):
     - standing → in-air when neither foot contact switch has fired for ``lift_time`` (the robot
       was lifted, or dropped: the contact-less references hold the legs at their nominal
       joint angles); in-air → standing once both feet report contact (RoMoCo §VI's staged
-      start: hang the robot, lower it, let it stand, then walk).
+      start: hang the robot, lower it, let it stand, then walk). ``lift_time`` only bridges
+      the first plant step, which has no contact results yet: standing references in the air
+      (feet held as if on the ground) swing the pelvis at up to 16 rad/s, and with 50 ms G1
+      fell after a 5 cm drop; with 10 ms it lands from 15 cm (from 30 cm it falls).
     - standing → walking when the command is non-zero and the CoM is nearly still
       (|v_CoM| < ``balance_speed``); the first stance is the foot away from the lateral command.
     - walking: each step is T_SS (from the command, latched at the step start) plus ``t_ds``;
@@ -69,7 +72,7 @@ class GaitStateMachine(LeafSystem):
 
     def __init__(self, robot: RobotModel, period: float, t_ds: float, balance_speed: float = 0.1,
                  stop_steps: int = 2, fall_height: float = 0.5, fall_tilt: float = math.pi / 4,
-                 touchdown_height: float = 0.01, settle_time: float = 0.2, lift_time: float = 0.05,
+                 touchdown_height: float = 0.01, settle_time: float = 0.2, lift_time: float = 0.01,
                  offset: float = 0.0):
         super().__init__()
         self.robot, self.t_ds = robot, t_ds
