@@ -29,7 +29,7 @@ from romoco_drake.embedding.bezier import BezierCurve, SwingTrajectory, plan_swi
 from romoco_drake.embedding.contact import DOMAINS, ContactModel
 from romoco_drake.embedding.outputs import InAirOutputs, Output, StandingOutputs, WalkingOutputs
 from romoco_drake.robots.model import RobotModel
-from romoco_drake.rom.types import PlannerOutput, other_side
+from romoco_drake.rom.types import PlannerOutput
 from romoco_drake.values import SharedValue
 
 # Control modes, as indices on ``mode`` ports. In damping (the safe mode after a fall or bad
@@ -92,7 +92,7 @@ class SwingState(SharedValue):
 
     stance_side: str
     step_start: float  # controller time at which this step began
-    liftoff_hip_yaw: tuple[float, float]  # (stance, swing) hip yaw angles at the step start
+    liftoff_yaw: tuple[float, float]  # stance hip yaw angle, swing sole yaw rel. stance, at the step start
     trajectory: SwingTrajectory | None  # swing sole rel. stance sole, stance yaw frame
     liftoff_com_height: float  # CoM height above the stance sole at the step start
 
@@ -128,7 +128,7 @@ class EmbeddingCore:
                            for s, leg in self.walking.legs.items()}
         self._hip_yaw_sign = {s: leg.hip_yaw_sign for s, leg in self.walking.legs.items()}
         self._swing_index = self.walking.names.index("swing_foot_x")
-        self._swing_yaw_index = self.walking.names.index("swing_hip_yaw")
+        self._swing_yaw_index = self.walking.names.index("swing_sole_yaw")
         ss = np.ones(len(self.walking.names), dtype=bool)
         ds = np.zeros_like(ss)
         for name in ("com_z", "stance_hip_yaw", "pelvis_pitch", "pelvis_roll"):
@@ -136,14 +136,14 @@ class EmbeddingCore:
         self._walking_active = {"single": ss, "double": ds}
 
     def start_step(self, context, stance_side: str, t: float, plan: PlannerOutput) -> SwingState:
-        """Latches lift-off: the swing sole's pose and both hip yaws at the start of a step."""
+        """Latches lift-off: the swing sole's pose, the stance hip yaw and the swing sole's yaw."""
         out = self.walking.evaluate(context, stance_side)
         q = self.robot.plant.GetPositions(context)
         i = self._swing_index
         start = out.y[i:i + 3]
         trajectory = plan_swing(start, self._target(plan), plan.t_ss, self.swing_height)
-        hips = (float(q[self._hip_yaw_q[stance_side]]), float(q[self._hip_yaw_q[other_side(stance_side)]]))
-        return SwingState(stance_side, t, hips, trajectory, float(out.y[0]))
+        yaws = (float(q[self._hip_yaw_q[stance_side]]), float(out.y[self._swing_yaw_index]))
+        return SwingState(stance_side, t, yaws, trajectory, float(out.y[0]))
 
     def update_swing(self, swing: SwingState, tau: float, plan: PlannerOutput) -> SwingState:
         """Replans the swing toward the plan's latest target, from the trajectory's own state at
@@ -151,7 +151,7 @@ class EmbeddingCore:
         if swing.trajectory is None or tau >= FREEZE_FRACTION * plan.t_ss:
             return swing
         trajectory = swing.trajectory.replan(tau, self._target(plan))
-        return SwingState(swing.stance_side, swing.step_start, swing.liftoff_hip_yaw, trajectory,
+        return SwingState(swing.stance_side, swing.step_start, swing.liftoff_yaw, trajectory,
                           swing.liftoff_com_height)
 
     @staticmethod
@@ -188,13 +188,13 @@ class EmbeddingCore:
         k = len(out.names)
         y_d, yd_d, ydd_d = np.zeros(k), np.zeros(k), np.zeros(k)
         y_d[0], yd_d[0], ydd_d[0] = _blend(swing.liftoff_com_height, plan.com_height, tau, HEIGHT_BLEND_S)
-        # Hip yaws: the pelvis turns half the planned yaw change relative to each foot.
+        # The swing sole turns to the planned yaw relative to the stance sole; the pelvis turns
+        # half of it on the stance leg.
         s = min(max(tau / plan.t_ss, 0.0), 1.0)
         rate = 0.0 if not single else 1.0 / plan.t_ss
-        half = 0.5 * plan.swing_yaw
-        st0, sw0 = swing.liftoff_hip_yaw
-        st_goal = -self._hip_yaw_sign[stance] * half
-        sw_goal = self._hip_yaw_sign[other_side(stance)] * half
+        st0, sw0 = swing.liftoff_yaw
+        st_goal = -self._hip_yaw_sign[stance] * 0.5 * plan.swing_yaw
+        sw_goal = plan.swing_yaw
         y_d[1], yd_d[1] = st0 + s * (st_goal - st0), rate * (st_goal - st0)
         i_sw_yaw = self._swing_yaw_index
         y_d[i_sw_yaw], yd_d[i_sw_yaw] = sw0 + s * (sw_goal - sw0), rate * (sw_goal - sw0)

@@ -16,7 +16,7 @@ ERROR_GROUPS = (
     ("com", ("com_",)),
     ("pelvis", ("pelvis_",)),
     ("swing foot position", ("swing_foot_x", "swing_foot_y", "swing_foot_z")),
-    ("swing foot tilt, hip yaw", ("swing_foot_", "stance_hip_yaw", "swing_hip_yaw")),
+    ("swing foot tilt, hip yaw", ("swing_foot_", "stance_hip_yaw", "swing_sole_yaw")),
     ("joints", ()),
 )
 
