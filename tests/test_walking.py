@@ -73,6 +73,18 @@ def test_tscqp_respects_torque_and_friction_limits(g1):
     assert np.all(refs.A_f @ f <= refs.b_f + 1e-5 * np.abs(f).max())
 
 
+def _closed_loop(scenario):
+    """The scenario's diagram, a simulator on it and the plant set to the initial pose."""
+    from romoco_drake.scenario import initial_positions
+
+    built = build_diagram(scenario)
+    simulator = Simulator(built.diagram)
+    root = simulator.get_mutable_context()
+    plant = built.plant_station.GetSubsystemByName("plant")
+    plant.SetPositions(plant.GetMyMutableContextFromRoot(root), initial_positions(built.robot, scenario))
+    return built, simulator, root, plant
+
+
 def _machine(robot):
     machine = GaitStateMachine(robot, period=0.002, t_ds=0.0)
     context = machine.CreateDefaultContext()
@@ -143,15 +155,11 @@ def test_state_machine_in_air_until_both_feet_touch_down(g1):
 def test_dropped_robot_lands_stands_and_walks(scenario):
     """Released 10 cm above the ground (0.14 s of free fall): in-air references (legs at their
     nominal angles) until both feet touch down, then it stands and walks."""
-    from romoco_drake.scenario import initial_positions, with_overrides
+    from romoco_drake.scenario import with_overrides
 
     s = with_overrides(load_scenario(scenario), command="0:0,0,0;1:0.3,0,0")
     s.initial_height_offset = 0.1
-    built = build_diagram(s)
-    simulator = Simulator(built.diagram)
-    root = simulator.get_mutable_context()
-    plant = built.plant_station.GetSubsystemByName("plant")
-    plant.SetPositions(plant.GetMyMutableContextFromRoot(root), initial_positions(built.robot, s))
+    built, simulator, root, plant = _closed_loop(s)
     machine = built.walking.state_machine
     machine_ctx = machine.GetMyContextFromRoot(root)
     simulator.Initialize()
@@ -331,14 +339,10 @@ def test_a_fall_is_scored_up_to_the_fall():
 @pytest.mark.parametrize("scenario", ["g1_walk", "h1_walk", "cassie_walk"])
 def test_walks_then_stops_and_stands(scenario):
     """A zero command after walking ends in standing (H1's heel-first landings included), upright."""
-    from romoco_drake.scenario import initial_positions, with_overrides
+    from romoco_drake.scenario import with_overrides
 
     s = with_overrides(load_scenario(scenario), command="0:0,0,0;1:0.3,0,0;3:0,0,0")
-    built = build_diagram(s)
-    simulator = Simulator(built.diagram)
-    root = simulator.get_mutable_context()
-    plant = built.plant_station.GetSubsystemByName("plant")
-    plant.SetPositions(plant.GetMyMutableContextFromRoot(root), initial_positions(built.robot, s))
+    built, simulator, root, plant = _closed_loop(s)
     simulator.Initialize()
     simulator.AdvanceTo(5.0)
     machine = built.walking.state_machine
@@ -353,14 +357,10 @@ def test_g1_walks_sideways_and_keeps_its_heading():
     """Sideways at 0.2 m/s: each swing sole lands at the planned yaw, so the heading holds (with
     the swing hip yaw joint as the output, G1 turned 0.23 rad in 3 s)."""
     from romoco_drake.planners.heading import base_yaw
-    from romoco_drake.scenario import initial_positions, with_overrides
+    from romoco_drake.scenario import with_overrides
 
     s = with_overrides(load_scenario("g1_walk"), command="0:0,0,0;1:0,0.2,0")
-    built = build_diagram(s)
-    simulator = Simulator(built.diagram)
-    root = simulator.get_mutable_context()
-    plant = built.plant_station.GetSubsystemByName("plant")
-    plant.SetPositions(plant.GetMyMutableContextFromRoot(root), initial_positions(built.robot, s))
+    built, simulator, root, plant = _closed_loop(s)
     simulator.Initialize()
     simulator.AdvanceTo(4.5)
     assert not built.monitor.summary(built.monitor.GetMyContextFromRoot(root))["fell"]
