@@ -164,8 +164,8 @@ def test_g1_stands_over_lcm_like_the_direct_simulation():
 
 
 def test_g1_walks_over_lcm_and_tracks_like_the_direct_simulation():
-    """G1 walking forward over LCM: upright, forward, stepping, fault free, and tracking within a
-    band of the direct simulation's velocity error."""
+    """G1 walking forward over LCM: upright, forward, stepping, fault free, and tracking as the
+    direct simulation does."""
     scenario = with_overrides(load_scenario("g1_walk"), command="0:0,0,0;0.5:0.3,0,0")
     via = run_scenario(scenario, 3.0, link="via_lcm")
     direct = run_scenario(scenario, 3.0, link="sim")
@@ -174,9 +174,10 @@ def test_g1_walks_over_lcm_and_tracks_like_the_direct_simulation():
     assert via["qp_failures"] == 0 and via["safe_mode_entries"] == 0
     assert {k: via[k] for k in NO_FAULTS} == NO_FAULTS
     assert via["robot_link"] == {"stale_events": 0, "rejected_messages": 0, "estop": 0}
-    via_error, direct_error = np.array(via["velocity_rms_error"]), np.array(direct["velocity_rms_error"])
-    assert np.all(via_error <= 2.0 * direct_error + 0.03), (via_error, direct_error)
-    assert abs(via["mean_velocity"][0] - direct["mean_velocity"][0]) < 0.1
+    # Same timing on both links: the LCM path is the direct loop, to the messages' round-off.
+    np.testing.assert_allclose(via["velocity_rms_error"], direct["velocity_rms_error"], atol=1e-3)
+    np.testing.assert_allclose(via["mean_velocity"], direct["mean_velocity"], atol=1e-3)
+    assert via["steps"] == direct["steps"]
 
 
 # ---------------------------------------------------------------- controller side: faults
