@@ -130,10 +130,11 @@ class GaitStateMachine(LeafSystem):
         elif s.mode == "walking" and t - s.step_start >= s.t_ss + self.t_ds - 1e-9:
             idle = s.idle_steps + 1 if is_zero(cmd) else 0
             stopping = idle >= self.stop_steps
+            # A stop holds the step in double support for up to settle_time while a sole rolls flat.
+            settling = stopping and t - s.step_start < s.t_ss + self.t_ds + self.settle_time
             if stopping and self._feet_down(x):
                 s = replace(s, mode="standing", idle_steps=0, steps=s.steps + 1)
-            elif not (stopping and t - s.step_start < s.t_ss + self.t_ds + self.settle_time):
-                # (otherwise the step is held in double support while the landed sole rolls flat)
+            elif not settling:
                 s = replace(s, side=other_side(s.side), step_start=t, t_ss=cmd.step_time, steps=s.steps + 1,
                             idle_steps=idle)
         return s
