@@ -334,6 +334,10 @@ def test_a_fall_is_scored_up_to_the_fall():
     assert summary["fell"] and summary["fall_time_s"] < 6.0
     assert summary["base_height_drift_m"] < robot.nominal.base_height
     assert all(v is None or abs(v) < 3.0 for v in summary["mean_velocity"] + summary["velocity_rms_error"])
+    # It fell before any sample was due for scoring (from 1.5 s), so nothing was scored; and the
+    # height range ends at the fall (lying on the ground it would be most of the base height).
+    assert summary["fall_time_s"] < 1.5 and summary["velocity_rms_error"] == [None, None, None]
+    assert summary["base_height_drift_m"] < 0.55 * robot.nominal.base_height
 
 
 @pytest.mark.parametrize("scenario", ["g1_walk", "h1_walk", "cassie_walk"])
