@@ -117,7 +117,8 @@ class GaitStateMachine(LeafSystem):
                 s = replace(s, mode="damping", fall_reason=reason, safe_mode_entries=s.safe_mode_entries + 1)
         on = np.asarray(contact) > 0.5  # a NaN switch reads as no contact
         if on.any():
-            s = replace(s, air_since=math.nan)
+            if not math.isnan(s.air_since):
+                s = replace(s, air_since=math.nan)
         elif math.isnan(s.air_since):
             s = replace(s, air_since=t)
         if s.mode == "standing" and t - s.air_since >= self.lift_time - 1e-9:
