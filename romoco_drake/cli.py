@@ -11,22 +11,24 @@ from romoco_drake.errors import RomocoError
 
 
 def _cmd_list(args) -> int:
+    from romoco_drake.control.registry import CONTROLLERS
+    from romoco_drake.estimation.registry import ESTIMATORS
     from romoco_drake.robots.model import robot_names
     from romoco_drake.rom.planners import PLANNERS
-    from romoco_drake.scenario import CONTROLLERS, ESTIMATORS, scenario_names
+    from romoco_drake.scenario import scenario_names
 
-    listing = {
-        "robots": robot_names(),
-        "scenarios": scenario_names(),
-        "planners": list(PLANNERS),
-        "controllers": list(CONTROLLERS),
-        "estimators": list(ESTIMATORS),
-    }
+    registries = {"planners": PLANNERS, "controllers": CONTROLLERS, "estimators": ESTIMATORS}
+    listing = {"robots": robot_names(), "scenarios": scenario_names()} | {
+        key: list(registry) for key, registry in registries.items()}
     if args.json:
         print(json.dumps(listing))
-    else:
-        for key, names in listing.items():
-            print(f"{key}: {', '.join(names)}")
+        return 0
+    for key, names in listing.items():
+        print(f"{key}: {', '.join(names)}")
+    for key, registry in registries.items():
+        print(f"\n{key}:")
+        for entry in registry.values():
+            print(f"  {entry.name:14s} {entry.description}")
     return 0
 
 
@@ -212,13 +214,14 @@ def _cmd_bench_embedding(args) -> int:
 
 def _cmd_bench_matrix(args) -> int:
     from romoco_drake.bench.walking import WALKING_ROBOTS, bench_matrix
+    from romoco_drake.control.registry import CONTROLLERS
     from romoco_drake.rom.planners import PLANNERS
     from romoco_drake.runner import stderr_progress
-    from romoco_drake.scenario import CONTROLLERS
 
+    walking_controllers = [name for name, entry in CONTROLLERS.items() if entry.facts["walking"]]
     robots = _names(args.robots, WALKING_ROBOTS, "robot", WALKING_ROBOTS)
     planners = _names(args.planners, ("hlip", "mlip", "dcm"), "planner", PLANNERS)
-    controllers = _names(args.controllers, ("tscqp",), "controller", CONTROLLERS)
+    controllers = _names(args.controllers, ("tscqp",), "walking controller", walking_controllers)
     rows = bench_matrix(robots, planners, controllers, args.duration, progress=stderr_progress)
     if args.json:
         print(json.dumps(rows))

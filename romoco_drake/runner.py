@@ -18,7 +18,7 @@ from romoco_drake.interfaces.lcm_log import LcmLogRecorder
 from romoco_drake.interfaces.robot_sim import make_robot_sim, robot_summary
 from romoco_drake.metrics import finite_or_none, velocity_tracking
 from romoco_drake.robots.model import load_robot
-from romoco_drake.scenario import MOTOR_COMMAND_CONTROLLERS, Scenario, build_diagram, initial_positions
+from romoco_drake.scenario import Scenario, build_diagram, initial_positions, uses_motor_command
 
 PROGRESS_WALL_S = 2.0  # print progress lines at most this often
 
@@ -139,7 +139,7 @@ def run_robot_sim(scenario: Scenario, duration: float | None = None, lcm_url: st
         raise RomocoError(f"--duration must be positive, got {duration}")
     lcm = make_lcm(lcm_url)
     robot = load_robot(scenario.robot)
-    motor_pd = scenario.controller.name in MOTOR_COMMAND_CONTROLLERS
+    motor_pd = uses_motor_command(scenario)
     robot_sim = make_robot_sim(robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link,
                                wait_for_commands_s=wait_s, motor_pd=motor_pd)
     simulator = Simulator(robot_sim)

@@ -9,9 +9,10 @@ from romoco_drake.embedding.system import ERROR_GROUPS
 from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces import lcm_codec as codec
 from romoco_drake.interfaces.lcm_log import LcmLogRecorder, plot_status_log, read_status_log
+from romoco_drake.modes import Mode
 from romoco_drake.robots.model import load_robot
 
-WALKING = 2  # embedding.references.MODES index
+WALKING = Mode.WALKING.index
 
 
 def _estop(utime: int, engaged: bool) -> bytes:

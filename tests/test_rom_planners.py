@@ -235,7 +235,7 @@ def test_make_planner_rejects_unsupported_gains(name, gain):
 def test_make_planner_rejects_bad_params(name):
     bad = [(PlannerParams(mass=0.0), "mass"), (PlannerParams(mass=math.nan), "mass"),
            (PlannerParams(mass=30.0, t_ds=-0.1), "t_ds")]
-    if "converging" in PLANNERS[name].supported_gains:
+    if "converging" in PLANNERS[name].facts["gains"]:
         bad += [(PlannerParams(mass=30.0, gain="converging", alpha=a), "alpha") for a in (-0.1, 1.0)]
     for params, what in bad:
         with pytest.raises(RomocoError, match=what):

@@ -12,17 +12,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
 
 
 def contact_gravity_compensation(
-    robot: RobotModel, context, sides=("left", "right"), force_weight: float = 1e-3
+    robot: RobotModel, kin: RobotKinematics, sides=("left", "right"), force_weight: float = 1e-3
 ) -> np.ndarray:
-    """Actuator torques (nu) holding the configuration in ``context`` still on ``sides``."""
-    plant = robot.plant
-    tau_g = plant.CalcGravityGeneralizedForces(context)
-    Jc = robot.foot_contact_jacobian(context, sides)
-    Jh = robot.internal_constraints(context).J
+    """Actuator torques (nu) holding the configuration of ``kin`` still on ``sides``."""
+    tau_g = kin.tau_g
+    Jc = robot.foot_contact_jacobian(kin.context, sides)
+    Jh = robot.internal_constraints(kin.context).J
     A = np.hstack([robot.B, Jc.T, Jh.T])
     # Weighted minimum norm: scale columns so forces are cheap relative to torques.
     w = np.concatenate([np.ones(robot.nu), np.full(Jc.shape[0] + Jh.shape[0], force_weight)])

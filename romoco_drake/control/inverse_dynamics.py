@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from romoco_drake.control.controller import SolverResult, torque_command
 from romoco_drake.control.tasks import (
     DEFAULT_TASK_GAINS,
     TaskGain,
@@ -58,14 +59,16 @@ from romoco_drake.control.tasks import (
     subspace_basis,
     weighted_least_squares,
 )
-from romoco_drake.control.tscqp import QpSolution, TscQpController
+from romoco_drake.control.tscqp import QpSolution
 from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.embedding.references import TaskReferences
+from romoco_drake.modes import Domain
+from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
 
 
 class InverseDynamics:
-    """The ID solve for one robot. ``solve`` takes the controller-plant context (state set).
+    """The ID solve for one robot, from the tick's shared controller-plant evaluation.
 
     ``regularization`` = (ε_v, ε_τ, ε_λ) and ``pivot_moment_weight`` mean what they mean in
     :class:`~romoco_drake.control.tscqp.TscQp` (same defaults), so both agree in single support
@@ -84,21 +87,28 @@ class InverseDynamics:
         self.w_split = load_split_weight
         self._eye = np.eye(robot.nv)
 
-    def solve(self, context, refs: TaskReferences) -> QpSolution:
+    warm_start_size = 0
+
+    def solve(self, kin: RobotKinematics, refs: TaskReferences, previous: np.ndarray,
+              warm_start: np.ndarray) -> SolverResult:
+        """The torque command of this tick (:class:`~romoco_drake.control.controller.WholeBodySolver`)."""
+        solution = self.compute(kin, refs)
+        return SolverResult(torque_command(self.robot, kin, solution.tau), solution.success)
+
+    def compute(self, kin: RobotKinematics, refs: TaskReferences) -> QpSolution:
         """v̇, τ and the constraint multipliers λ (all J_h rows) of one tick; success iff finite."""
         try:
-            return self._solve(context, refs)
+            return self._solve(kin, refs)
         except np.linalg.LinAlgError:  # non-finite inputs: the SVDs do not converge
             r = self.robot
             return QpSolution(np.zeros(r.nu), np.zeros(r.nv), np.zeros(len(refs.holonomic.y)), False)
 
-    def _solve(self, context, refs: TaskReferences) -> QpSolution:
-        r, plant = self.robot, self.robot.plant
-        q, v = plant.GetPositions(context), plant.GetVelocities(context)
+    def _solve(self, kin: RobotKinematics, refs: TaskReferences) -> QpSolution:
+        r = self.robot
+        q, v = kin.q, kin.v
         t = self.tasks.evaluate(refs, q)
         a_cmd = t.yddot_des - t.kp * t.error - t.kd * (t.J @ v - t.ydot_des)
-        M = plant.CalcMassMatrix(context)
-        C = plant.CalcBiasTerm(context) - plant.CalcGravityGeneralizedForces(context)
+        M, C = kin.M, kin.C
         Jh = refs.holonomic.J
         h = subspace_basis(Jh)
         vdot_p = h.pinv(-refs.holonomic.Jdot_v - self.k_h * (Jh @ v))
@@ -123,15 +133,15 @@ class InverseDynamics:
         rows = [t.J @ N_z, N_z, T, L]
         targets = [a_cmd - t.Jdot_v - t.J @ vdot_p, -vdot_p, -tau_p, -lam_p]
         weights = [t.weight, np.full(r.nv, eps_v), np.full(r.nu, eps_tau), np.full(len(lam_p), eps_lam)]
-        if refs.domain in ("left", "right") and self.w_pivot > 0.0:
-            G = pivot_moment_map(self.contact, context, refs)
+        if refs.domain.single_support and self.w_pivot > 0.0:
+            G = pivot_moment_map(self.contact, kin.context, refs)
             n_f = refs.num_contact_forces
             rows.append(G @ L[:n_f])
             targets.append(-G @ lam_p[:n_f])
             weights.append(np.full(2, self.w_pivot))
-        if refs.domain == "double" and self.w_split > 0.0:
+        if refs.domain == Domain.DOUBLE and self.w_split > 0.0:
             n_f = refs.num_contact_forces
-            f_split = load_split_target(self.robot, context, refs, a_cmd)
+            f_split = load_split_target(self.robot, kin, refs, a_cmd)
             rows.append(L[:n_f])
             targets.append(f_split - lam_p[:n_f])
             weights.append(np.full(n_f, self.w_split))
@@ -139,25 +149,3 @@ class InverseDynamics:
         vdot, tau, forces = vdot_p + N_z @ z, tau_p + T @ z, lam_p + L @ z
         ok = bool(np.all(np.isfinite(tau)) and np.all(np.isfinite(vdot)))
         return QpSolution(tau, vdot, forces, ok)
-
-
-class InverseDynamicsController(TscQpController):
-    """Inverse dynamics as a system: :class:`TscQpController`'s ports, safe mode and stats.
-
-    Damping mode (``mode`` = damping) or a non-finite state give joint damping −k_d v; a
-    non-finite solve (e.g. NaN references) keeps the last good torque, damping after
-    ``max_stale_ticks`` failures in a row. Failures are counted.
-
-    | port | kind | size | meaning |
-    |---|---|---|---|
-    | ``state`` | in | nq+nv | robot state |
-    | ``task_references`` | in | abstract | :class:`TaskReferences` |
-    | ``mode`` | in | 1 | index into ``MODES`` |
-    | ``actuation`` | out | nu | joint torques [N·m] clipped to the effort limits, held between ticks |
-    | ``stats`` | out | 3 | failures, safe (damping) ticks, consecutive failures |
-    | ``tick_ms`` | out | 1 | wall time of the last update [ms] (instrumentation, not control) |
-    """
-
-    def __init__(self, robot: RobotModel, period: float, solver: InverseDynamics, max_stale_ticks: int = 20,
-                 offset: float = 0.0):
-        super().__init__(robot, period, solver, max_stale_ticks, offset)

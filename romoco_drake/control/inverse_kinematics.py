@@ -48,31 +48,30 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-from pydrake.common.value import AbstractValue
 from pydrake.multibody.tree import JacobianWrtVariable
-from pydrake.systems.framework import LeafSystem
 
+from romoco_drake.control.controller import SolverResult
 from romoco_drake.control.inverse_dynamics import InverseDynamics
 from romoco_drake.control.tasks import (
     DEFAULT_TASK_GAINS,
     TaskGain,
     TaskStack,
-    placeholder_references,
     subspace_basis,
     weighted_least_squares,
 )
 from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.embedding.outputs import Output, _leg_chain
-from romoco_drake.embedding.references import MODES, EmbeddingCore, TaskReferences
+from romoco_drake.embedding.references import EmbeddingCore, TaskReferences
+from romoco_drake.modes import Domain, Mode
+from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
 
 
-def gravity_compensation(robot: RobotModel, contact: ContactModel, context, refs: TaskReferences,
+def gravity_compensation(robot: RobotModel, contact: ContactModel, kin: RobotKinematics, refs: TaskReferences,
                          force_weight: float = 1e-3) -> np.ndarray:
     """Actuator torques u holding the joints against gravity: B u + J_cᵀ f + J_iᵀ λ = −τ_g.
 
@@ -81,15 +80,15 @@ def gravity_compensation(robot: RobotModel, contact: ContactModel, context, refs
     internal loops. In single support the base's tipping about the pivot stays unbalanced.
     """
     plant = robot.plant
-    tau_g = plant.CalcGravityGeneralizedForces(context)
+    tau_g = kin.tau_g
     J_h, n_f = refs.holonomic.J, refs.num_contact_forces
     cols = [robot.B, np.sqrt(force_weight) * J_h.T]
-    if refs.domain in ("left", "right"):
+    if refs.domain.single_support:
         foot, W = contact.feet[refs.domain], plant.world_frame()
-        J_p = plant.CalcJacobianTranslationalVelocity(context, JacobianWrtVariable.kV, foot.frame, foot.p_FS,
-                                                      W, W)
+        J_p = plant.CalcJacobianTranslationalVelocity(kin.context, JacobianWrtVariable.kV, foot.frame,
+                                                      foot.p_FS, W, W)
         cols[1] = np.sqrt(force_weight) * np.vstack([J_p, J_h[n_f:]]).T
-    elif refs.domain == "none":
+    elif refs.domain == Domain.NONE:
         base = np.zeros((robot.nv, 6))
         base[robot.base_v_start + np.arange(6), np.arange(6)] = np.sqrt(force_weight)
         cols.append(base)
@@ -130,13 +129,12 @@ class VelocityIK:
         self.tasks = TaskStack(robot, gains)
         self.damping = damping
 
-    def solve(self, context, refs: TaskReferences, feedback: bool = True) -> np.ndarray:
+    def solve(self, kin: RobotKinematics, refs: TaskReferences, feedback: bool = True) -> np.ndarray:
         """v_d (nv) with J_h v_d = 0 tracking ẏ_d − K (y − y_d) (just ẏ_d without ``feedback``)."""
-        t = self.tasks.evaluate(refs, self.robot.plant.GetPositions(context))
+        t = self.tasks.evaluate(refs, kin.q)
         ydot = t.ydot_des - (t.kp / t.kd) * t.error if feedback else t.ydot_des
         N = subspace_basis(refs.holonomic.J).V_n
-        v = self.robot.plant.GetVelocities(context)
-        return N @ weighted_least_squares(t.J @ N, ydot, t.weight, self.damping, prior=N.T @ v)
+        return N @ weighted_least_squares(t.J @ N, ydot, t.weight, self.damping, prior=N.T @ kin.v)
 
 
 @dataclass(frozen=True)
@@ -150,7 +148,12 @@ class PositionIkSolution:
 
 
 class PositionIK:
-    """POS-IK: Newton–Raphson on the configuration, on its own controller-plant context."""
+    """POS-IK: Newton–Raphson on the configuration.
+
+    The Newton iterates are configurations no other system sees, so they are evaluated on a
+    scratch :class:`~romoco_drake.robots.kinematics.RobotKinematics` of the solver's own; it
+    carries nothing from one solve to the next (every solve sets it before reading it).
+    """
 
     def __init__(self, robot: RobotModel, contact: ContactModel | None = None,
                  gains: tuple[TaskGain, ...] = DEFAULT_TASK_GAINS, damping: float = 1e-6,
@@ -160,23 +163,23 @@ class PositionIK:
         self.velocity = VelocityIK(robot, gains, damping)
         self.damping, self.max_iterations, self.tolerance = damping, max_iterations, tolerance
         self.max_step = max_step
-        self._context = robot.plant.CreateDefaultContext()
+        self._iterate = RobotKinematics(robot)
 
-    def _outputs(self, context, refs: TaskReferences) -> Output:
-        if refs.mode == "walking":
-            return self.core.walking.evaluate(context, refs.stance_side)
-        if refs.mode == "in_air":
-            return self.core.in_air.evaluate(context)
-        return self.core.standing.evaluate(context)
+    def _outputs(self, kin: RobotKinematics, refs: TaskReferences) -> Output:
+        if refs.mode == Mode.WALKING:
+            return self.core.walking.evaluate(kin, refs.stance_side)
+        if refs.mode == Mode.IN_AIR:
+            return self.core.in_air.evaluate(kin)
+        return self.core.standing.evaluate(kin)
 
-    def solve(self, context, refs: TaskReferences) -> PositionIkSolution:
-        """Up to ``max_iterations`` Newton steps from the configuration in ``context``.
+    def solve(self, kin: RobotKinematics, refs: TaskReferences) -> PositionIkSolution:
+        """Up to ``max_iterations`` Newton steps from the configuration of ``kin``.
 
         Steps longer than ``max_step`` (∞-norm, rad or m) are scaled down, so a far or
         unreachable target moves the command a bounded amount per tick.
         """
-        plant, tasks = self.robot.plant, self.velocity.tasks
-        q = plant.GetPositions(context)
+        tasks = self.velocity.tasks
+        q = kin.q
         n_f = refs.num_contact_forces
         h_target = np.concatenate([refs.holonomic.y[:n_f], np.zeros(len(refs.holonomic.y) - n_f)])
         # Iteration 0 reads the references (evaluated at the measured state) as they are.
@@ -197,136 +200,71 @@ class PositionIK:
             dv *= min(1.0, self.max_step / max(np.abs(dv).max(), 1e-12))
             q = integrate_configuration(self.robot, q, dv)
             k += 1
-            plant.SetPositions(self._context, q)
-            out = self._outputs(self._context, refs)
-            hol = self.core.contact.constraints(self._context, refs.domain)
+            self._iterate.update(np.concatenate([q, kin.v]))
+            out = self._outputs(self._iterate, refs)
+            hol = self.core.contact.constraints(self._iterate.context, refs.domain)
             t = tasks.evaluate(dataclasses.replace(refs, y=out.y, J=out.J, Jdot_v=out.Jdot_v), q)
-        return PositionIkSolution(q, self.velocity.solve(context, refs, feedback=False), k, residual)
+        return PositionIkSolution(q, self.velocity.solve(kin, refs, feedback=False), k, residual)
 
 
-class IkController(LeafSystem):
-    """VEL-IK or POS-IK as a system: motor commands and the torque they produce.
+class IkSolver:
+    """VEL-IK or POS-IK as a :class:`~romoco_drake.control.controller.WholeBodySolver`: joint targets,
+    gains and a feedforward torque (module docstring).
 
-    Each tick computes the motor command [q_d; v_d; τ_ff; K_p; K_d] and the torque
-    τ = K_p (q_d − q) + K_d (v_d − v) + τ_ff it gives at the tick's state, clipped to the effort
-    limits. Damping mode (``mode`` = damping) or a non-finite state command q_d = q, v_d = 0,
-    τ_ff = 0, K_p = 0 (joint damping −K_d v, as :class:`~romoco_drake.control.tscqp.TscQpController`);
-    a non-finite solve (e.g. NaN references) keeps the last good command, damping after
-    ``max_stale_ticks`` failures in a row. Failures are counted. VEL-IK integrates q_d from the
-    previous command, restarting at the measured joints when that had K_p = 0 (at start, after
-    damping). ``feedforward`` picks τ_ff (module docstring); a non-finite inverse-dynamics
-    torque falls back to gravity compensation for that tick.
-
-    | port | kind | size | meaning |
-    |---|---|---|---|
-    | ``state`` | in | nq+nv | robot state |
-    | ``task_references`` | in | abstract | :class:`TaskReferences` |
-    | ``mode`` | in | 1 | index into ``MODES`` |
-    | ``actuation`` | out | nu | joint torques [N·m] of the command at the tick's state, held |
-    | ``motor_command`` | out | 5·nu | blocks q_d [rad], v_d [rad/s], τ_ff [N·m], K_p, K_d; held |
-    | ``stats`` | out | 3 | failures, safe (damping) ticks, consecutive failures |
-    | ``tick_ms`` | out | 1 | wall time of the last update [ms] (instrumentation, not control) |
+    VEL-IK integrates q_d from the previous command, restarting at the measured joints when that
+    had K_p = 0 (at start, after damping). ``feedforward`` picks τ_ff; a non-finite
+    inverse-dynamics torque falls back to gravity compensation for that tick.
     """
+
+    warm_start_size = 0
 
     def __init__(self, robot: RobotModel, period: float, kind: Literal["velocity", "position"] = "velocity",
                  contact: ContactModel | None = None, gains: tuple[TaskGain, ...] = DEFAULT_TASK_GAINS,
-                 max_stale_ticks: int = 20, max_lead: float | None = None,
+                 max_lead: float | None = None,
                  feedforward: Literal["inverse_dynamics", "gravity"] = "inverse_dynamics",
-                 position_gain_scale: float = 0.25, offset: float = 0.0):
-        super().__init__()
+                 position_gain_scale: float = 0.25):
         if kind not in ("velocity", "position"):
             raise ValueError(f"unknown IK kind '{kind}' (velocity or position)")
         if feedforward not in ("inverse_dynamics", "gravity"):
             raise ValueError(f"unknown feedforward '{feedforward}' (inverse_dynamics or gravity)")
         self.robot, self.kind, self.period = robot, kind, period
-        self.max_stale_ticks = max_stale_ticks
         self.contact = contact or ContactModel(robot)
-        self.solver = (VelocityIK(robot, gains) if kind == "velocity"
-                       else PositionIK(robot, self.contact, gains))
+        self.ik = (VelocityIK(robot, gains) if kind == "velocity" else PositionIK(robot, self.contact, gains))
         self.dynamics = (InverseDynamics(robot, self.contact, gains) if feedforward == "inverse_dynamics"
                          else None)
         self._kp = robot.kp * (position_gain_scale if self.dynamics is not None else 1.0)
         self.max_lead = max_lead if max_lead is not None else (0.02 if self.dynamics is not None else 0.2)
-        self._context = robot.plant.CreateDefaultContext()
         self._q_limits = (robot.q_lower[robot.actuated_q_index], robot.q_upper[robot.actuated_q_index])
         self._ankles = {side: _ankle_actuators(robot, side) for side in ("left", "right")}
-        self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
-        self.task_references_port = self.DeclareAbstractInputPort(
-            "task_references", AbstractValue.Make(placeholder_references(robot)))
-        self.mode_port = self.DeclareVectorInputPort("mode", 1)
-        self._tau = self.DeclareDiscreteState(robot.nu)
-        self._command = self.DeclareDiscreteState(5 * robot.nu)
-        self._stats = self.DeclareDiscreteState(3)
-        self._tick = self.DeclareDiscreteState(1)
-        self.actuation_port = self.DeclareStateOutputPort("actuation", self._tau)
-        self.motor_command_port = self.DeclareStateOutputPort("motor_command", self._command)
-        self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
-        self.tick_ms_port = self.DeclareStateOutputPort("tick_ms", self._tick)
-        self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
 
-    def torque(self, command: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """τ the motor command gives at state x, clipped to the effort limits."""
+    def solve(self, kin: RobotKinematics, refs: TaskReferences, previous: np.ndarray,
+              warm_start: np.ndarray) -> SolverResult:
         r = self.robot
-        q_d, v_d, tau_ff, kp, kd = command.reshape(5, r.nu)
-        x = np.nan_to_num(x)
-        tau = kp * (q_d - x[r.actuated_q_index]) + kd * (v_d - x[r.nq + r.actuated_v_index]) + tau_ff
-        return np.clip(tau, -r.effort_limits, r.effort_limits)
-
-    def _damping(self, x: np.ndarray) -> np.ndarray:
-        r = self.robot
-        q = np.nan_to_num(x[r.actuated_q_index])
-        return np.concatenate([q, np.zeros(3 * r.nu), r.kd])
-
-    def _solve(self, refs: TaskReferences, x: np.ndarray, previous: np.ndarray) -> np.ndarray:
-        r = self.robot
-        q = x[r.actuated_q_index]
+        q = kin.q[r.actuated_q_index]
         if self.kind == "velocity":
-            v_d = self.solver.solve(self._context, refs)[r.actuated_v_index]
+            v_d = self.ik.solve(kin, refs)[r.actuated_v_index]
             start = previous[:r.nu] if np.any(previous[3 * r.nu:4 * r.nu]) else q
             q_d = np.clip(start + self.period * v_d, q - self.max_lead, q + self.max_lead)
             q_d = np.clip(q_d, *self._q_limits)
         else:
-            solution = self.solver.solve(self._context, refs)
+            solution = self.ik.solve(kin, refs)
             q_d, v_d = solution.q[r.actuated_q_index], solution.v[r.actuated_v_index]
-        tau_ff = self._feedforward(refs)
+        tau_ff = self._feedforward(kin, refs)
         kp = self._kp
         if refs.domain in self._ankles:
             # No position feedback at the stance ankle: it acts as the pivot the ROM assumes
             # (joint damping and the feedforward stay).
             kp = kp.copy()
             kp[self._ankles[refs.domain]] = 0.0
-        return np.concatenate([q_d, v_d, tau_ff, kp, r.kd])
+        command = np.concatenate([q_d, v_d, tau_ff, kp, r.kd])
+        return SolverResult(command, bool(np.all(np.isfinite(command))))
 
-    def _feedforward(self, refs: TaskReferences) -> np.ndarray:
+    def _feedforward(self, kin: RobotKinematics, refs: TaskReferences) -> np.ndarray:
         if self.dynamics is not None:
-            solution = self.dynamics.solve(self._context, refs)
+            solution = self.dynamics.compute(kin, refs)
             if solution.success:
                 return solution.tau
-        return gravity_compensation(self.robot, self.contact, self._context, refs)
-
-    def _update(self, context, discrete_state) -> None:
-        start = time.perf_counter()
-        x = self.state_port.Eval(context)
-        failures, safe, streak = context.get_discrete_state(self._stats).value()
-        previous = context.get_discrete_state(self._command).value()
-        mode = MODES[int(self.mode_port.Eval(context)[0])]
-        if mode == "damping" or not np.all(np.isfinite(x)):
-            command, safe = self._damping(x), safe + 1
-        else:
-            self.robot.plant.SetPositionsAndVelocities(self._context, x)
-            try:
-                command = self._solve(self.task_references_port.Eval(context), x, previous)
-            except np.linalg.LinAlgError:  # non-finite references: the SVDs do not converge
-                command = np.full(5 * self.robot.nu, np.nan)
-            if np.all(np.isfinite(command)):
-                streak = 0.0
-            else:
-                failures, streak = failures + 1, streak + 1
-                command = previous.copy() if streak <= self.max_stale_ticks else self._damping(x)
-        discrete_state.get_mutable_vector(self._command).SetFromVector(command)
-        discrete_state.get_mutable_vector(self._tau).SetFromVector(self.torque(command, x))
-        discrete_state.get_mutable_vector(self._stats).SetFromVector([failures, safe, streak])
-        discrete_state.get_mutable_vector(self._tick).SetFromVector([1e3 * (time.perf_counter() - start)])
+        return gravity_compensation(self.robot, self.contact, kin, refs)
 
 
 def _ankle_actuators(robot: RobotModel, side: str) -> np.ndarray:

@@ -22,6 +22,8 @@ import numpy as np
 
 from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.embedding.references import EmbeddingCore, TaskReferences
+from romoco_drake.modes import Mode
+from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
 
 
@@ -214,7 +216,8 @@ def _cop_weights(rel: np.ndarray, offset: np.ndarray) -> np.ndarray:
     return 1.0 / len(rel) + rel @ (G_pinv @ offset)
 
 
-def load_split_target(robot: RobotModel, context, refs: TaskReferences, a_cmd: np.ndarray) -> np.ndarray:
+def load_split_target(robot: RobotModel, kin: RobotKinematics, refs: TaskReferences, a_cmd: np.ndarray
+                      ) -> np.ndarray:
     """The double-support point-force target: the commanded CoM acceleration, LIP-style.
 
     ``a_cmd`` holds the commanded accelerations of the active outputs (then the locked joints).
@@ -228,7 +231,7 @@ def load_split_target(robot: RobotModel, context, refs: TaskReferences, a_cmd: n
     points = refs.holonomic.y[:n_f].reshape(-1, 3)
     active = [n for n, on in zip(refs.names, refs.active, strict=True) if on]
     a_com = np.array([a_cmd[active.index(n)] if n in active else 0.0 for n in ("com_x", "com_y", "com_z")])
-    p_com = robot.plant.CalcCenterOfMassPositionInWorld(context)
+    p_com = kin.p_com
     g_plus_az = max(GRAVITY + a_com[2], 0.1 * GRAVITY)
     z_c = p_com[2] - points[:, 2].mean()
     p_zmp = p_com[:2] - z_c * a_com[:2] / g_plus_az
@@ -238,7 +241,4 @@ def load_split_target(robot: RobotModel, context, refs: TaskReferences, a_cmd: n
 
 def placeholder_references(robot: RobotModel) -> TaskReferences:
     """Standing references at the nominal pose: the value task_references ports start with."""
-    core = EmbeddingCore(robot)
-    context = robot.plant.CreateDefaultContext()
-    robot.plant.SetPositions(context, robot.nominal.q)
-    return core.evaluate(context, "standing", 0.0, None, None)
+    return EmbeddingCore(robot).evaluate(RobotKinematics(robot), Mode.STANDING, 0.0, None, None)

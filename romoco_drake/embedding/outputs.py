@@ -20,12 +20,12 @@ import numpy as np
 from pydrake.multibody.tree import Frame, JacobianWrtVariable, Joint
 
 from romoco_drake.errors import RomocoError
+from romoco_drake.robots.kinematics import RobotKinematics, check_floating_base
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.robots.nominal import foot_forward_axis
 from romoco_drake.values import SharedValue
 
 _OTHER = {"left": "right", "right": "left"}
-_ORIGIN = np.zeros(3)
 
 
 @dataclass(frozen=True)
@@ -148,50 +148,16 @@ def _heading(a: list[float], w: list[float], alpha: list[float]) -> tuple[float,
     return atan2(ay, ax), (-k * ax, -k * ay, 1.0), psidot, bias
 
 
-class _FloatingBase:
-    """Base rotation and angular-velocity Jacobian, and CoM kinematics, via the floating joint.
+def _base_rotation(kin: RobotKinematics) -> np.ndarray:
+    return kin.robot.plant.EvalBodyPoseInWorld(kin.context, kin.robot.base_body).rotation().matrix()
 
-    Drake's floating-joint velocities are the base's angular velocity ω_WB and translational
-    velocity v_WB, both in world. So J_ω of the base selects ω_WB (zero bias), and since
-    translation changes no kinetic energy, the v_WB rows of M v and of the equations of motion
-    are the linear momentum m v_CoM and its rate: J_CoM = M_t / m and J̇_CoM v = (C v)_t / m.
-    Both are a few times cheaper than Drake's general functions (its CoM bias loops over the
-    bodies) and are checked against them once, here.
-    """
 
-    def __init__(self, robot: RobotModel):
-        self._plant, self._body = robot.plant, robot.base_body
-        s = robot.base_v_start
-        self._rows = slice(s + 3, s + 6)
-        self._mass = robot.total_mass
-        self.Jw = np.zeros((3, robot.nv))
-        self.Jw[:, s:s + 3] = np.eye(3)
-        self.Jw.setflags(write=False)
-        plant, W, kV = robot.plant, robot.plant.world_frame(), JacobianWrtVariable.kV
-        frame = robot.base_body.body_frame()
-        context = plant.CreateDefaultContext()
-        plant.SetPositions(context, robot.nominal.q)
-        plant.SetVelocities(context, np.linspace(-1.0, 1.0, robot.nv))
-        _, J, bias = self.com(context)
-        checks = (
-            (J, plant.CalcJacobianCenterOfMassTranslationalVelocity(context, kV, W, W)),
-            (bias, plant.CalcBiasCenterOfMassTranslationalAcceleration(context, kV, W, W)),
-            (self.Jw, plant.CalcJacobianAngularVelocity(context, kV, frame, W, W)),
-            (np.zeros(3), plant.CalcBiasSpatialAcceleration(context, kV, frame, _ORIGIN, W, W).rotational()),
-        )
-        if not all(np.allclose(a, b, atol=1e-9) for a, b in checks):
-            raise RomocoError(f"{robot.yaml_path}: base or CoM kinematics from the floating joint do not "
-                              "match Drake's (is all mass on the floating base's tree?)")
-
-    def rotation(self, context) -> np.ndarray:
-        return self._plant.EvalBodyPoseInWorld(context, self._body).rotation().matrix()
-
-    def com(self, context) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """p_WCoM (3,), J_CoM (3×nv) and J̇_CoM·v (3,)."""
-        plant = self._plant
-        return (plant.CalcCenterOfMassPositionInWorld(context),
-                plant.CalcMassMatrix(context)[self._rows] / self._mass,
-                plant.CalcBiasTerm(context)[self._rows] / self._mass)
+def base_angular_jacobian(robot: RobotModel) -> np.ndarray:
+    """J_ω of the floating base (3×nv): selects ω_WB."""
+    J = np.zeros((3, robot.nv))
+    J[:, robot.base_v_start:robot.base_v_start + 3] = np.eye(3)
+    J.setflags(write=False)
+    return J
 
 
 class WalkingOutputs:
@@ -231,7 +197,8 @@ class WalkingOutputs:
         self._tilt_axes = {side: (np.vstack([R_FS[:, 1], -R_FS[:, 0]]) if self.has_ankle_roll
                                   else -R_FS[:, :1].T) for side, (R_FS, _) in soles.items()}
         self._W = plant.world_frame()
-        self._base = _FloatingBase(robot)
+        check_floating_base(robot)
+        self._Jw = base_angular_jacobian(robot)
         self.names = ("com_z", "stance_hip_yaw", "pelvis_pitch", "pelvis_roll", "swing_foot_x",
                       "swing_foot_y", "swing_foot_z", "swing_sole_yaw") + (
             ("swing_foot_roll", "swing_foot_pitch") if self.has_ankle_roll else ("swing_foot_pitch",))
@@ -242,18 +209,18 @@ class WalkingOutputs:
         self._C0[0, [15, 5]] = 1.0, -1.0
         self._C0[6, [11, 5]] = 1.0, -1.0
 
-    def evaluate(self, context, stance: str) -> Output:
-        """Outputs with ``stance`` ('left'/'right') the stance foot, on the controller-plant context."""
+    def evaluate(self, kin: RobotKinematics, stance: str) -> Output:
+        """Outputs with ``stance`` ('left'/'right') the stance foot, at the state of ``kin``."""
         swing = _OTHER[stance]
-        plant, W = self.robot.plant, self._W
-        q, v = plant.GetPositions(context), plant.GetVelocities(context)
+        plant, W, context = self.robot.plant, self._W, kin.context
+        q, v = kin.q, kin.v
         R_st, p_st, J_st, bias_st = _motion(plant, context, self.robot.foot_frames[stance],
                                             self._centroid[stance], W)
         R_sw, p_sw, J_sw, bias_sw = _motion(plant, context, self.robot.foot_frames[swing],
                                             self._centroid[swing], W)
-        R_b = self._base.rotation(context)
-        com, J_com, com_bias = self._base.com(context)
-        S = np.concatenate((J_st, J_sw, self._base.Jw, J_com[2:]))
+        R_b = _base_rotation(kin)
+        com, J_com, com_bias = kin.p_com, kin.J_com, kin.com_bias
+        S = np.concatenate((J_st, J_sw, self._Jw, J_com[2:]))
         V = (S @ v).tolist()
         B = [*bias_st.tolist(), *bias_sw.tolist(), 0.0, 0.0, 0.0, float(com_bias[2])]
         w_st, w_sw, w_b = V[0:3], V[6:9], V[12:15]
@@ -307,17 +274,17 @@ class StandingOutputs:
 
     def __init__(self, robot: RobotModel):
         self.robot = robot
-        self._base = _FloatingBase(robot)
+        check_floating_base(robot)
+        self._Jw = base_angular_jacobian(robot)
 
-    def evaluate(self, context) -> Output:
-        v = self.robot.plant.GetVelocities(context)
-        Jw = self._base.Jw
-        w, alpha = (Jw @ v).tolist(), [0.0, 0.0, 0.0]
-        x_b, y_b, _ = self._base.rotation(context).T.tolist()
+    def evaluate(self, kin: RobotKinematics) -> Output:
+        Jw = self._Jw
+        w, alpha = (Jw @ kin.v).tolist(), [0.0, 0.0, 0.0]
+        x_b, y_b, _ = _base_rotation(kin).T.tolist()
         roll, c_roll, roll_bias = _tilt(y_b, w, alpha)
         pitch, c_pitch, pitch_bias = _tilt([-x_b[0], -x_b[1], -x_b[2]], w, alpha)
         yaw, c_yaw, _, yaw_bias = _heading(x_b, w, alpha)
-        com, J_com, com_bias = self._base.com(context)
+        com, J_com, com_bias = kin.p_com, kin.J_com, kin.com_bias
         return Output(self.names, np.array([*com, roll, pitch, yaw]),
                       np.vstack([J_com, np.array([c_roll, c_pitch, c_yaw]) @ Jw]),
                       np.array([*com_bias, roll_bias, pitch_bias, yaw_bias]))
@@ -333,6 +300,5 @@ class InAirOutputs:
         self._J[np.arange(robot.nu), robot.actuated_v_index] = 1.0
         self._J.setflags(write=False)
 
-    def evaluate(self, context) -> Output:
-        q = self.robot.plant.GetPositions(context)
-        return Output(self.names, q[self.robot.actuated_q_index], self._J, np.zeros(self.robot.nu))
+    def evaluate(self, kin: RobotKinematics) -> Output:
+        return Output(self.names, kin.q[self.robot.actuated_q_index], self._J, np.zeros(self.robot.nu))

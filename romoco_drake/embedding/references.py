@@ -20,21 +20,21 @@ wraps it as a system. Desired values per mode:
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from romoco_drake.embedding.bezier import BezierCurve, SwingTrajectory, plan_swing, quintic_bezier
-from romoco_drake.embedding.contact import DOMAINS, ContactModel
+from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.embedding.outputs import InAirOutputs, Output, StandingOutputs, WalkingOutputs
+from romoco_drake.modes import Domain, Mode
+from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.types import PlannerOutput
 from romoco_drake.values import SharedValue
 
-# Control modes, as indices on ``mode`` ports. In damping (the safe mode after a fall or bad
-# state) controllers ignore the references; the embedding evaluates it like standing.
-MODES = ("in_air", "standing", "walking", "damping")
 # The swing target is frozen once this fraction of single support has passed: late target
 # moves would need large swing accelerations just before touchdown.
 FREEZE_FRACTION = 0.85
@@ -59,8 +59,8 @@ class TaskReferences(SharedValue):
     by A_f f ≤ b_f (friction pyramid, unilateral normal force, CoP inside each sole).
     """
 
-    mode: str
-    domain: str
+    mode: Mode  # in damping (controllers ignore the references) the embedding evaluates standing
+    domain: Domain
     stance_side: str
     names: tuple[str, ...]
     y: np.ndarray
@@ -79,11 +79,15 @@ class TaskReferences(SharedValue):
     def error(self) -> np.ndarray:
         """y − y_d (angles wrapped to (−π, π])."""
         e = self.y - self.y_des
-        return np.where(self._angular, np.remainder(e + math.pi, 2 * math.pi) - math.pi, e)
+        return np.where(_angular(self.names), np.remainder(e + math.pi, 2 * math.pi) - math.pi, e)
 
-    @property
-    def _angular(self) -> np.ndarray:
-        return np.array(["yaw" in n or "pitch" in n or "roll" in n for n in self.names])
+
+@functools.cache
+def _angular(names: tuple[str, ...]) -> np.ndarray:
+    """Which outputs are angles (their errors wrap)."""
+    mask = np.array(["yaw" in n or "pitch" in n or "roll" in n for n in names], dtype=bool)
+    mask.setflags(write=False)
+    return mask
 
 
 @dataclass(frozen=True)
@@ -135,10 +139,10 @@ class EmbeddingCore:
             ds[self.walking.names.index(name)] = True
         self._walking_active = {"single": ss, "double": ds}
 
-    def start_step(self, context, stance_side: str, t: float, plan: PlannerOutput) -> SwingState:
+    def start_step(self, kin: RobotKinematics, stance_side: str, t: float, plan: PlannerOutput) -> SwingState:
         """Latches lift-off: the swing sole's pose, the stance hip yaw and the swing sole's yaw."""
-        out = self.walking.evaluate(context, stance_side)
-        q = self.robot.plant.GetPositions(context)
+        out = self.walking.evaluate(kin, stance_side)
+        q = kin.q
         i = self._swing_index
         start = out.y[i:i + 3]
         trajectory = plan_swing(start, self._target(plan), plan.t_ss, self.swing_height)
@@ -158,32 +162,32 @@ class EmbeddingCore:
     def _target(plan: PlannerOutput) -> np.ndarray:
         return np.array([plan.swing_target[0], plan.swing_target[1], 0.0])
 
-    def start_standing(self, context, t: float) -> StandState:
+    def start_standing(self, kin: RobotKinematics, t: float) -> StandState:
         """Latches the CoM's state at the start of standing (time t)."""
-        out = self.standing.evaluate(context)
-        v = self.robot.plant.GetVelocities(context)
-        target = self._standing_targets(context)
-        curve = quintic_bezier(out.y[:3], out.J[:3] @ v, np.zeros(3), target[:3], np.zeros(3), np.zeros(3),
-                               STAND_SETTLE_S)
+        out = self.standing.evaluate(kin)
+        target = self._standing_targets(kin)
+        curve = quintic_bezier(out.y[:3], out.J[:3] @ kin.v, np.zeros(3), target[:3], np.zeros(3),
+                               np.zeros(3), STAND_SETTLE_S)
         return StandState(t, curve, float(target[5]))
 
-    def evaluate(self, context, mode: str, tau: float, plan: PlannerOutput | None,
+    def evaluate(self, kin: RobotKinematics, mode: Mode | str, tau: float, plan: PlannerOutput | None,
                  memory: SwingState | StandState | None, t: float = 0.0) -> TaskReferences:
-        """References on the controller-plant ``context`` (state set) at controller time t.
+        """References at the state of ``kin`` at controller time t.
 
         Walking uses ``tau`` (time into the step), the plan and the latched step in ``memory``;
         standing uses the latched entry in ``memory`` if there is one. Walking without a plan or
         a latched step falls back to standing references.
         """
-        if mode == "walking" and plan is not None and isinstance(memory, SwingState):
-            return self._walking(context, tau, plan, memory)
-        if mode == "in_air":
-            return self._in_air(context)
-        return self._standing(context, memory if isinstance(memory, StandState) else None, t)
+        if mode == Mode.WALKING and plan is not None and isinstance(memory, SwingState):
+            return self._walking(kin, tau, plan, memory)
+        if mode == Mode.IN_AIR:
+            return self._in_air(kin)
+        return self._standing(kin, memory if isinstance(memory, StandState) else None, t)
 
-    def _walking(self, context, tau: float, plan: PlannerOutput, swing: SwingState) -> TaskReferences:
+    def _walking(self, kin: RobotKinematics, tau: float, plan: PlannerOutput, swing: SwingState
+                 ) -> TaskReferences:
         stance = swing.stance_side
-        out = self.walking.evaluate(context, stance)
+        out = self.walking.evaluate(kin, stance)
         single = tau < plan.t_ss
         k = len(out.names)
         y_d, yd_d, ydd_d = np.zeros(k), np.zeros(k), np.zeros(k)
@@ -202,21 +206,21 @@ class EmbeddingCore:
             i = self._swing_index
             y_d[i:i + 3], yd_d[i:i + 3], ydd_d[i:i + 3] = swing.trajectory.evaluate(tau)
         active = self._walking_active["single" if single else "double"]
-        return self._pack("walking", stance if single else "double", stance, out, y_d, yd_d, ydd_d, active,
-                          context)
+        domain = Domain(stance) if single else Domain.DOUBLE
+        return self._pack(Mode.WALKING, domain, stance, out, y_d, yd_d, ydd_d, active, kin)
 
-    def _standing(self, context, stand: StandState | None, t: float) -> TaskReferences:
-        out = self.standing.evaluate(context)
-        y_d, yd_d, ydd_d = self._standing_targets(context), np.zeros(6), np.zeros(6)
+    def _standing(self, kin: RobotKinematics, stand: StandState | None, t: float) -> TaskReferences:
+        out = self.standing.evaluate(kin)
+        y_d, yd_d, ydd_d = self._standing_targets(kin), np.zeros(6), np.zeros(6)
         if stand is not None:
             y_d[:3], yd_d[:3], ydd_d[:3] = stand.com.evaluate(t - stand.start)
             y_d[5] = stand.yaw  # latched: a foot rocking on its edge must not swing the target
         active = np.ones(6, dtype=bool)
-        return self._pack("standing", "double", "left", out, y_d, yd_d, ydd_d, active, context)
+        return self._pack(Mode.STANDING, Domain.DOUBLE, "left", out, y_d, yd_d, ydd_d, active, kin)
 
-    def _standing_targets(self, context) -> np.ndarray:
+    def _standing_targets(self, kin: RobotKinematics) -> np.ndarray:
         """CoM over the middle of the soles at the nominal height; pelvis level, mean foot heading."""
-        plant = self.robot.plant
+        plant, context = self.robot.plant, kin.context
         world = plant.world_frame()
         centers, headings = [], []
         for side in ("left", "right"):
@@ -230,15 +234,17 @@ class EmbeddingCore:
         y_d[5] = math.atan2(sum(math.sin(h) for h in headings), sum(math.cos(h) for h in headings))
         return y_d
 
-    def _in_air(self, context) -> TaskReferences:
-        out = self.in_air.evaluate(context)
+    def _in_air(self, kin: RobotKinematics) -> TaskReferences:
+        out = self.in_air.evaluate(kin)
         k = len(out.names)
-        return self._pack("in_air", "none", "left", out, self.nominal_joints.copy(), np.zeros(k), np.zeros(k),
-                          np.ones(k, dtype=bool), context)
+        return self._pack(Mode.IN_AIR, Domain.NONE, "left", out, self.nominal_joints.copy(), np.zeros(k),
+                          np.zeros(k), np.ones(k, dtype=bool), kin)
 
-    def _pack(self, mode, domain, stance, out: Output, y_d, yd_d, ydd_d, active, context) -> TaskReferences:
+    def _pack(self, mode: Mode, domain: Domain, stance: str, out: Output, y_d, yd_d, ydd_d, active,
+              kin: RobotKinematics) -> TaskReferences:
+        context = kin.context
         holonomic = self.contact.constraints(context, domain)
-        blocks = [self.contact.friction_constraints(context, side) for side in DOMAINS[domain]]
+        blocks = [self.contact.friction_constraints(context, side) for side in domain.feet]
         if len(blocks) == 1:
             A_f, b_f = blocks[0]
         else:

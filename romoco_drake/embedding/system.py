@@ -6,7 +6,9 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
-from romoco_drake.embedding.references import MODES, EmbeddingCore, StandState, SwingState, TaskReferences
+from romoco_drake.embedding.references import EmbeddingCore, StandState, SwingState, TaskReferences
+from romoco_drake.modes import Mode
+from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_value
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.types import GAIT_PHASE_SIZE, PlannerOutput, side_from_sign
 
@@ -24,16 +26,16 @@ ERROR_GROUPS = (
 class OutputEmbedding(LeafSystem):
     """Turns the planner's discrete foot placement into continuous whole-body task references.
 
-    The output is evaluated on demand from the current state (Jacobians and biases from the
-    system's own controller-plant context); the swing trajectory is latched at each step start
+    The output is evaluated on demand from the tick's shared controller-plant evaluation
+    (Jacobians and biases on its context); the swing trajectory is latched at each step start
     and replanned toward the latest target every ``period`` seconds.
 
     | port | kind | size | meaning |
     |---|---|---|---|
-    | ``state`` | in | nq+nv | robot state [q; v] (controller plant order) |
+    | ``kinematics`` | in | abstract | :class:`~romoco_drake.robots.kinematics.RobotKinematics` of the state |
     | ``planner_output`` | in | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` |
     | ``gait_phase`` | in | 2 | stance (+1 left, −1 right), time in step [s] |
-    | ``mode`` | in | 1 | index into ``MODES``: in-air, standing, walking, damping |
+    | ``mode`` | in | abstract | :class:`~romoco_drake.modes.Mode` |
     | ``task_references`` | out | abstract | :class:`~romoco_drake.embedding.references.TaskReferences` |
     | ``tracking_error`` | out | 5 | norm of the active errors y − y_d per ``ERROR_GROUPS`` (m or rad) |
 
@@ -46,12 +48,11 @@ class OutputEmbedding(LeafSystem):
         super().__init__()
         self.robot = robot
         self.core = core or EmbeddingCore(robot)
-        self._plant_context = robot.plant.CreateDefaultContext()
-        self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
+        self.kinematics_port = self.DeclareAbstractInputPort("kinematics", kinematics_model_value(robot))
         self.planner_output_port = self.DeclareAbstractInputPort(
             "planner_output", AbstractValue.Make(PlannerOutput.placeholder()))
         self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
-        self.mode_port = self.DeclareVectorInputPort("mode", 1)
+        self.mode_port = self.DeclareAbstractInputPort("mode", AbstractValue.Make(Mode.STANDING))
         self._swing = self.DeclareAbstractState(AbstractValue.Make(_NoSwing()))
         self.task_references_port = self.DeclareAbstractOutputPort(
             "task_references", self._default_references, self._calc_references)
@@ -61,15 +62,14 @@ class OutputEmbedding(LeafSystem):
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, offset, self._update_swing)
 
     def _default_references(self) -> AbstractValue:
-        self.robot.plant.SetPositions(self._plant_context, self.robot.nominal.q)
-        return AbstractValue.Make(self.core.evaluate(self._plant_context, "standing", 0.0, None, None))
+        return AbstractValue.Make(self.core.evaluate(RobotKinematics(self.robot), Mode.STANDING, 0.0, None,
+                                                     None))
 
-    def _set_plant_state(self, context) -> None:
-        self.robot.plant.SetPositionsAndVelocities(self._plant_context, self.state_port.Eval(context))
+    def _kinematics(self, context) -> RobotKinematics:
+        return self.kinematics_port.Eval(context)
 
-    def _mode(self, context) -> str:
-        index = int(round(float(self.mode_port.Eval(context)[0])))
-        return MODES[min(max(index, 0), len(MODES) - 1)]
+    def _mode(self, context) -> Mode:
+        return Mode(self.mode_port.Eval(context))
 
     def memory(self, context) -> SwingState | StandState | None:
         """The latched step (walking) or standing entry, if any."""
@@ -83,12 +83,11 @@ class OutputEmbedding(LeafSystem):
     def _update_swing(self, context, state) -> None:
         swing = self.swing_state(context)
         mode = self._mode(context)
-        if mode == "standing":
+        if mode == Mode.STANDING:
             new = self.memory(context)
             if not isinstance(new, StandState):
-                self._set_plant_state(context)
-                new = self.core.start_standing(self._plant_context, context.get_time())
-        elif mode != "walking":
+                new = self.core.start_standing(self._kinematics(context), context.get_time())
+        elif mode != Mode.WALKING:
             new = _NoSwing()
         else:
             phase = self.gait_phase_port.Eval(context)
@@ -100,15 +99,13 @@ class OutputEmbedding(LeafSystem):
             if same_step:
                 new = self.core.update_swing(swing, tau, plan)
             else:
-                self._set_plant_state(context)
-                new = self.core.start_step(self._plant_context, side, step_start, plan)
+                new = self.core.start_step(self._kinematics(context), side, step_start, plan)
         state.get_mutable_abstract_state(int(self._swing)).set_value(new)
 
     def _calc_references(self, context, value) -> None:
-        self._set_plant_state(context)
         phase = self.gait_phase_port.Eval(context)
         refs: TaskReferences = self.core.evaluate(
-            self._plant_context, self._mode(context), float(phase[1]),
+            self._kinematics(context), self._mode(context), float(phase[1]),
             self.planner_output_port.Eval(context), self.memory(context), context.get_time())
         value.set_value(refs)
 

@@ -8,6 +8,7 @@ import numpy as np
 from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.embedding.outputs import sole_frame
+from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_value
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.types import GAIT_PHASE_SIZE, ROM_STATE_SIZE, side_from_sign
 
@@ -21,7 +22,7 @@ class RomStateFromRobot(LeafSystem):
 
     | port | kind | size | meaning |
     |---|---|---|---|
-    | ``state`` | in | nq+nv | robot state [q; v] |
+    | ``kinematics`` | in | abstract | :class:`~romoco_drake.robots.kinematics.RobotKinematics` of the state |
     | ``gait_phase`` | in | 2 | stance (+1 left, −1 right), time in step [s] |
     | ``rom_state`` | out | 6 | [p (m), L (kg·m²/s)] in the stance yaw frame |
     """
@@ -29,27 +30,24 @@ class RomStateFromRobot(LeafSystem):
     def __init__(self, robot: RobotModel):
         super().__init__()
         self.robot = robot
-        self._context = robot.plant.CreateDefaultContext()
         self._soles = {side: sole_frame(robot, side) for side in ("left", "right")}
-        self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
+        self.kinematics_port = self.DeclareAbstractInputPort("kinematics", kinematics_model_value(robot))
         self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
         self.rom_state_port = self.DeclareVectorOutputPort(
             "rom_state", ROM_STATE_SIZE, self._calc, prerequisites_of_calc={self.all_input_ports_ticket()})
 
-    def compute(self, x: np.ndarray, side: str) -> np.ndarray:
-        plant, ctx = self.robot.plant, self._context
-        plant.SetPositionsAndVelocities(ctx, x)
+    def compute(self, kin: RobotKinematics, side: str) -> np.ndarray:
         R_FS, p_FS = self._soles[side]
-        X_WF = self.robot.foot_frames[side].CalcPoseInWorld(ctx)
+        X_WF = self.robot.foot_frames[side].CalcPoseInWorld(kin.context)
         pivot = X_WF.multiply(p_FS)
         forward = X_WF.rotation().matrix() @ R_FS[:, 0]
         psi = math.atan2(forward[1], forward[0])
         c, s = math.cos(psi), math.sin(psi)
         R_T = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-        p = R_T @ (plant.CalcCenterOfMassPositionInWorld(ctx) - pivot)
-        L = R_T @ plant.CalcSpatialMomentumInWorldAboutPoint(ctx, pivot).rotational()
+        p = R_T @ (kin.p_com - pivot)
+        L = R_T @ kin.angular_momentum_about(pivot)
         return np.concatenate([p, L])
 
     def _calc(self, context, out) -> None:
         phase = self.gait_phase_port.Eval(context)
-        out.SetFromVector(self.compute(self.state_port.Eval(context), side_from_sign(phase[0])))
+        out.SetFromVector(self.compute(self.kinematics_port.Eval(context), side_from_sign(phase[0])))

@@ -60,6 +60,7 @@ from romoco_drake.interfaces.lcm_codec import (
     encode_controller_status,
     encode_motor_command,
 )
+from romoco_drake.modes import Mode
 from romoco_drake.robots.model import RobotModel
 
 LINK_COUNTERS = ("stale_events", "rejected_messages", "clamped_commands", "estop")
@@ -403,7 +404,7 @@ class StatusSender(LeafSystem):
     | port           | dir | size     | meaning                                        |
     |----------------|-----|----------|------------------------------------------------|
     | state          | in  | nq+nv    | the controller's state estimate                |
-    | mode           | in  | 1        | index into MODES                               |
+    | mode           | in  | abstract | :class:`~romoco_drake.modes.Mode`              |
     | command        | in  | ≥ 3      | walking command (vx, vy, wz first)             |
     | tracking_error | in  | k        | per-group output tracking errors               |
     | message        | out | abstract | encoded controller_status_t (utime = sim time) |
@@ -415,7 +416,7 @@ class StatusSender(LeafSystem):
         super().__init__()
         self.robot = robot
         self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
-        self.mode_port = self.DeclareVectorInputPort("mode", 1)
+        self.mode_port = self.DeclareAbstractInputPort("mode", AbstractValue.Make(Mode.STANDING))
         self.command_port = self.DeclareVectorInputPort("command", command_size)
         self.tracking_error_port = self.DeclareVectorInputPort("tracking_error", num_errors)
         self.message_port = self.DeclareAbstractOutputPort("message", lambda: AbstractValue.Make(b""),
@@ -423,6 +424,6 @@ class StatusSender(LeafSystem):
 
     def _message(self, context, out) -> None:
         out.set_value(encode_controller_status(ControllerStatus(
-            int(round(context.get_time() * 1e6)), self.robot.name, int(self.mode_port.Eval(context)[0]),
+            int(round(context.get_time() * 1e6)), self.robot.name, Mode(self.mode_port.Eval(context)).index,
             self.command_port.Eval(context)[:3], self.state_port.Eval(context),
             self.tracking_error_port.Eval(context))))

@@ -35,6 +35,7 @@ from romoco_drake.interfaces.lcmtypes.romoco_lcm import (
     controller_status_t,
     estop_t,
 )
+from romoco_drake.modes import Mode
 from romoco_drake.values import SharedValue
 
 PROPRIOCEPTION_CHANNEL = "ROMOCO_PROPRIOCEPTION"
@@ -222,6 +223,13 @@ def _check_utime(name: str, utime: int) -> int:
     return utime
 
 
+def _check_mode(name: str, mode: int) -> int:
+    try:
+        return Mode.decode(mode).index
+    except ValueError as e:
+        raise MessageRejected(name, f"mode: {e}") from None
+
+
 def _check_count(name: str, field: str, count: int, expected: int) -> None:
     if count != expected:
         raise MessageRejected(name, f"{field} is {count}, expected {expected}")
@@ -312,7 +320,7 @@ def decode_controller_status(data: bytes) -> ControllerStatus:
     name = "controller_status_t"
     lcm = _unpack(controller_status_t, data)
     return ControllerStatus(
-        utime=_check_utime(name, lcm.utime), robot=lcm.robot, mode=int(lcm.mode),
+        utime=_check_utime(name, lcm.utime), robot=lcm.robot, mode=_check_mode(name, lcm.mode),
         command=_finite(name, "command", lcm.command), state=np.array(lcm.state, dtype=float),
         tracking_error=np.array(lcm.tracking_error, dtype=float))
 

@@ -88,7 +88,7 @@ class StatusLog:
 
     robot: str
     times: np.ndarray  # (N,)
-    modes: np.ndarray  # (N,) index into embedding.references.MODES
+    modes: np.ndarray  # (N,) mode numbers (romoco_drake.modes.Mode.index)
     commands: np.ndarray  # (N, 3) vx, vy (m/s), wz (rad/s) in the heading frame
     states: np.ndarray  # (N, nq+nv)
     errors: np.ndarray  # (N, len(ERROR_GROUPS))

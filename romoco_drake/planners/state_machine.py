@@ -9,7 +9,8 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
-from romoco_drake.embedding.references import MODES
+from romoco_drake.modes import Mode
+from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_value
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.robots.posture import base_fault
 from romoco_drake.rom.types import COMMAND_SIZE, GAIT_PHASE_SIZE, WalkCommand, other_side
@@ -23,7 +24,7 @@ _ZERO_COMMAND = (1e-3, 1e-3, 1e-3)
 class GaitSchedule(SharedValue):
     """The state machine's state."""
 
-    mode: str
+    mode: Mode
     side: str  # stance side of the current step
     step_start: float
     t_ss: float
@@ -62,10 +63,10 @@ class GaitStateMachine(LeafSystem):
 
     | port | kind | size | meaning |
     |---|---|---|---|
-    | ``state`` | in | nq+nv | robot state |
+    | ``kinematics`` | in | abstract | :class:`~romoco_drake.robots.kinematics.RobotKinematics` of the state |
     | ``command`` | in | 6 | :class:`WalkCommand` vector |
     | ``foot_contact`` | in | 2 | contact switches [left, right], 1.0 in contact |
-    | ``mode`` | out | 1 | index into :data:`~romoco_drake.embedding.references.MODES` |
+    | ``mode`` | out | abstract | :class:`~romoco_drake.modes.Mode` |
     | ``gait_phase`` | out | 2 | stance (+1 left, −1 right), time in step [s] |
     | ``schedule`` | out | abstract | :class:`GaitSchedule` |
     """
@@ -80,14 +81,14 @@ class GaitStateMachine(LeafSystem):
         self.touchdown_height, self.settle_time, self.lift_time = touchdown_height, settle_time, lift_time
         self._min_base_z = fall_height * robot.nominal.base_height
         self._cos_tilt = math.cos(fall_tilt)
-        self._context = robot.plant.CreateDefaultContext()
-        self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
+        self.kinematics_port = self.DeclareAbstractInputPort("kinematics", kinematics_model_value(robot))
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
         self.foot_contact_port = self.DeclareVectorInputPort("foot_contact", 2)
-        initial = GaitSchedule("standing", "left", 0.0, robot.config.walking.t_ss, 0, 0, 0, "")
+        initial = GaitSchedule(Mode.STANDING, "left", 0.0, robot.config.walking.t_ss, 0, 0, 0, "")
         self._schedule = self.DeclareAbstractState(AbstractValue.Make(initial))
-        self.mode_port = self.DeclareVectorOutputPort(
-            "mode", 1, lambda c, out: out.SetFromVector([MODES.index(self.schedule(c).mode)]),
+        self.mode_port = self.DeclareAbstractOutputPort(
+            "mode", lambda: AbstractValue.Make(Mode.STANDING),
+            lambda c, value: value.set_value(self.schedule(c).mode),
             prerequisites_of_calc={self.abstract_state_ticket(self._schedule)})
         self.gait_phase_port = self.DeclareVectorOutputPort(
             "gait_phase", GAIT_PHASE_SIZE, self._calc_phase,
@@ -103,57 +104,54 @@ class GaitStateMachine(LeafSystem):
 
     def _calc_phase(self, context, out) -> None:
         s = self.schedule(context)
-        tau = context.get_time() - s.step_start if s.mode == "walking" else 0.0
+        tau = context.get_time() - s.step_start if s.mode == Mode.WALKING else 0.0
         out.SetFromVector([1.0 if s.side == "left" else -1.0, tau])
 
-    def next_schedule(self, s: GaitSchedule, t: float, x: np.ndarray, cmd: WalkCommand,
+    def next_schedule(self, s: GaitSchedule, t: float, kin: RobotKinematics, cmd: WalkCommand,
                       contact: np.ndarray) -> GaitSchedule:
         """One tick of the state machine at time t (the periodic update calls this)."""
         if cmd.problem() is not None:
             cmd = WalkCommand(step_width=cmd.step_width, com_height=cmd.com_height, step_time=s.t_ss)
-        if s.mode != "damping":
-            reason, _ = base_fault(self.robot, x, self._min_base_z, self._cos_tilt)
+        if s.mode != Mode.DAMPING:
+            reason, _ = base_fault(self.robot, kin.x, self._min_base_z, self._cos_tilt)
             if reason:
-                s = replace(s, mode="damping", fall_reason=reason, safe_mode_entries=s.safe_mode_entries + 1)
+                s = replace(s, mode=Mode.DAMPING, fall_reason=reason,
+                            safe_mode_entries=s.safe_mode_entries + 1)
         on = np.asarray(contact) > 0.5  # a NaN switch reads as no contact
         if on.any():
             if not math.isnan(s.air_since):
                 s = replace(s, air_since=math.nan)
         elif math.isnan(s.air_since):
             s = replace(s, air_since=t)
-        if s.mode == "standing" and t - s.air_since >= self.lift_time - 1e-9:
-            s = replace(s, mode="in_air")
-        elif s.mode == "in_air" and on.all():
-            s = replace(s, mode="standing")
-        elif s.mode == "standing" and not is_zero(cmd) and self._balanced(x):
+        if s.mode == Mode.STANDING and t - s.air_since >= self.lift_time - 1e-9:
+            s = replace(s, mode=Mode.IN_AIR)
+        elif s.mode == Mode.IN_AIR and on.all():
+            s = replace(s, mode=Mode.STANDING)
+        elif s.mode == Mode.STANDING and not is_zero(cmd) and self._balanced(kin):
             side = "right" if cmd.vy > 0.0 else "left"
-            s = replace(s, mode="walking", side=side, step_start=t, t_ss=cmd.step_time, idle_steps=0)
-        elif s.mode == "walking" and t - s.step_start >= s.t_ss + self.t_ds - 1e-9:
+            s = replace(s, mode=Mode.WALKING, side=side, step_start=t, t_ss=cmd.step_time, idle_steps=0)
+        elif s.mode == Mode.WALKING and t - s.step_start >= s.t_ss + self.t_ds - 1e-9:
             idle = s.idle_steps + 1 if is_zero(cmd) else 0
             stopping = idle >= self.stop_steps
             # A stop holds the step in double support for up to settle_time while a sole rolls flat.
             settling = stopping and t - s.step_start < s.t_ss + self.t_ds + self.settle_time
-            if stopping and self._feet_down(x):
-                s = replace(s, mode="standing", idle_steps=0, steps=s.steps + 1)
+            if stopping and self._feet_down(kin):
+                s = replace(s, mode=Mode.STANDING, idle_steps=0, steps=s.steps + 1)
             elif not settling:
                 s = replace(s, side=other_side(s.side), step_start=t, t_ss=cmd.step_time, steps=s.steps + 1,
                             idle_steps=idle)
         return s
 
     def _update(self, context, state) -> None:
-        s = self.next_schedule(self.schedule(context), context.get_time(), self.state_port.Eval(context),
+        s = self.next_schedule(self.schedule(context), context.get_time(), self.kinematics_port.Eval(context),
                                WalkCommand.from_vector(self.command_port.Eval(context)),
                                self.foot_contact_port.Eval(context))
         state.get_mutable_abstract_state(int(self._schedule)).set_value(s)
 
-    def _feet_down(self, x: np.ndarray) -> bool:
+    def _feet_down(self, kin: RobotKinematics) -> bool:
         """Every sole point of both feet within ``touchdown_height`` of the ground (z = 0)."""
-        self.robot.plant.SetPositionsAndVelocities(self._context, x)
-        heights = [self.robot.sole_points_in_world(self._context, side)[2] for side in ("left", "right")]
+        heights = [self.robot.sole_points_in_world(kin.context, side)[2] for side in ("left", "right")]
         return float(np.max(np.concatenate(heights))) < self.touchdown_height
 
-    def _balanced(self, x: np.ndarray) -> bool:
-        plant = self.robot.plant
-        plant.SetPositionsAndVelocities(self._context, x)
-        v = plant.CalcCenterOfMassTranslationalVelocityInWorld(self._context)
-        return float(np.linalg.norm(v)) < self.balance_speed
+    def _balanced(self, kin: RobotKinematics) -> bool:
+        return float(np.linalg.norm(kin.v_com)) < self.balance_speed

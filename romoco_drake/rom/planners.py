@@ -18,6 +18,7 @@ from typing import Literal
 import numpy as np
 
 from romoco_drake.errors import RomocoError
+from romoco_drake.registry import Registry
 from romoco_drake.rom import alip, alip_general
 from romoco_drake.rom.dcm import dcm_s2s
 from romoco_drake.rom.hlip import hlip_s2s
@@ -288,13 +289,11 @@ class AlipGeneralLaw(FootPlacementLaw):
         return u_x, u_y, orbit, nominal
 
 
-PLANNERS: dict[str, type[FootPlacementLaw]] = {
-    law.name: law for law in (AlipLaw, HlipLaw, MlipLaw, DcmLaw, AlipGeneralLaw)
-}
+PLANNERS = Registry("planner")
+for _law in (AlipLaw, HlipLaw, MlipLaw, DcmLaw, AlipGeneralLaw):
+    PLANNERS.add(_law.name, _law, (_law.__doc__ or "").split("\n")[0], gains=_law.supported_gains)
 
 
 def make_planner(name: str, params: PlannerParams) -> FootPlacementLaw:
     """The law called ``name`` (one of :data:`PLANNERS`)."""
-    if name not in PLANNERS:
-        raise RomocoError(f"unknown planner '{name}'; choose from {', '.join(PLANNERS)}")
-    return PLANNERS[name](params)
+    return PLANNERS[name].factory(params)

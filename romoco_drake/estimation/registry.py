@@ -1,0 +1,21 @@
+"""The estimator registry: every estimator a scenario can name, how to build it, what it reads.
+
+A factory takes ``(robot, period, initial_base_position, offset)``: the update period (s),
+the base position to start from when it is known (simulation) or None, and the tick offset.
+``inputs`` are the station output ports it is wired to (same names on its own input ports).
+"""
+
+from __future__ import annotations
+
+from romoco_drake.estimation.ground_truth import GroundTruthEstimator
+from romoco_drake.estimation.kalman_estimator import KalmanEstimator
+from romoco_drake.registry import Registry
+
+ESTIMATORS = Registry("estimator")
+ESTIMATORS.add("ground_truth", lambda robot, period, start, offset: GroundTruthEstimator(robot),
+               "encoders plus the base pose/velocity ports (exact in simulation, motion capture on hardware)",
+               inputs=("joint_state", "base_pose", "base_velocity"))
+ESTIMATORS.add("kalman", lambda robot, period, start, offset: KalmanEstimator(
+    robot, period, initial_base_position=start, offset=offset),
+    "contact-aided Kalman filter on encoders, IMU and contact switches",
+    inputs=("joint_state", "imu", "foot_contact"))

@@ -1,0 +1,176 @@
+"""One evaluation of the controller plant per state, shared by every system of a control tick.
+
+:class:`RobotKinematics` holds a controller-plant context set to a state x = [q; v] (Drake
+caches the body poses, velocities and bias accelerations inside it) and, evaluated on first
+use and then kept until the state changes, the dynamics every consumer needs: M, the bias
+C(q, v) v, gravity τ_g, and the CoM terms read from them. :class:`RobotKinematicsSystem`
+keeps one of these in its output port's cache, keyed on its ``state`` input, so the state
+machine, the ROM state, the output embedding and the whole-body controller of one tick all
+read the same evaluation instead of re-loading the state into contexts of their own.
+
+CoM and momentum through the floating joint: Drake's floating-joint velocities are the base's
+angular velocity ω_WB and the translational velocity v_WB, both in world, so the kinetic energy's
+gradient with respect to them, the base rows of M v, is the spatial momentum of the whole robot
+about the base origin (world frame). Its translational part is m v_CoM, hence J_CoM = M_t / m
+and J̇_CoM v = (C v)_t / m; its rotational part gives the angular momentum about any point.
+:func:`check_floating_base` verifies both against Drake's general functions once per robot.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.systems.framework import LeafSystem
+
+from romoco_drake.errors import RomocoError
+from romoco_drake.robots.model import RobotModel
+
+_ORIGIN = np.zeros(3)
+
+
+class RobotKinematics:
+    """The controller plant at one state; dynamics terms evaluated once, on first use.
+
+    ``context`` is the plant context (state set: query poses and Jacobians on it, never set
+    it); ``x``, ``q``, ``v`` the state; ``finite`` whether every entry of x is finite (on a
+    non-finite state every derived quantity is NaN and consumers go to their safe mode).
+    The object is refilled in place by :meth:`update` when its owner's state changes: read it
+    within one tick, do not keep it.
+    """
+
+    __slots__ = ("robot", "context", "x", "q", "v", "finite", "_M", "_bias", "_tau_g", "_base_rows",
+                 "_p_com", "_p_base")
+
+    def __init__(self, robot: RobotModel, x: np.ndarray | None = None):
+        self.robot = robot
+        self.context = robot.plant.CreateDefaultContext()
+        s = robot.base_v_start
+        self._base_rows = slice(s, s + 6)
+        self.update(np.concatenate([robot.nominal.q, np.zeros(robot.nv)]) if x is None else x)
+
+    def update(self, x: np.ndarray) -> None:
+        """Sets the state and forgets every quantity evaluated at the previous one."""
+        r = self.robot
+        self.x = np.array(x, dtype=float)
+        self.q, self.v = self.x[:r.nq], self.x[r.nq:]
+        self.finite = bool(np.isfinite(self.x).all())
+        r.plant.SetPositionsAndVelocities(self.context, self.x)
+        self._M = self._bias = self._tau_g = self._p_com = self._p_base = None
+
+    def __deepcopy__(self, memo) -> RobotKinematics:
+        """A copy on its own context (Drake clones cached values when it clones a context)."""
+        return RobotKinematics(self.robot, self.x)
+
+    @property
+    def M(self) -> np.ndarray:
+        """Mass matrix (nv×nv)."""
+        if self._M is None:
+            self._M = self.robot.plant.CalcMassMatrix(self.context)
+        return self._M
+
+    @property
+    def bias(self) -> np.ndarray:
+        """C(q, v) v: Coriolis, centripetal and gyroscopic terms (nv), without gravity."""
+        if self._bias is None:
+            self._bias = self.robot.plant.CalcBiasTerm(self.context)
+        return self._bias
+
+    @property
+    def tau_g(self) -> np.ndarray:
+        """Generalized gravity forces τ_g (nv); M v̇ + C v = τ_g + applied forces."""
+        if self._tau_g is None:
+            self._tau_g = self.robot.plant.CalcGravityGeneralizedForces(self.context)
+        return self._tau_g
+
+    @property
+    def C(self) -> np.ndarray:
+        """C v − τ_g: what the equations of motion M v̇ + C = B τ + J_hᵀ λ call C."""
+        return self.bias - self.tau_g
+
+    @property
+    def p_com(self) -> np.ndarray:
+        """CoM position in world (3,)."""
+        if self._p_com is None:
+            self._p_com = self.robot.plant.CalcCenterOfMassPositionInWorld(self.context)
+        return self._p_com
+
+    @property
+    def J_com(self) -> np.ndarray:
+        """CoM translational Jacobian (3×nv), from the base rows of M (module docstring)."""
+        return self.M[self._base_rows][3:] / self.robot.total_mass
+
+    @property
+    def com_bias(self) -> np.ndarray:
+        """J̇_CoM v (3,)."""
+        return self.bias[self._base_rows][3:] / self.robot.total_mass
+
+    @property
+    def v_com(self) -> np.ndarray:
+        return self.J_com @ self.v
+
+    @property
+    def p_base(self) -> np.ndarray:
+        """Base origin in world (3,)."""
+        if self._p_base is None:
+            pose = self.robot.plant.EvalBodyPoseInWorld(self.context, self.robot.base_body)
+            self._p_base = pose.translation()
+        return self._p_base
+
+    def angular_momentum_about(self, point: np.ndarray) -> np.ndarray:
+        """The robot's angular momentum about a world point, in world (3,)."""
+        h = self.M[self._base_rows] @ self.v  # [angular about the base origin; linear]
+        return h[:3] + np.cross(self.p_base - point, h[3:])
+
+
+@functools.cache
+def check_floating_base(robot: RobotModel) -> None:
+    """Checks the floating-joint shortcuts (module docstring) against Drake's general functions."""
+    plant, W, kV = robot.plant, robot.plant.world_frame(), JacobianWrtVariable.kV
+    x = np.concatenate([robot.nominal.q, np.linspace(-1.0, 1.0, robot.nv)])
+    kin = RobotKinematics(robot, x)
+    ctx = kin.context
+    point = np.array([0.3, -0.2, 0.1])
+    checks = (
+        (kin.J_com, plant.CalcJacobianCenterOfMassTranslationalVelocity(ctx, kV, W, W)),
+        (kin.com_bias, plant.CalcBiasCenterOfMassTranslationalAcceleration(ctx, kV, W, W)),
+        (kin.angular_momentum_about(point),
+         plant.CalcSpatialMomentumInWorldAboutPoint(ctx, point).rotational()),
+        (np.zeros(3), plant.CalcBiasSpatialAcceleration(ctx, kV, robot.base_body.body_frame(), _ORIGIN, W,
+                                                        W).rotational()),
+    )
+    if not all(np.allclose(a, b, atol=1e-9) for a, b in checks):
+        raise RomocoError(f"{robot.yaml_path}: base or CoM kinematics from the floating joint do not "
+                          "match Drake's (is all mass on the floating base's tree?)")
+
+
+class RobotKinematicsSystem(LeafSystem):
+    """The shared controller-plant evaluation of a tick, cached on the state input.
+
+    | port | kind | size | meaning |
+    |---|---|---|---|
+    | ``state`` | in | nq+nv | robot state [q; v] (controller plant order) |
+    | ``kinematics`` | out | abstract | :class:`RobotKinematics` at that state |
+
+    Drake recomputes the output only when the state input changes; its value object (and plant
+    context) lives in the output port's cache entry, one per system context.
+    """
+
+    def __init__(self, robot: RobotModel):
+        super().__init__()
+        check_floating_base(robot)
+        self.robot = robot
+        self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
+        self.kinematics_port = self.DeclareAbstractOutputPort(
+            "kinematics", lambda: AbstractValue.Make(RobotKinematics(robot)), self._calc,
+            prerequisites_of_calc={self.state_port.ticket()})
+
+    def _calc(self, context, value) -> None:
+        value.get_mutable_value().update(self.state_port.Eval(context))
+
+
+def kinematics_model_value(robot: RobotModel) -> AbstractValue:
+    """The model value of a ``kinematics`` input port."""
+    return AbstractValue.Make(RobotKinematics(robot))
