@@ -92,7 +92,7 @@ def _cmd_run(args) -> int:
     from romoco_drake.scenario import load_scenario, with_overrides
 
     scenario = with_overrides(load_scenario(args.scenario), args.planner, args.controller, args.command,
-                              args.estimator)
+                              args.estimator, args.solver)
     if args.via_lcm and args.hardware:
         raise RomocoError("--via-lcm and --hardware exclude each other")
     link = "via_lcm" if args.via_lcm else "hardware" if args.hardware else "sim"
@@ -247,15 +247,16 @@ def _cmd_bench_tick(args) -> int:
     from romoco_drake.bench.walking import bench_tick
     from romoco_drake.scenario import load_scenario, with_overrides
 
-    scenario = with_overrides(load_scenario(args.scenario), args.planner, args.controller)
+    scenario = with_overrides(load_scenario(args.scenario), args.planner, args.controller, solver=args.solver)
     s = bench_tick(scenario, ticks=args.ticks)
     if args.json:
         print(json.dumps(s))
     else:
-        print(f"{s['scenario']}: {s['planner']} + {s['controller']}, {s['ticks']} ticks of "
+        print(f"{s['scenario']}: {s['planner']} + {s['controller']} ({s['solver']}), {s['ticks']} ticks of "
               f"{s['period_s'] * 1e3:g} ms while {s['mode']}")
         for name, v in s["tick_ms"].items():
             print(f"  {name:14s} {v['median']:8.3f} ms median  {v['p99']:8.3f} ms p99")
+        print(f"  total / plant step (medians): {s['controller_to_plant']}")
     return 0
 
 
@@ -299,6 +300,7 @@ def make_parser() -> argparse.ArgumentParser:
                    help="override the velocity command: piecewise constant from each time T (s)")
     p.add_argument("--plot", type=Path, metavar="DIR", help="write velocity and tracking-error PNGs")
     p.add_argument("--estimator", help="override the scenario's estimator: ground_truth or kalman")
+    p.add_argument("--solver", help="override the TSC-QP's QP solver: daqp or clarabel (the reference)")
     p.add_argument("--via-lcm", action="store_true",
                    help="run the robot and the controller over LCM in this process (memq:// by default)")
     p.add_argument("--hardware", action="store_true",
@@ -346,6 +348,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenario", default="g1_walk")
     p.add_argument("--planner")
     p.add_argument("--controller")
+    p.add_argument("--solver", help="TSC-QP solver: daqp or clarabel (the reference)")
     p.add_argument("--ticks", type=int, default=500)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_bench_tick)

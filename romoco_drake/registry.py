@@ -37,7 +37,11 @@ class Registry(Mapping[str, Entry]):
         self._entries[name] = Entry(name, factory, description, facts)
 
     def __getitem__(self, name: str) -> Entry:
+        """The entry called ``name``; an unknown name is a one-line RomocoError (see :meth:`check`)."""
         return self._entries[self.check(name)]
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._entries
 
     def __iter__(self) -> Iterator[str]:
         return iter(self._entries)

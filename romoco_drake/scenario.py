@@ -241,8 +241,15 @@ def parse_command(text: str) -> list[CommandPoint]:
 
 
 def with_overrides(scenario: Scenario, planner: str | None = None, controller: str | None = None,
-                   command: str | None = None, estimator: str | None = None) -> Scenario:
-    """``scenario`` with the CLI's --planner/--controller/--command/--estimator applied (names checked)."""
+                   command: str | None = None, estimator: str | None = None, solver: str | None = None
+                   ) -> Scenario:
+    """``scenario`` with the CLI's --planner/--controller/--command/--estimator/--solver applied
+    (names checked)."""
+    if solver is not None:
+        if solver not in QP_SOLVERS:
+            raise RomocoError(f"unknown QP solver '{solver}' (known: {', '.join(QP_SOLVERS)})")
+        scenario = dataclasses.replace(scenario, controller=dataclasses.replace(scenario.controller,
+                                                                                solver=solver))
     if estimator is not None:
         ESTIMATORS.check(estimator)
         estimator_config = dataclasses.replace(scenario.estimator, name=estimator)

@@ -5,10 +5,20 @@ import shutil
 import pytest
 import yaml
 
+from romoco_drake.control.registry import CONTROLLERS
 from romoco_drake.errors import ConfigError, RomocoError
+from romoco_drake.estimation.registry import ESTIMATORS
 from romoco_drake.robots.model import RobotModel, load_robot_config_file
 from romoco_drake.robots.source import ROBOTS_DIR
-from romoco_drake.scenario import load_scenario
+from romoco_drake.scenario import (
+    ControllerConfig,
+    PlannerConfig,
+    Scenario,
+    build_diagram,
+    load_scenario,
+    validate_scenario,
+    with_overrides,
+)
 
 
 def _write(tmp_path, name, data):
@@ -29,7 +39,11 @@ def _scenario(**overrides):
         (_scenario(robot="atlas"), "robot", "unknown robot 'atlas'"),
         (_scenario(duraton_s=2.0), "duraton_s", "unknown key"),
         (_scenario(controller={"name": "standing", "rate": 1.0}), "controller.rate", "unknown key"),
-        (_scenario(controller={"name": "mpc"}), "controller.name", "not one of"),
+        (_scenario(controller={"name": "mpc"}), "controller.name", "unknown controller 'mpc'"),
+        (_scenario(planner={"name": "lipm"}), "planner.name", "unknown planner 'lipm' (known: alip, hlip"),
+        (_scenario(planner={"name": "alip_general", "gain": "lqr"}), "planner.gain", "supports gains"),
+        (_scenario(estimator={"name": "ekf"}), "estimator.name", "unknown estimator 'ekf'"),
+        (_scenario(controller={"name": "tscqp", "solver": "osqp"}), "controller.solver", "not one of: daqp"),
         (_scenario(duration_s="long"), "duration_s", "expected a number"),
         (_scenario(duration_s=-1.0), "duration_s", "must be positive"),
         ({"duration_s": 1.0}, "robot", "missing required key"),
@@ -42,6 +56,28 @@ def test_bad_scenario_names_file_and_key(tmp_path, data, key, words):
     message = str(info.value)
     assert "\n" not in message
     assert message.startswith(str(path)) and f": {key}: " in message and words in message
+
+
+def test_scenario_built_in_python_is_validated_like_yaml():
+    """build_diagram checks a Scenario made in code against the same registries."""
+    scenario = Scenario(robot="g1", controller=ControllerConfig(name="mpc"))
+    with pytest.raises(ConfigError, match=r"^<scenario g1>: controller.name: unknown controller 'mpc'"):
+        build_diagram(scenario)
+    scenario = Scenario(robot="g1", planner=PlannerConfig(name="lipm"), controller=ControllerConfig("tscqp"))
+    with pytest.raises(ConfigError, match=r"planner.name: unknown planner 'lipm'"):
+        validate_scenario(scenario)
+
+
+def test_every_registered_component_is_listed_and_buildable():
+    """romoco list, the overrides and validation read one registry per kind."""
+    assert list(CONTROLLERS) == ["standing", "tscqp", "id", "velik", "posik"]
+    assert list(ESTIMATORS) == ["ground_truth", "kalman"]
+    for name in CONTROLLERS:
+        validate_scenario(with_overrides(Scenario(robot="g1"), controller=name))
+    with pytest.raises(RomocoError, match="unknown controller 'mpc'"):
+        with_overrides(Scenario(robot="g1"), controller="mpc")
+    with pytest.raises(RomocoError, match="unknown QP solver 'osqp'"):
+        with_overrides(Scenario(robot="g1"), solver="osqp")
 
 
 def test_unknown_scenario_name():

@@ -19,6 +19,7 @@ from romoco_drake.embedding import (
     find_leg_joints,
     wrench_map,
 )
+from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import load_robot
 
 H = 1e-5  # finite-difference step (s) along q(t) with constant v
@@ -60,13 +61,13 @@ def _check_derivatives(robot, evaluate: Callable[..., Output], seed: int = 0) ->
     q0, v = _random_state(robot, seed)
     plant.SetPositions(context, q0)
     plant.SetVelocities(context, v)
-    out = evaluate(context)
+    out = evaluate(_kin(robot, context))
     k = len(out.names)
     assert out.y.shape == (k,) and out.J.shape == (k, robot.nv) and out.Jdot_v.shape == (k,)
     ends = []
     for t in (H, -H):
         plant.SetPositions(context, _q_along(robot, q0, v, t))
-        ends.append(evaluate(context))
+        ends.append(evaluate(_kin(robot, context)))
     ydot = (ends[0].y - ends[1].y) / (2 * H)
     np.testing.assert_allclose(out.J @ v, ydot, rtol=1e-6, atol=1e-6)
     Jdot_v = (ends[0].J @ v - ends[1].J @ v) / (2 * H)
@@ -114,9 +115,14 @@ def test_standing_and_in_air_output_derivatives(robot):
 @pytest.mark.parametrize("domain", list(DOMAINS))
 def test_contact_constraint_derivatives(robot, domain):
     contact = ContactModel(robot)
-    out = _check_derivatives(robot, lambda c: contact.constraints(c, domain), seed=5)
+    out = _check_derivatives(robot, lambda kin: contact.constraints(kin.context, domain), seed=5)
     points = sum(len(contact.feet[s].point_names) for s in DOMAINS[domain])
     assert len(out.names) == 3 * points + robot.num_internal_constraints()
+
+
+def _kin(robot, context) -> RobotKinematics:
+    """The shared evaluation at a plant context's state."""
+    return RobotKinematics(robot, robot.plant.GetPositionsAndVelocities(context))
 
 
 def _nominal_context(robot):
@@ -140,7 +146,7 @@ def test_constraints_hold_at_nominal(robot):
 def test_walking_outputs_at_nominal_and_invariant_to_yaw(robot, stance):
     walking = WalkingOutputs(robot)
     context = _nominal_context(robot)
-    y = walking.evaluate(context, stance).y
+    y = walking.evaluate(_kin(robot, context), stance).y
     sign = 1.0 if stance == "left" else -1.0
     expected = dict.fromkeys(walking.names, 0.0)
     expected["com_z"] = robot.config.nominal.com_height
@@ -152,7 +158,7 @@ def test_walking_outputs_at_nominal_and_invariant_to_yaw(robot, stance):
     X_WB = robot.plant.GetFreeBodyPose(context, robot.base_body)
     robot.plant.SetFreeBodyPose(context, robot.base_body,
                                 RigidTransform(RotationMatrix.MakeZRotation(2.0)) @ X_WB)
-    np.testing.assert_allclose(walking.evaluate(context, stance).y, y, atol=1e-9)
+    np.testing.assert_allclose(walking.evaluate(_kin(robot, context), stance).y, y, atol=1e-9)
 
 
 def test_pelvis_tilt_matches_drake_rpy_for_small_angles(robot):
@@ -160,7 +166,7 @@ def test_pelvis_tilt_matches_drake_rpy_for_small_angles(robot):
     roll, pitch, yaw = 0.03, -0.05, 1.2
     X_WB = RigidTransform(RollPitchYaw(roll, pitch, yaw), [0.0, 0.0, 1.0])
     robot.plant.SetFreeBodyPose(context, robot.base_body, X_WB)
-    y = StandingOutputs(robot).evaluate(context).y
+    y = StandingOutputs(robot).evaluate(_kin(robot, context)).y
     np.testing.assert_allclose(y[3:], [np.cos(pitch) * np.sin(roll), np.sin(pitch), yaw], atol=1e-12)
     np.testing.assert_allclose(y[3:5], [roll, pitch], atol=2e-4)
 

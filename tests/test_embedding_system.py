@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from romoco_drake.embedding.references import FREEZE_FRACTION, MODES
+from romoco_drake.embedding.references import FREEZE_FRACTION
 from romoco_drake.embedding.system import OutputEmbedding
+from romoco_drake.modes import Mode
+from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import load_robot
 from romoco_drake.rom.planners import PlannerParams, make_planner
 from romoco_drake.rom.types import PlannerOutput, WalkCommand
@@ -21,10 +23,10 @@ def _setup(name, mode="walking", side=1.0, tau=0.0, vx=0.3):
     cmd = WalkCommand(vx=vx, step_width=walk.step_width, com_height=walk.z0, step_time=walk.t_ss)
     law = make_planner("hlip", PlannerParams(mass=robot.total_mass, t_ds=walk.t_ds))
     plan = law.plan([0.0, -0.05 * side, walk.z0, 0.0, 0.0, 0.0], "left" if side > 0 else "right", tau, cmd)
-    system.state_port.FixValue(context, np.concatenate([robot.nominal.q, np.zeros(robot.nv)]))
+    system.kinematics_port.FixValue(context, RobotKinematics(robot))
     system.planner_output_port.FixValue(context, plan)
     system.gait_phase_port.FixValue(context, [side, tau])
-    system.mode_port.FixValue(context, [MODES.index(mode)])
+    system.mode_port.FixValue(context, Mode(mode))
     context.SetTime(tau)
     simulator = Simulator(system, context)
     simulator.Initialize()
@@ -35,9 +37,7 @@ def _setup(name, mode="walking", side=1.0, tau=0.0, vx=0.3):
 def test_output_equals_core_evaluation(name):
     robot, system, context, _, plan, _, _ = _setup(name, tau=0.1)
     refs = system.task_references_port.Eval(context)
-    plant_context = robot.plant.CreateDefaultContext()
-    robot.plant.SetPositions(plant_context, robot.nominal.q)
-    expected = system.core.evaluate(plant_context, "walking", 0.1, plan, system.swing_state(context))
+    expected = system.core.evaluate(RobotKinematics(robot), "walking", 0.1, plan, system.swing_state(context))
     assert refs.names == expected.names
     for field in ("y", "J", "Jdot_v", "y_des", "ydot_des", "yddot_des", "active", "A_f", "b_f"):
         np.testing.assert_allclose(getattr(refs, field), getattr(expected, field), atol=1e-12)
@@ -133,7 +133,7 @@ def test_target_freezes_late_in_the_swing():
 def test_walking_without_a_plan_falls_back_to_standing():
     _, system, context, _, _, _, _ = _setup("g1", tau=0.1)
     core = system.core
-    refs = core.evaluate(system._plant_context, "walking", 0.1, None, None)
+    refs = core.evaluate(RobotKinematics(system.robot), "walking", 0.1, None, None)
     assert refs.mode == "standing" and refs.domain == "double"
 
 

@@ -15,6 +15,7 @@ from romoco_drake.config import load_typed
 from romoco_drake.control.gravity import contact_gravity_compensation
 from romoco_drake.errors import ConfigError
 from romoco_drake.interfaces.sensors import SensorConfig, SimulatedSensors, add_sensors, foot_normal_forces
+from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel, load_robot
 
 TIME_STEP = 0.002
@@ -71,9 +72,7 @@ def simulate(config: SensorConfig, standing: bool, lift: float = 0.0,
     plant, _ = robot.add_to_builder(builder, TIME_STEP, motor_pd=standing)
     u = np.zeros(robot.nu)
     if standing:
-        controller_context = robot.plant.CreateDefaultContext()
-        robot.plant.SetPositions(controller_context, robot.nominal.q)
-        u = contact_gravity_compensation(robot, controller_context)
+        u = contact_gravity_compensation(robot, RobotKinematics(robot))
         x_d = np.concatenate([robot.nominal.q[robot.actuated_q_index], np.zeros(robot.nu)])
         builder.Connect(builder.AddSystem(ConstantVectorSource(x_d)).get_output_port(),
                         plant.get_desired_state_input_port(robot.model_instance))

@@ -5,6 +5,7 @@ import pytest
 
 from romoco_drake.control.gravity import contact_gravity_compensation
 from romoco_drake.interfaces.monitor import FallMonitor
+from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import load_robot
 from romoco_drake.runner import run_scenario
 from romoco_drake.scenario import load_scenario
@@ -28,9 +29,9 @@ def test_drop_from_height_is_survived():
 def test_gravity_compensation_balances_gravity(name):
     """B u + J_cᵀ λ + J_hᵀ λ_h = −τ_g has a solution with these u (static balance)."""
     robot = load_robot(name)
-    context = robot.plant.CreateDefaultContext()
-    robot.plant.SetPositions(context, robot.nominal.q)
-    u = contact_gravity_compensation(robot, context)
+    kin = RobotKinematics(robot)
+    context = kin.context
+    u = contact_gravity_compensation(robot, kin)
     tau_g = robot.plant.CalcGravityGeneralizedForces(context)
     Jc = robot.foot_contact_jacobian(context)
     Jh = robot.internal_constraints(context).J

@@ -5,8 +5,10 @@ import pytest
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.control.tscqp import TscQp
-from romoco_drake.embedding.references import MODES, EmbeddingCore
+from romoco_drake.embedding.references import EmbeddingCore
+from romoco_drake.modes import Mode
 from romoco_drake.planners.state_machine import GaitStateMachine
+from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import load_robot
 from romoco_drake.rom.planners import HlipLaw, PlannerParams
 from romoco_drake.rom.types import WalkCommand
@@ -21,10 +23,8 @@ def g1():
 
 
 def _standing_refs(robot, core, v):
-    context = robot.plant.CreateDefaultContext()
-    robot.plant.SetPositions(context, robot.nominal.q)
-    robot.plant.SetVelocities(context, v)
-    return context, core.evaluate(context, "standing", 0.0, None, None)
+    kin = RobotKinematics(robot, np.concatenate([robot.nominal.q, v]))
+    return kin, core.evaluate(kin, "standing", 0.0, None, None)
 
 
 def test_tscqp_reproduces_feasible_task_accelerations(g1):
@@ -47,13 +47,13 @@ def test_tscqp_reproduces_feasible_task_accelerations(g1):
     wanted = refs.J @ vdot + refs.Jdot_v
     refs = type(refs)(**{**refs.__dict__, "y_des": refs.y.copy(), "ydot_des": refs.J @ v,
                          "yddot_des": wanted})
-    solution = qp.solve(context, refs)
+    solution, _ = qp.compute(context, refs)
     assert solution.success
     achieved = refs.J @ solution.vdot + refs.Jdot_v
     np.testing.assert_allclose(achieved, wanted, atol=2e-3 * (1 + np.abs(wanted).max()))
     np.testing.assert_allclose(Jh @ solution.vdot, -refs.holonomic.Jdot_v - qp.k_h * Jh @ v, atol=1e-6)
     # Dynamics: M v̇ + C = B τ + J_hᵀ λ.
-    plant = robot.plant
+    plant, context = robot.plant, context.context
     lhs = plant.CalcMassMatrix(context) @ solution.vdot + plant.CalcBiasTerm(context) \
         - plant.CalcGravityGeneralizedForces(context)
     np.testing.assert_allclose(lhs, robot.B @ solution.tau + Jh.T @ solution.forces, atol=1e-5)
@@ -65,7 +65,7 @@ def test_tscqp_respects_torque_and_friction_limits(g1):
     context, refs = _standing_refs(robot, core, np.zeros(robot.nv))
     huge = np.full(len(refs.y), 500.0)
     refs = type(refs)(**{**refs.__dict__, "yddot_des": huge})
-    solution = qp.solve(context, refs)
+    solution, _ = qp.compute(context, refs)
     assert solution.success
     assert np.all(np.abs(solution.tau) <= robot.effort_limits * (1 + 1e-6) + 1e-6)
     assert np.any(np.abs(solution.tau) > 0.5 * robot.effort_limits)  # the limits were reached
@@ -89,7 +89,7 @@ def _machine(robot):
     machine = GaitStateMachine(robot, period=0.002, t_ds=0.0)
     context = machine.CreateDefaultContext()
     x = np.concatenate([robot.nominal.q, np.zeros(robot.nv)])
-    machine.state_port.FixValue(context, x)
+    machine.kinematics_port.FixValue(context, RobotKinematics(robot, x))
     machine.foot_contact_port.FixValue(context, [1.0, 1.0])
     w = robot.config.walking
     return machine, context, x, w
@@ -112,7 +112,7 @@ def test_state_machine_stand_walk_stand_and_damping(g1):
     assert s.mode == "walking" and s.side == "left"
     simulator.AdvanceTo(0.2 + w.t_ss + 0.01)
     assert machine.schedule(context).side == "right"
-    assert machine.mode_port.Eval(context)[0] == MODES.index("walking")
+    assert machine.mode_port.Eval(context) == Mode.WALKING
     phase = machine.gait_phase_port.Eval(context)
     assert phase[0] == -1.0 and 0.0 < phase[1] < w.t_ss
     machine.command_port.FixValue(context, _command(w))
@@ -120,7 +120,7 @@ def test_state_machine_stand_walk_stand_and_damping(g1):
     assert machine.schedule(context).mode == "standing"
     bad = x.copy()
     bad[robot.nq] = np.nan
-    machine.state_port.FixValue(context, bad)
+    machine.kinematics_port.FixValue(context, RobotKinematics(robot, bad))
     simulator.AdvanceTo(context.get_time() + 0.01)
     s = machine.schedule(context)
     assert s.mode == "damping" and s.fall_reason == "invalid_state" and s.safe_mode_entries == 1
@@ -137,7 +137,7 @@ def test_state_machine_in_air_until_both_feet_touch_down(g1):
     assert machine.schedule(context).mode == "standing"  # a contact dropout shorter than lift_time
     simulator.AdvanceTo(0.02)
     assert machine.schedule(context).mode == "in_air"
-    assert machine.mode_port.Eval(context)[0] == MODES.index("in_air")
+    assert machine.mode_port.Eval(context) == Mode.IN_AIR
     machine.command_port.FixValue(context, _command(w, vx=0.3))  # no walking from the air
     machine.foot_contact_port.FixValue(context, [1.0, np.nan])
     simulator.AdvanceTo(0.2)
@@ -180,12 +180,12 @@ def test_state_machine_waits_for_balance_and_leads_with_the_lateral_foot(g1):
     machine, context, x, w = _machine(robot)
     moving = x.copy()
     moving[robot.nq + robot.base_v_start + 3] = 0.5  # base moving forward at 0.5 m/s
-    machine.state_port.FixValue(context, moving)
+    machine.kinematics_port.FixValue(context, RobotKinematics(robot, moving))
     machine.command_port.FixValue(context, _command(w, vy=0.2))
     simulator = Simulator(machine, context)
     simulator.AdvanceTo(0.05)
     assert machine.schedule(context).mode == "standing"
-    machine.state_port.FixValue(context, x)
+    machine.kinematics_port.FixValue(context, RobotKinematics(robot, x))
     simulator.AdvanceTo(0.1)
     s = machine.schedule(context)
     assert s.mode == "walking" and s.side == "right"  # the left foot swings first to go left

@@ -8,7 +8,10 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.bench.rom import percentiles
+from romoco_drake.control.gravity import contact_gravity_compensation
 from romoco_drake.errors import RomocoError
+from romoco_drake.interfaces.station import make_station
+from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.rom.types import WalkCommand
 from romoco_drake.runner import run_scenario
 from romoco_drake.scenario import (
@@ -57,8 +60,11 @@ def bench_tick(scenario: Scenario, warmup: float = 2.0, ticks: int = 500) -> dic
 
     After ``warmup`` simulated seconds (walking under the scenario's command), each of ``ticks``
     controller periods is simulated and then every component is evaluated in pipeline order:
-    estimator output, ROM state, state machine step, planner, embedding references, controller
-    update (which then finds the references cached).
+    estimator output, the shared controller-plant evaluation (``kinematics``), state machine
+    step, ROM state and planner, embedding references, controller update (which then finds
+    everything upstream cached). ``plant_step`` (:func:`passive_plant_steps`) is the reference
+    measured in the same run that makes the numbers comparable across machines
+    (``controller_to_plant``: the ratio of the medians of the total tick and the plant step).
     """
     built = build_diagram(scenario)
     if built.walking is None:
@@ -70,42 +76,67 @@ def bench_tick(scenario: Scenario, warmup: float = 2.0, ticks: int = 500) -> dic
     simulator.Initialize()
     simulator.AdvanceTo(warmup)
     diagram, loop = built.diagram, built.walking
-    estimator = diagram.GetSubsystemByName("estimator")
-    rom_state = diagram.GetSubsystemByName("rom_state")
-    heading = diagram.GetSubsystemByName("heading")
-    ctx = {name: diagram.GetSubsystemByName(name).GetMyContextFromRoot(root)
-           for name in ("estimator", "rom_state", "heading", "state_machine", "planner", "embedding",
-                        "controller")}
+    systems = {name: diagram.GetSubsystemByName(name)
+               for name in ("estimator", "kinematics", "rom_state", "heading", "state_machine", "planner",
+                            "embedding", "controller")}
+    ctx = {name: system.GetMyContextFromRoot(root) for name, system in systems.items()}
     period = 1.0 / scenario.controller.rate_hz
-    names = ("estimator", "state_machine", "planner", "embedding", "controller")
-    times: dict[str, list[int]] = {n: [] for n in names}
+    names = ("estimator", "kinematics", "state_machine", "planner", "embedding", "controller")
+    times: dict[str, list[int]] = {n: [] for n in (*names, "plant_step")}
+    machine = loop.state_machine
     t = root.get_time()
     for _ in range(ticks):
         t += period
         simulator.AdvanceTo(t)
         t0 = time.perf_counter_ns()
-        x = estimator.state_output.Eval(ctx["estimator"])
-        times["estimator"].append(time.perf_counter_ns() - t0)
-        cmd = WalkCommand.from_vector(heading.command_port.Eval(ctx["heading"]))
-        machine = loop.state_machine
-        t0 = time.perf_counter_ns()
+        systems["estimator"].state_output.Eval(ctx["estimator"])
+        t1 = time.perf_counter_ns()
+        kin = systems["kinematics"].kinematics_port.Eval(ctx["kinematics"])
+        _ = kin.M, kin.C  # what the tick's consumers read
+        t2 = time.perf_counter_ns()
+        cmd = WalkCommand.from_vector(systems["heading"].command_port.Eval(ctx["heading"]))
         contact = machine.foot_contact_port.Eval(ctx["state_machine"])
-        machine.next_schedule(machine.schedule(ctx["state_machine"]), t, x, cmd, contact)
-        times["state_machine"].append(time.perf_counter_ns() - t0)
-        t0 = time.perf_counter_ns()
-        rom_state.rom_state_port.Eval(ctx["rom_state"])
+        t3 = time.perf_counter_ns()
+        machine.next_schedule(machine.schedule(ctx["state_machine"]), t, kin, cmd, contact)
+        t4 = time.perf_counter_ns()
+        systems["rom_state"].rom_state_port.Eval(ctx["rom_state"])
         loop.planner.planner_output_port.Eval(ctx["planner"])
-        times["planner"].append(time.perf_counter_ns() - t0)
-        t0 = time.perf_counter_ns()
+        t5 = time.perf_counter_ns()
         loop.embedding.task_references_port.Eval(ctx["embedding"])
-        times["embedding"].append(time.perf_counter_ns() - t0)
-        t0 = time.perf_counter_ns()
+        t6 = time.perf_counter_ns()
         loop.controller.EvalUniquePeriodicDiscreteUpdate(ctx["controller"])
-        times["controller"].append(time.perf_counter_ns() - t0)
+        t7 = time.perf_counter_ns()
+        for name, ns in zip(names, (t1 - t0, t2 - t1, t4 - t3, t5 - t4, t6 - t5, t7 - t6), strict=True):
+            times[name].append(ns)
+    times["plant_step"] = passive_plant_steps(built.robot, scenario, ticks)
     result = {n: {k: round(v / 1e3, 4) for k, v in percentiles(ns).items()} for n, ns in times.items()}
-    total = np.sum([np.array(v) for v in times.values()], axis=0)
+    total = np.sum([np.array(times[n]) for n in names], axis=0)
     result["total"] = {k: round(v / 1e3, 4) for k, v in percentiles(list(total)).items()}
-    mode = loop.state_machine.schedule(ctx["state_machine"]).mode
+    mode = machine.schedule(ctx["state_machine"]).mode
     return {"scenario": scenario.name, "planner": scenario.planner.name,
-            "controller": scenario.controller.name, "ticks": ticks, "period_s": period, "mode": mode,
-            "tick_ms": result}
+            "controller": scenario.controller.name, "solver": scenario.controller.solver, "ticks": ticks,
+            "period_s": period, "mode": str(mode), "tick_ms": result,
+            "controller_to_plant": round(result["total"]["median"] / result["plant_step"]["median"], 3)}
+
+
+def passive_plant_steps(robot, scenario: Scenario, steps: int) -> list[int]:
+    """Wall time (ns) of each of ``steps`` simulated plant steps with no controller.
+
+    The scenario's simulated station alone (plant, contact, sensors) holding the nominal pose's
+    gravity-compensation torque, started at the nominal pose on the ground: what one step of
+    the simulation costs by itself.
+    """
+    station = make_station(robot, scenario.time_step, sensors=scenario.sensors)
+    simulator = Simulator(station)
+    context = simulator.get_mutable_context()
+    plant = station.GetSubsystemByName("plant")
+    plant.SetPositions(plant.GetMyMutableContextFromRoot(context), robot.nominal.q)
+    torque = contact_gravity_compensation(robot, RobotKinematics(robot))
+    station.GetInputPort("actuation").FixValue(context, torque)
+    simulator.Initialize()
+    out = []
+    for k in range(1, steps + 1):
+        t0 = time.perf_counter_ns()
+        simulator.AdvanceTo(k * scenario.time_step)
+        out.append(time.perf_counter_ns() - t0)
+    return out

@@ -14,7 +14,8 @@ class StandingController(LeafSystem):
     """u = kp (q₀ − q) − kd v + u_g(q), clipped to the effort limits.
 
     q₀ is the robot's nominal standing pose, kp/kd the YAML gains, u_g the
-    contact-consistent gravity compensation of both feet on the controller plant.
+    contact-consistent gravity compensation of both feet on the controller plant. A
+    non-finite state gets joint damping −kd v alone.
 
     | port | kind | size | meaning |
     |---|---|---|---|
@@ -36,7 +37,11 @@ class StandingController(LeafSystem):
         self.actuation_output = self.DeclareStateOutputPort("actuation", u)
 
     def compute(self, kin: RobotKinematics) -> np.ndarray:
+        """The torque at the state of ``kin``; joint damping alone on a non-finite state."""
         r = self._robot
+        if not kin.finite:
+            damping = -r.kd * np.nan_to_num(kin.v[r.actuated_v_index])
+            return np.clip(damping, -r.effort_limits, r.effort_limits)
         u = r.kp * (self._q0 - kin.q[r.actuated_q_index]) - r.kd * kin.v[r.actuated_v_index]
         u += contact_gravity_compensation(r, kin)
         return np.clip(u, -r.effort_limits, r.effort_limits)

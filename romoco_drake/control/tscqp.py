@@ -216,9 +216,11 @@ class TscQp:
             # interior-point solver reads the round-off in redundant rows as infeasibility, and an
             # active-set one a singular KKT system, so the constraint is imposed on an
             # orthonormal basis of J_h's row space instead.
+            # The basis: eigenvectors of J_h J_hᵀ with the largest eigenvalues (a small symmetric
+            # eigenproblem, several times cheaper than J_h's SVD; the rank is the domain's).
             if refs.domain not in self._rank_h:
                 self._rank_h[refs.domain] = int(np.linalg.matrix_rank(Jh))
-            U = np.linalg.svd(Jh, full_matrices=False)[0][:, :self._rank_h[refs.domain]]
+            U = np.linalg.eigh(Jh @ Jh.T)[1][:, -self._rank_h[refs.domain]:]
             A_eq.append(np.hstack([U.T @ Jh, np.zeros((U.shape[1], n - nv))]))
             b_eq.append(U.T @ (-refs.holonomic.Jdot_v - self.k_h * (Jh @ v)))
         n_fric = refs.A_f.shape[0]

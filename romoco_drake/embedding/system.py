@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
+import functools
+
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
@@ -40,7 +43,9 @@ class OutputEmbedding(LeafSystem):
     | ``tracking_error`` | out | 5 | norm of the active errors y − y_d per ``ERROR_GROUPS`` (m or rad) |
 
     Abstract state: the current step's :class:`SwingState` when walking, the
-    :class:`StandState` latched on entering standing, else nothing.
+    :class:`StandState` latched on entering standing, else nothing. Discrete state: the
+    tracking errors of the last tick. A non-finite state latches nothing and gives standing
+    references with NaN outputs (the controllers are damping then), so NaN tracking errors.
     """
 
     def __init__(self, robot: RobotModel, period: float, core: EmbeddingCore | None = None,
@@ -48,6 +53,8 @@ class OutputEmbedding(LeafSystem):
         super().__init__()
         self.robot = robot
         self.core = core or EmbeddingCore(robot)
+        standing = self.core.evaluate(RobotKinematics(robot), Mode.STANDING, 0.0, None, None)
+        self._nan_references = dataclasses.replace(standing, y=np.full_like(standing.y, np.nan))
         self.kinematics_port = self.DeclareAbstractInputPort("kinematics", kinematics_model_value(robot))
         self.planner_output_port = self.DeclareAbstractInputPort(
             "planner_output", AbstractValue.Make(PlannerOutput.placeholder()))
@@ -56,10 +63,13 @@ class OutputEmbedding(LeafSystem):
         self._swing = self.DeclareAbstractState(AbstractValue.Make(_NoSwing()))
         self.task_references_port = self.DeclareAbstractOutputPort(
             "task_references", self._default_references, self._calc_references)
-        self.tracking_error_port = self.DeclareVectorOutputPort(
-            "tracking_error", len(ERROR_GROUPS), self._calc_tracking_error)
+        self._errors = self.DeclareDiscreteState(len(ERROR_GROUPS))
+        self.tracking_error_port = self.DeclareStateOutputPort("tracking_error", self._errors)
         self.DeclareInitializationUnrestrictedUpdateEvent(self._update_swing)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, offset, self._update_swing)
+        # Discrete updates see the tick's final references (after the unrestricted ones), the same
+        # the controller reads, so logging the errors costs no extra evaluation.
+        self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update_tracking_error)
 
     def _default_references(self) -> AbstractValue:
         return AbstractValue.Make(self.core.evaluate(RobotKinematics(self.robot), Mode.STANDING, 0.0, None,
@@ -83,6 +93,8 @@ class OutputEmbedding(LeafSystem):
     def _update_swing(self, context, state) -> None:
         swing = self.swing_state(context)
         mode = self._mode(context)
+        if not self._kinematics(context).finite:  # nothing to latch from; the controllers damp
+            return
         if mode == Mode.STANDING:
             new = self.memory(context)
             if not isinstance(new, StandState):
@@ -103,25 +115,28 @@ class OutputEmbedding(LeafSystem):
         state.get_mutable_abstract_state(int(self._swing)).set_value(new)
 
     def _calc_references(self, context, value) -> None:
+        if not self._kinematics(context).finite:  # the controllers damp; these are never tracked
+            value.set_value(self._nan_references)
+            return
         phase = self.gait_phase_port.Eval(context)
         refs: TaskReferences = self.core.evaluate(
             self._kinematics(context), self._mode(context), float(phase[1]),
             self.planner_output_port.Eval(context), self.memory(context), context.get_time())
         value.set_value(refs)
 
-    def _calc_tracking_error(self, context, out) -> None:
+    def _update_tracking_error(self, context, discrete_state) -> None:
         refs: TaskReferences = self.task_references_port.Eval(context)
         err = np.where(refs.active, refs.error, 0.0) ** 2
         sums = np.zeros(len(ERROR_GROUPS))
-        np.add.at(sums, [_group_of(n) for n in refs.names], err)
-        out.SetFromVector(np.sqrt(sums))
+        np.add.at(sums, _groups(refs.names), err)
+        discrete_state.get_mutable_vector(self._errors).SetFromVector(np.sqrt(sums))
 
 
-def _group_of(name: str) -> int:
-    for i, (_, prefixes) in enumerate(ERROR_GROUPS):
-        if name.startswith(prefixes):
-            return i
-    return len(ERROR_GROUPS) - 1
+@functools.cache
+def _groups(names: tuple[str, ...]) -> np.ndarray:
+    """The ``ERROR_GROUPS`` index of each output."""
+    return np.array([next((i for i, (_, prefixes) in enumerate(ERROR_GROUPS) if n.startswith(prefixes)),
+                          len(ERROR_GROUPS) - 1) for n in names], dtype=int)
 
 
 class _NoSwing:

@@ -37,6 +37,9 @@ class RomStateFromRobot(LeafSystem):
             "rom_state", ROM_STATE_SIZE, self._calc, prerequisites_of_calc={self.all_input_ports_ticket()})
 
     def compute(self, kin: RobotKinematics, side: str) -> np.ndarray:
+        """The ROM state for ``side`` stance; NaN on a non-finite state (planners fall back)."""
+        if not kin.finite:
+            return np.full(6, np.nan)
         R_FS, p_FS = self._soles[side]
         X_WF = self.robot.foot_frames[side].CalcPoseInWorld(kin.context)
         pivot = X_WF.multiply(p_FS)

@@ -35,8 +35,10 @@ class RobotKinematics:
     """The controller plant at one state; dynamics terms evaluated once, on first use.
 
     ``context`` is the plant context (state set: query poses and Jacobians on it, never set
-    it); ``x``, ``q``, ``v`` the state; ``finite`` whether every entry of x is finite (on a
-    non-finite state every derived quantity is NaN and consumers go to their safe mode).
+    it); ``x``, ``q``, ``v`` the state; ``finite`` whether every entry of x is finite. Drake
+    refuses a non-finite state, so then the context keeps the last finite one and every derived
+    quantity here is NaN: consumers check ``finite`` before querying the context (controllers go
+    to their safe mode).
     The object is refilled in place by :meth:`update` when its owner's state changes: read it
     within one tick, do not keep it.
     """
@@ -57,8 +59,14 @@ class RobotKinematics:
         self.x = np.array(x, dtype=float)
         self.q, self.v = self.x[:r.nq], self.x[r.nq:]
         self.finite = bool(np.isfinite(self.x).all())
-        r.plant.SetPositionsAndVelocities(self.context, self.x)
         self._M = self._bias = self._tau_g = self._p_com = self._p_base = None
+        if self.finite:
+            r.plant.SetPositionsAndVelocities(self.context, self.x)
+        else:
+            nv = r.nv
+            self._M = np.full((nv, nv), np.nan)
+            self._bias, self._tau_g = np.full(nv, np.nan), np.full(nv, np.nan)
+            self._p_com = self._p_base = np.full(3, np.nan)
 
     def __deepcopy__(self, memo) -> RobotKinematics:
         """A copy on its own context (Drake clones cached values when it clones a context)."""
@@ -121,8 +129,10 @@ class RobotKinematics:
 
     def angular_momentum_about(self, point: np.ndarray) -> np.ndarray:
         """The robot's angular momentum about a world point, in world (3,)."""
-        h = self.M[self._base_rows] @ self.v  # [angular about the base origin; linear]
-        return h[:3] + np.cross(self.p_base - point, h[3:])
+        h = (self.M[self._base_rows] @ self.v).tolist()  # [angular about the base origin; linear]
+        rx, ry, rz = (self.p_base - point).tolist()
+        return np.array([h[0] + ry * h[5] - rz * h[4], h[1] + rz * h[3] - rx * h[5],
+                         h[2] + rx * h[4] - ry * h[3]])
 
 
 @functools.cache

@@ -36,7 +36,7 @@ class controller_status_t(object):
 
         self.mode = 0
         """
-        Gait mode: index into romoco_drake.embedding.references.MODES.
+        Gait mode: romoco_drake.modes.Mode.index (0 in_air, 1 standing, 2 walking, 3 damping).
         LCM Type: int8_t
         """
 
