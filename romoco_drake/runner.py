@@ -21,6 +21,12 @@ from romoco_drake.robots.model import load_robot
 from romoco_drake.scenario import Scenario, build_diagram, initial_positions, uses_motor_command
 
 PROGRESS_WALL_S = 2.0  # print progress lines at most this often
+# Drake's report that the plant's discrete contact solver gave up on a step (v1.51,
+# multibody/plant/sap_driver.cc; the plants here use SAP).
+SAP_DIVERGED = "The SAP solver failed to converge"
+# No robot's |q| or |v| (m, rad, m/s, rad/s) gets here; a blown-up simulation does within a
+# few steps, often without a solver noticing (then a controller trips on it).
+BLOWN_UP = 1e6
 
 
 def run_scenario(
@@ -73,10 +79,12 @@ def run_scenario(
             t = min(duration, t + chunk)
             try:
                 simulator.AdvanceTo(t)
-            except RuntimeError as e:
-                # The contact solver gives up on a state that has already blown up (a fall the
-                # monitor may not have sampled yet): end the run and report it, no traceback.
-                diverged = (context.get_time(), str(e).split(".")[0])
+            except Exception as e:
+                # A diverged simulation ends the run as a fall (the monitor may not have sampled
+                # it yet), without a traceback; anything else is a bug and goes up as it is.
+                if (reason := divergence(e, _plant_state(built, context))) is None:
+                    raise
+                diverged = (context.get_time(), reason)
                 break
             now = time.perf_counter()
             if progress is not None and now - last_print > PROGRESS_WALL_S:
@@ -164,6 +172,28 @@ def run_robot_sim(scenario: Scenario, duration: float | None = None, lcm_url: st
     monitor = station.GetSubsystemByName("monitor")
     return ({"robot": robot.name, "lcm_url": lcm.get_lcm_url(), "duration_s": duration}
             | monitor.summary(monitor.GetMyContextFromRoot(context)) | robot_summary(robot_sim, context))
+
+
+def divergence(error: Exception, plant_state: np.ndarray | None) -> str | None:
+    """What to report if ``error``, raised while advancing the simulation, means it diverged; else None.
+
+    Diverged: Drake's SAP solver said so, or the plant state ``[q; v]`` (None without a plant)
+    is non-finite or blown up past ``BLOWN_UP``, whatever then raised (e.g. a controller's
+    "QuaternionToRotationMatrix(): All the elements in a quaternion are zero").
+    """
+    text = str(error).strip()
+    blown_up = plant_state is not None and not np.all(np.abs(plant_state) < BLOWN_UP)  # NaN included
+    if not blown_up and SAP_DIVERGED not in text:
+        return None
+    return text.splitlines()[0].split(". ")[0].rstrip(".") if text else type(error).__name__
+
+
+def _plant_state(built, context) -> np.ndarray | None:
+    """The simulated robot's [q; v], or None on hardware."""
+    if built.plant_station is None:
+        return None
+    plant = built.plant_station.GetSubsystemByName("plant")
+    return plant.GetPositionsAndVelocities(plant.GetMyContextFromRoot(context))
 
 
 def make_lcm(url: str | None) -> DrakeLcm:

@@ -23,11 +23,23 @@ from romoco_drake.errors import RomocoError
 from romoco_drake.robots.config import ModelSource
 from romoco_drake.robots.meshes import stl_as_obj
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
-ROBOTS_DIR = REPO_ROOT / "robots"
-MODELS_DIR = REPO_ROOT / "models"
-DIAGRAMS_DIR = REPO_ROOT / "diagrams"
 ERD_PACKAGE = "example-robot-data"
+_PACKAGE_DIR = Path(__file__).resolve().parents[1]
+
+
+def _data_dir(name: str) -> Path:
+    """The repository's top-level ``name`` folder, wherever the install put it.
+
+    A wheel ships it inside the package as ``romoco_drake/_data/<name>`` (see pyproject.toml);
+    an editable install or a source checkout reads it in place, next to ``romoco_drake/``.
+    """
+    shipped = _PACKAGE_DIR / "_data" / name
+    return shipped if shipped.is_dir() else _PACKAGE_DIR.parent / name
+
+
+ROBOTS_DIR = _data_dir("robots")
+MODELS_DIR = _data_dir("models")
+DIAGRAMS_DIR = _data_dir("diagrams")
 
 
 @functools.cache
