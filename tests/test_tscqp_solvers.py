@@ -1,0 +1,100 @@
+"""The TSC-QP's fast path (DAQP) against the reference (MathematicalProgram + Clarabel) on recorded ticks.
+
+The ticks are recorded from closed-loop runs that pass through every contact domain: a drop
+(in the air), landing and standing (double support), and walking (left and right single
+support). G1 has plane feet; Cassie has line feet and internal loops (its achilles rods).
+"""
+
+import functools
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+
+from romoco_drake.control.controller import SolverResult
+from romoco_drake.control.tscqp import TscQp
+from romoco_drake.modes import Domain
+from romoco_drake.robots.kinematics import RobotKinematics
+from romoco_drake.scenario import build_diagram, initial_positions, load_scenario, with_overrides
+
+TICKS_PER_DOMAIN = 8
+
+
+class _Recorder:
+    """Wraps the controller's solver and keeps the state and references of some ticks per domain."""
+
+    def __init__(self, solver):
+        self.solver, self.warm_start_size = solver, solver.warm_start_size
+        self.ticks: dict[Domain, list] = {d: [] for d in Domain}
+        self._seen: dict[Domain, int] = {d: 0 for d in Domain}
+
+    def solve(self, kin, refs, previous, warm_start) -> SolverResult:
+        self._seen[refs.domain] += 1
+        if self._seen[refs.domain] % 3 == 1 and len(self.ticks[refs.domain]) < TICKS_PER_DOMAIN:
+            self.ticks[refs.domain].append((kin.x.copy(), refs))
+        return self.solver.solve(kin, refs, previous, warm_start)
+
+
+@functools.cache
+def _recorded(scenario_name):
+    scenario = with_overrides(load_scenario(scenario_name), command="0:0,0,0;1.2:0.4,0.1,0.2")
+    scenario.initial_height_offset = 0.1
+    built = build_diagram(scenario)
+    controller = built.walking.controller
+    recorder = _Recorder(controller.solver)
+    controller.solver = recorder
+    simulator = Simulator(built.diagram)
+    plant = built.plant_station.GetSubsystemByName("plant")
+    root = simulator.get_mutable_context()
+    plant.SetPositions(plant.GetMyMutableContextFromRoot(root), initial_positions(built.robot, scenario))
+    simulator.AdvanceTo(2.2)
+    assert not built.monitor.summary(built.monitor.GetMyContextFromRoot(root))["fell"]
+    return built.robot, controller.solver.solver.contact, recorder.ticks
+
+
+@pytest.mark.parametrize("scenario_name", ["g1_walk", "cassie_walk"])
+def test_daqp_gives_the_reference_solution_in_every_domain(scenario_name):
+    """τ, v̇ and the generalized contact force J_hᵀλ agree to 1e-5 (relative to their size).
+
+    The point forces themselves are compared through J_hᵀλ: a foot's redundant contact points
+    (rank 6 of 9 rows) leave internal forces that only the tiny ε_λ regularisation fixes, and an
+    interior-point method stops short of that minimum in those directions.
+    """
+    robot, contact, ticks = _recorded(scenario_name)
+    fast = TscQp(robot, contact, solver="daqp")
+    reference = TscQp(robot, contact, solver="clarabel", clarabel_tolerance=1e-10)
+    for domain in Domain:
+        assert len(ticks[domain]) >= 3, f"no {domain} ticks recorded"
+        for x, refs in ticks[domain]:
+            kin = RobotKinematics(robot, x)
+            ours, _ = fast.compute(kin, refs)
+            theirs, _ = reference.compute(kin, refs)
+            assert ours.success and theirs.success
+            Jh_t = refs.holonomic.J.T
+            for a, b in ((ours.tau, theirs.tau), (ours.vdot, theirs.vdot),
+                         (Jh_t @ ours.forces, Jh_t @ theirs.forces)):
+                np.testing.assert_allclose(a, b, atol=1e-5 * (1.0 + np.abs(b).max()))
+
+
+def test_daqp_warm_start_changes_nothing_but_the_work():
+    """Starting from the previous tick's active set gives the cold start's solution."""
+    robot, contact, ticks = _recorded("g1_walk")
+    qp = TscQp(robot, contact)
+    warm = None
+    for x, refs in ticks[Domain.LEFT]:
+        kin = RobotKinematics(robot, x)
+        cold, _ = TscQp(robot, contact).compute(kin, refs)
+        hot, warm = qp.compute(kin, refs, warm)
+        assert warm is not None and warm[0] > 0
+        np.testing.assert_allclose(hot.tau, cold.tau, atol=1e-6 * (1.0 + np.abs(cold.tau).max()))
+
+
+def test_infeasible_qp_is_a_failure_not_an_exception():
+    """A friction limit no force can meet (b_f < 0 on the normal force): both solvers report failure."""
+    robot, contact, ticks = _recorded("g1_walk")
+    x, refs = ticks[Domain.DOUBLE][0]
+    impossible = type(refs)(**{**refs.__dict__, "b_f": refs.b_f - 1e3})
+    kin = RobotKinematics(robot, x)
+    for solver in ("daqp", "clarabel"):
+        solution, warm = TscQp(robot, contact, solver=solver).compute(kin, impossible)
+        assert not solution.success and warm is None
