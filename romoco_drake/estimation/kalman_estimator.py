@@ -16,6 +16,7 @@ from romoco_drake.estimation.kalman import (
     pack,
     unpack,
 )
+from romoco_drake.robots.kinematics import RobotKinematics, declare_kinematics_cache
 from romoco_drake.robots.model import RobotModel
 
 SIDES = ("left", "right")
@@ -63,10 +64,13 @@ class KalmanEstimator(LeafSystem):
         self._filter = ContactAidedKalman(params or KalmanParams())
         self._initial_base_position = (
             None if initial_base_position is None else np.array(initial_base_position, dtype=float))
-        self._context = robot.plant.CreateDefaultContext()
         nj = len(robot.joint_names)
         self.joint_state_input = self.DeclareVectorInputPort("joint_state", 2 * nj)
         self.imu_input = self.DeclareVectorInputPort("imu", IMU_SIZE)
+        # The legs' kinematics at the measured joints and orientation, cached on those inputs.
+        self._legs = declare_kinematics_cache(
+            self, robot, lambda c: self.leg_state(self.joint_state_input.Eval(c), self.imu_input.Eval(c)),
+            {self.joint_state_input.ticket(), self.imu_input.ticket()})
         self.foot_contact_input = self.DeclareVectorInputPort("foot_contact", 2)
         q0 = robot.nominal.q
         nominal_js = np.concatenate([q0[robot.joint_q_index], np.zeros(nj)])
@@ -83,9 +87,11 @@ class KalmanEstimator(LeafSystem):
         """Foot reference points relative to the base and their velocities relative to the base,
         both in world axes (2×3 each, left then right): r = R_WB r_B(q_j) and
         v_rel = R_WB (ω_B × r_B + J_B(q_j) q̇_j)."""
-        ctx = self._set_kinematics(joint_state, imu)
+        return self._foot_kinematics(RobotKinematics(self._robot, self.leg_state(joint_state, imu)))
+
+    def _foot_kinematics(self, kin: RobotKinematics) -> tuple[np.ndarray, np.ndarray]:
+        ctx, v = kin.context, kin.v
         plant, world = self._robot.plant, self._robot.plant.world_frame()
-        v = plant.GetVelocities(ctx)
         r, v_rel = np.zeros((2, 3)), np.zeros((2, 3))
         for i, side in enumerate(SIDES):
             frame, point = self._robot.foot_frames[side], self._robot.feet[side].points.mean(axis=1)
@@ -95,9 +101,10 @@ class KalmanEstimator(LeafSystem):
             v_rel[i] = J @ v
         return r, v_rel
 
-    def _set_kinematics(self, joint_state: np.ndarray, imu: np.ndarray):
-        """The own plant context with the base at the world origin, at rest in translation."""
-        r, ctx = self._robot, self._context
+    def leg_state(self, joint_state: np.ndarray, imu: np.ndarray) -> np.ndarray:
+        """The plant state [q; v] of the measured legs with the base at the world origin, at rest
+        in translation (only the feet relative to the base are read from it)."""
+        r = self._robot
         nj = len(r.joint_names)
         R = _rotation(imu[:4])
         q, v = np.zeros(r.nq), np.zeros(r.nv)
@@ -105,14 +112,14 @@ class KalmanEstimator(LeafSystem):
         q[r.base_q_start:r.base_q_start + 4] = imu[:4] / np.linalg.norm(imu[:4])
         v[r.joint_v_index] = joint_state[nj:]
         v[r.base_v_start:r.base_v_start + 3] = R @ imu[4:7]
-        r.plant.SetPositionsAndVelocities(ctx, np.concatenate([q, v]))
-        return ctx
+        return np.concatenate([q, v])
 
     def _start(self, joint_state: np.ndarray, imu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        r_world, _ = self.foot_kinematics(joint_state, imu)
+        kin = RobotKinematics(self._robot, self.leg_state(joint_state, imu))
+        r_world, _ = self._foot_kinematics(kin)
         p_WB = self._initial_base_position
         if p_WB is None:
-            lowest = min(self._robot.sole_points_in_world(self._context, s)[2].min() for s in SIDES)
+            lowest = min(self._robot.sole_points_in_world(kin.context, s)[2].min() for s in SIDES)
             p_WB = np.array([0.0, 0.0, -lowest])
         return self._filter.initial(p_WB, r_world)
 
@@ -143,7 +150,7 @@ class KalmanEstimator(LeafSystem):
         w = self._filter.contact_confidence(contact_time)
         x, P = unpack(context.get_discrete_state(self._kf_index).value())
         x, P = self._filter.predict(x, P, R_WB, imu[7:10], w, self._period)
-        r_world, v_rel = self.foot_kinematics(js, imu)
+        r_world, v_rel = self._foot_kinematics(self._legs.Eval(context))
         x, P = self._filter.correct(x, P, r_world, v_rel, w)
         discrete_state.get_mutable_vector(self._kf_index).SetFromVector(pack(x, P))
         discrete_state.get_mutable_vector(self._contact_time_index).SetFromVector(contact_time)

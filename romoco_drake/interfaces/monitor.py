@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
+from romoco_drake.robots.kinematics import RobotKinematics, declare_kinematics_cache
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.robots.posture import base_fault
 
@@ -33,7 +34,6 @@ class FallMonitor(LeafSystem):
                  max_tilt: float = np.deg2rad(45.0), body_clearance: float = 0.02):
         super().__init__()
         self._robot = robot
-        self._context = robot.plant.CreateDefaultContext()
         self._nominal_height = robot.nominal.base_height
         self._height_fraction = height_fraction
         self._cos_max_tilt = np.cos(max_tilt)
@@ -45,19 +45,24 @@ class FallMonitor(LeafSystem):
             if plant.get_body(i).name() not in feet
         ]
         self.state_input = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
+        self._kinematics = declare_kinematics_cache(self, robot, self.state_input.Eval,
+                                                    {self.state_input.ticket()})
         h0 = self._nominal_height
         self._state_index = self.DeclareDiscreteState([0.0, np.nan, 0.0, h0, h0, h0])
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
 
     def check(self, x: np.ndarray) -> tuple[str, float]:
         """(fall reason or "", base height) for state ``x``."""
+        return self._check(RobotKinematics(self._robot, x))
+
+    def _check(self, kin: RobotKinematics) -> tuple[str, float]:
         r = self._robot
-        reason, height = base_fault(r, x, self._height_fraction * self._nominal_height, self._cos_max_tilt)
+        reason, height = base_fault(r, kin.x, self._height_fraction * self._nominal_height,
+                                    self._cos_max_tilt)
         if reason:
             return reason, height
-        r.plant.SetPositionsAndVelocities(self._context, x)
         for body in self._bodies:
-            if r.plant.EvalBodyPoseInWorld(self._context, body).translation()[2] < self._clearance:
+            if r.plant.EvalBodyPoseInWorld(kin.context, body).translation()[2] < self._clearance:
                 return "body_contact", height
         return "", height
 
@@ -65,7 +70,7 @@ class FallMonitor(LeafSystem):
         s = discrete_state.get_mutable_vector(self._state_index).get_mutable_value()
         if s[FELL]:  # the height range and last height stay those up to the fall
             return
-        reason, height = self.check(self.state_input.Eval(context))
+        reason, height = self._check(self._kinematics.Eval(context))
         s[LAST_HEIGHT] = height
         if np.isfinite(height):
             s[MIN_HEIGHT] = min(s[MIN_HEIGHT], height)

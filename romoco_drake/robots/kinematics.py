@@ -19,11 +19,12 @@ and J̇_CoM v = (C v)_t / m; its rotational part gives the angular momentum abou
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.tree import JacobianWrtVariable
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import CacheEntry, Context, LeafSystem, ValueProducer
 
 from romoco_drake.errors import RomocoError
 from romoco_drake.robots.model import RobotModel
@@ -179,6 +180,22 @@ class RobotKinematicsSystem(LeafSystem):
 
     def _calc(self, context, value) -> None:
         value.get_mutable_value().update(self.state_port.Eval(context))
+
+
+def declare_kinematics_cache(system: LeafSystem, robot: RobotModel, state_of: Callable[[Context], np.ndarray],
+                             prerequisites: set) -> CacheEntry:
+    """A cache entry of ``system`` holding a :class:`RobotKinematics` at ``state_of(context)``.
+
+    For systems that need the controller plant at a state of their own (the fall monitor on the
+    true state, the estimator on the measured legs): the plant context lives in the system's
+    context, recomputed only when the ``prerequisites`` (dependency tickets) change, instead of
+    in a Python attribute rewritten inside callbacks.
+    """
+    return system.DeclareCacheEntry(
+        f"{robot.name} controller-plant kinematics",
+        ValueProducer(allocate=lambda: AbstractValue.Make(RobotKinematics(robot)),
+                      calc=lambda context, value: value.get_mutable_value().update(state_of(context))),
+        prerequisites)
 
 
 def kinematics_model_value(robot: RobotModel) -> AbstractValue:

@@ -89,7 +89,6 @@ class RobotModel:
         self._add_model(self.plant)
         self._add_actuators(self.plant)
         self.plant.Finalize()
-        self._context = self.plant.CreateDefaultContext()
         self._read_structure()
 
     # ----------------------------------------------------------------- building
@@ -180,7 +179,7 @@ class RobotModel:
         self.B = plant.MakeActuationMatrix()
         self.q_lower = plant.GetPositionLowerLimits()
         self.q_upper = plant.GetPositionUpperLimits()
-        self.total_mass = plant.CalcTotalMass(self._context)
+        self.total_mass = plant.CalcTotalMass(plant.CreateDefaultContext())
         self.feet = {
             side: Foot(side, f.body, np.array(f.points, dtype=float).T,
                        np.array(f.up, dtype=float) / np.linalg.norm(f.up))
