@@ -60,4 +60,4 @@ class Domain(str, Enum):
 
     @property
     def single_support(self) -> bool:
-        return self in (Domain.LEFT, Domain.RIGHT)
+        return self is Domain.LEFT or self is Domain.RIGHT

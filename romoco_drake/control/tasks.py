@@ -108,7 +108,7 @@ class TaskStack:
         a = refs.active
         kp, kd, w = self._gains(refs.names, a)
         z = self._zeros
-        return Tasks(np.vstack([refs.J[a], self._J_locked]), np.concatenate([refs.Jdot_v[a], z]),
+        return Tasks(np.concatenate((refs.J[a], self._J_locked)), np.concatenate([refs.Jdot_v[a], z]),
                      np.concatenate([refs.error[a], q[self._locked_q] - self._locked_q0]),
                      np.concatenate([refs.ydot_des[a], z]), np.concatenate([refs.yddot_des[a], z]), kp, kd, w)
 

@@ -14,6 +14,7 @@ k_h damps constraint drift, since the controller plant's contacts are only held 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -53,19 +54,19 @@ class QpSolution:
 
 @dataclass(frozen=True)
 class QpData:
-    """One tick's QP over x = [v̇; λ]: min ½ xᵀH x + gᵀx s.t. A_eq x = b_eq, lower ≤ A_in x ≤ upper.
+    """One tick's QP over x = [v̇; λ]: min ½ xᵀH x + gᵀx s.t. lower ≤ A x ≤ upper.
 
-    A_in's first nu rows are the torques τ = T x + c (bounded by the effort limits), the rest
-    the friction/CoP rows on the contact forces (lower bound −∞).
+    The first ``n_eq`` rows of A are equalities (lower = upper): the unactuated rows of the
+    dynamics, then the holonomic constraints. The next nu rows are the torques τ = T x + c
+    within the effort limits, the rest the friction/CoP rows on the contact forces (lower −∞).
     """
 
     H: np.ndarray
     g: np.ndarray
-    A_eq: np.ndarray
-    b_eq: np.ndarray
-    A_in: np.ndarray
+    A: np.ndarray
     lower: np.ndarray
     upper: np.ndarray
+    n_eq: int
     T: np.ndarray
     c: np.ndarray
 
@@ -93,9 +94,10 @@ class _ClarabelProgram:
             self.options.SetOption(ClarabelSolver.id(), name, value)
 
     def solve(self, qp: QpData, warm_start: np.ndarray | None) -> tuple[np.ndarray | None, np.ndarray | None]:
+        e = qp.n_eq
         self.cost.evaluator().UpdateCoefficients(qp.H, qp.g)
-        self.equality.evaluator().UpdateCoefficients(qp.A_eq, qp.b_eq)
-        self.inequality.evaluator().UpdateCoefficients(qp.A_in, qp.lower, qp.upper)
+        self.equality.evaluator().UpdateCoefficients(qp.A[:e], qp.lower[:e])
+        self.inequality.evaluator().UpdateCoefficients(qp.A[e:], qp.lower[e:], qp.upper[e:])
         result = self.solver.Solve(self.prog, None, self.options)
         return (result.GetSolution(self.x) if result.is_success() else None), None
 
@@ -113,20 +115,20 @@ class _DaqpWorkspace:
     def __init__(self, n_eq: int, n_in: int):
         self.model = daqp.Model()
         self.ready = False
-        self.n_eq, self.n_in = n_eq, n_in
+        self.n_eq = n_eq
+        self.sense = np.zeros(n_eq + n_in, dtype=np.int32)
+        self.sense[:n_eq] = _DAQP_EQUALITY
 
     def solve(self, qp: QpData, warm_start: np.ndarray | None) -> tuple[np.ndarray | None, np.ndarray | None]:
-        A = np.vstack([qp.A_eq, qp.A_in])
-        upper = np.concatenate([qp.b_eq, np.minimum(qp.upper, _DAQP_INF)])
-        lower = np.concatenate([qp.b_eq, np.maximum(qp.lower, -_DAQP_INF)])
-        sense = np.zeros(self.n_eq + self.n_in, dtype=np.int32)
-        sense[:self.n_eq] = _DAQP_EQUALITY
+        upper = np.minimum(qp.upper, _DAQP_INF)
+        lower = np.maximum(qp.lower, -_DAQP_INF)
+        sense = self.sense.copy()
         if warm_start is not None:
             sense[self.n_eq:] = warm_start
         if self.ready:
-            self.model.update(H=qp.H, f=qp.g, A=A, bupper=upper, blower=lower, sense=sense)
+            self.model.update(H=qp.H, f=qp.g, A=qp.A, bupper=upper, blower=lower, sense=sense)
         else:
-            self.model.setup(qp.H, qp.g, A, upper, lower, sense)
+            self.model.setup(qp.H, qp.g, qp.A, upper, lower, sense)
             self.ready = True
         x, _, flag, info = self.model.solve()
         if flag < 0:
@@ -171,9 +173,10 @@ class TscQp:
         # (forces are O(100 N)) not to trade task accuracy for smaller forces.
         eps_vdot, self._eps_tau, self._eps_force = regularization
         self._eps_vdot = np.full(robot.nv, eps_vdot)
+        self._sqrt_eps_tau = math.sqrt(self._eps_tau)
         self.w_pivot = pivot_moment_weight
         self._workspaces: dict[Domain, _ClarabelProgram | _DaqpWorkspace] = {}
-        self._rank_h: dict[Domain, int] = {}  # J_h's rank per domain: the QP's shape, fixed at first use
+        self._diagonals: dict[int, np.ndarray] = {}
         self._tasks = TaskStack(robot, gains)
         B = robot.B
         selection = np.all((B == 0.0) | (B == 1.0)) and np.all(B.sum(axis=0) == 1.0)
@@ -187,56 +190,84 @@ class TscQp:
         self.warm_start_size = 1 + robot.nu + friction_rows
 
     def formulate(self, kin: RobotKinematics, refs: TaskReferences) -> QpData:
-        """The QP of this tick (module docstring), from the shared evaluation and the references."""
-        nv, v = self.robot.nv, kin.v
+        """The QP of this tick (module docstring), from the shared evaluation and the references.
+
+        The cost is assembled as Σ ‖S x − s‖² + ε‖x‖² with one row block per term (tasks √w J,
+        torques √ε_τ T, the pivot moment or the load split), so H = 2 SᵀS + 2 diag(ε) and
+        g = −2 Sᵀs come from one product.
+        """
+        r = self.robot
+        nv, nu, v = r.nv, r.nu, kin.v
         tasks = self._tasks.evaluate(refs, kin.q)
-        J, bias, w = tasks.J, tasks.Jdot_v, tasks.weight
+        J = tasks.J
         a_cmd = tasks.yddot_des - tasks.kp * tasks.error - tasks.kd * (J @ v - tasks.ydot_des)
         M, C = kin.M, kin.C
         Jh = refs.holonomic.J
-        n = nv + Jh.shape[0]
-        # τ = T x + c with x = [v̇; λ].
-        T = np.hstack([M[self._rows_a], -Jh.T[self._rows_a]])
-        c = C[self._rows_a]
-        WJ = J * w[:, None]
-        H = (2.0 * self._eps_tau) * (T.T @ T)
-        H[:nv, :nv] += 2.0 * J.T @ WJ
-        H[np.diag_indices(n)] += 2.0 * np.concatenate([self._eps_vdot, np.full(n - nv, self._eps_force)])
-        g = (2.0 * self._eps_tau) * (T.T @ c)
-        g[:nv] += 2.0 * WJ.T @ (bias - a_cmd)
-        n_f = refs.num_contact_forces
+        n_h, n_f = Jh.shape[0], refs.num_contact_forces
+        n = nv + n_h
         f = slice(nv, nv + n_f)
-        if refs.domain.single_support and self.w_pivot > 0.0:
-            G = pivot_moment_map(self.contact, kin.context, refs)
-            H[f, f] += 2.0 * self.w_pivot * G.T @ G
-        if refs.domain == Domain.DOUBLE and self.w_split > 0.0:
-            H[f, f] += 2.0 * self.w_split * np.eye(n_f)
-            g[f] -= 2.0 * self.w_split * load_split_target(self.robot, kin, refs, a_cmd)
+        # τ = T x + c with x = [v̇; λ].
+        T = np.empty((nu, n))
+        T[:, :nv] = M[self._rows_a]
+        T[:, nv:] = -Jh[:, self._rows_a].T
+        c = C[self._rows_a]
+        k = len(a_cmd)
+        single = refs.domain.single_support and self.w_pivot > 0.0
+        split = refs.domain == Domain.DOUBLE and self.w_split > 0.0
+        extra = 2 if single else n_f if split else 0
+        S = np.zeros((k + nu + extra, n))
+        s = np.empty(k + nu + extra)
+        sw = np.sqrt(tasks.weight)
+        S[:k, :nv] = J * sw[:, None]
+        s[:k] = sw * (a_cmd - tasks.Jdot_v)
+        S[k:k + nu] = self._sqrt_eps_tau * T
+        s[k:k + nu] = -self._sqrt_eps_tau * c
+        if single:
+            S[k + nu:, f] = math.sqrt(self.w_pivot) * pivot_moment_map(self.contact, kin.context, refs)
+            s[k + nu:] = 0.0
+        elif split:
+            root = math.sqrt(self.w_split)
+            S[k + nu:, f] = root * np.eye(n_f)
+            s[k + nu:] = root * load_split_target(r, kin, refs, a_cmd)
+        H = 2.0 * (S.T @ S)
+        H.flat[::n + 1] += self._regularization(n)
+        g = -2.0 * (S.T @ s)
+        # Rows: unactuated dynamics and the holonomic constraints on an orthonormal basis U of
+        # J_h's column space (equalities), torques, friction. The multi-point contact rows are
+        # redundant (rank 6 of 9 for a plane foot): an interior-point solver reads the round-off
+        # in redundant rows as infeasibility, an active-set one as a singular KKT system.
         u = self._rows_u
-        A_eq, b_eq = [np.hstack([M[u], -Jh.T[u]])], [-C[u]]
-        if Jh.shape[0]:
-            # The multi-point contact rows are redundant (rank 6 of 9 for a plane foot); an
-            # interior-point solver reads the round-off in redundant rows as infeasibility, and an
-            # active-set one a singular KKT system, so the constraint is imposed on an
-            # orthonormal basis of J_h's row space instead.
-            # The basis: eigenvectors of J_h J_hᵀ with the largest eigenvalues (a small symmetric
-            # eigenproblem, several times cheaper than J_h's SVD; the rank is the domain's).
-            if refs.domain not in self._rank_h:
-                self._rank_h[refs.domain] = int(np.linalg.matrix_rank(Jh))
-            U = np.linalg.eigh(Jh @ Jh.T)[1][:, -self._rank_h[refs.domain]:]
-            A_eq.append(np.hstack([U.T @ Jh, np.zeros((U.shape[1], n - nv))]))
-            b_eq.append(U.T @ (-refs.holonomic.Jdot_v - self.k_h * (Jh @ v)))
+        U = self.contact.row_space_basis(kin.context, refs.domain) if n_h else np.zeros((0, 0))
+        n_u, rank = len(u), U.shape[1]
+        n_eq = n_u + rank
         n_fric = refs.A_f.shape[0]
-        A_in = np.zeros((self.robot.nu + n_fric, n))
-        A_in[:self.robot.nu] = T
-        A_in[self.robot.nu:, f] = refs.A_f
-        lower = np.concatenate([-self._effort - c, np.full(n_fric, -np.inf)])
-        upper = np.concatenate([self._effort - c, refs.b_f])
-        return QpData(H, g, np.vstack(A_eq), np.concatenate(b_eq), A_in, lower, upper, T, c)
+        A = np.zeros((n_eq + nu + n_fric, n))
+        lower = np.empty(len(A))
+        A[:n_u, :nv] = M[u]
+        A[:n_u, nv:] = -Jh[:, u].T
+        lower[:n_u] = -C[u]
+        if rank:
+            A[n_u:n_eq, :nv] = U.T @ Jh
+            lower[n_u:n_eq] = U.T @ (-refs.holonomic.Jdot_v - self.k_h * (Jh @ v))
+        A[n_eq:n_eq + nu] = T
+        A[n_eq + nu:, f] = refs.A_f
+        upper = lower.copy()
+        lower[n_eq:n_eq + nu] = -self._effort - c
+        upper[n_eq:n_eq + nu] = self._effort - c
+        lower[n_eq + nu:] = -np.inf
+        upper[n_eq + nu:] = refs.b_f
+        return QpData(H, g, A, lower, upper, n_eq, T, c)
+
+    def _regularization(self, n: int) -> np.ndarray:
+        """2 diag(ε) of an n-variable QP: ε_v on v̇, ε_λ on the multipliers (made once per size)."""
+        if n not in self._diagonals:
+            self._diagonals[n] = np.concatenate([2.0 * self._eps_vdot,
+                                                 np.full(n - self.robot.nv, 2.0 * self._eps_force)])
+        return self._diagonals[n]
 
     def _workspace(self, domain: Domain, qp: QpData):
         if domain not in self._workspaces:
-            n_eq, n_in = len(qp.b_eq), len(qp.lower)
+            n_eq, n_in = qp.n_eq, len(qp.lower) - qp.n_eq
             self._workspaces[domain] = (_DaqpWorkspace(n_eq, n_in) if self.solver_name == "daqp"
                                         else _ClarabelProgram(len(qp.g), n_eq, n_in, self.clarabel_tolerance))
         return self._workspaces[domain]
@@ -246,7 +277,7 @@ class TscQp:
         """The QP's solution, and the warm start for the next tick (``warm_start_size`` numbers)."""
         qp = self.formulate(kin, refs)
         tag = _DOMAIN_CODES[refs.domain]
-        n_in = len(qp.lower)
+        n_in = len(qp.lower) - qp.n_eq
         flags = (warm_start[1:1 + n_in].astype(np.int32)
                  if warm_start is not None and len(warm_start) and warm_start[0] == tag else None)
         x, active = self._workspace(refs.domain, qp).solve(qp, flags)

@@ -130,6 +130,7 @@ class FootContact:
     wrench_map: np.ndarray  # 6 × 3k
     A_S: np.ndarray
     b: np.ndarray
+    motion_basis: np.ndarray  # 3k × r orthonormal: the point velocities a rigid foot can have, in S
 
 
 class ContactModel:
@@ -185,7 +186,12 @@ class ContactModel:
             A_w = np.vstack([limits, cop, torsion])
             b = np.zeros(len(A_w))
             b[0] = -min_normal_force
-            arrays = (np.asfortranarray(points_F), R_FS, p_FS, G, A_w @ G, b)
+            # Point velocities of a rigid foot are Gᵀ [v; ω] (Gᵀ maps a twist to the points as G
+            # maps point forces to a wrench): its range is the foot's rows' column space, rank 6
+            # of 3k for a plane foot, 5 for a line (no spin about the line moves its points).
+            U, sv, _ = np.linalg.svd(G.T, full_matrices=False)
+            motion = U[:, sv > 1e-9 * sv[0]]
+            arrays = (np.asfortranarray(points_F), R_FS, p_FS, G, A_w @ G, b, motion)
             for a in arrays:
                 a.setflags(write=False)
             self.feet[side] = FootContact(side, robot.foot_frames[side], names, *arrays)
@@ -195,6 +201,16 @@ class ContactModel:
             for domain, sides in DOMAINS.items()
         }
         self._world = plant.world_frame()
+        m = robot.num_internal_constraints()
+        self._eye_internal = np.eye(m)
+        self._basis_shapes = {domain: (sum(self.feet[s].motion_basis.shape[0] for s in sides) + m,
+                                       sum(self.feet[s].motion_basis.shape[1] for s in sides) + m)
+                              for domain, sides in DOMAINS.items()}
+        if m:
+            context = plant.CreateDefaultContext()
+            plant.SetPositions(context, robot.nominal.q)
+            if np.linalg.matrix_rank(robot.internal_constraints(context).J) < m:
+                raise RomocoError(f"{robot.yaml_path}: the internal constraints are not independent")
 
     def constraints(self, context, domain: str) -> Output:
         """h (as ``y``), J_h and J̇_h·v of ``domain`` on the controller-plant ``context``."""
@@ -217,6 +233,27 @@ class ContactModel:
         if not J:
             return Output(self._names[domain], np.zeros(0), np.zeros((0, self.robot.nv)), np.zeros(0))
         return Output(self._names[domain], np.concatenate(h), np.vstack(J), np.concatenate(Jdv))
+
+    def row_space_basis(self, context, domain: str) -> np.ndarray:
+        """U (n_h × r) orthonormal, spanning the column space of ``domain``'s J_h (rank r).
+
+        The multi-point contact rows are redundant (rank 6 of 9 for a plane foot); controllers
+        impose J_h v̇ = b as Uᵀ J_h v̇ = Uᵀ b, which is the same constraint without redundant
+        rows. Built from each foot's constant :attr:`FootContact.motion_basis` turned into world
+        (U = blockdiag(R_WS) U_S), not by factorising J_h each tick. The internal loops' rows
+        are independent (checked once per robot) and kept as they are.
+        """
+        rows, cols = self._basis_shapes[domain]
+        U = np.zeros((rows, cols))
+        i = j = 0
+        for side in DOMAINS[domain]:
+            U_S = self.feet[side].motion_basis
+            k, r = U_S.shape[0] // 3, U_S.shape[1]
+            R_WS = self.sole_rotation(context, side)
+            U[i:i + 3 * k, j:j + r] = (R_WS @ U_S.reshape(k, 3, r)).reshape(3 * k, r)
+            i, j = i + 3 * k, j + r
+        U[i:, j:] = self._eye_internal
+        return U
 
     def sole_rotation(self, context, side: str) -> np.ndarray:
         """R_WS of the foot's sole frame at ``context``."""
