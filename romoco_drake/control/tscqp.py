@@ -7,9 +7,13 @@
           |τ| ≤ τ_max                             (torque limits)
 
 with ÿ^cmd = ÿ_d − K_p (y − y_d) − K_d (ẏ − ẏ_d). The small ε terms keep the QP strictly convex
-(it has a unique solution even when tasks are redundant). One program per contact domain
-is built once; each tick only its coefficients change and Clarabel solves it. The small
-k_h damps constraint drift, since the controller plant's contacts are only held in velocity.
+(it has a unique solution even when tasks are redundant). The small k_h damps constraint
+drift, since the controller plant's contacts are only held in velocity.
+
+One solver workspace per contact domain is built once; each tick :meth:`TscQp.formulate`
+fills the coefficients from the tick's shared controller-plant evaluation and the solver
+named by ``controller.solver`` solves them: DAQP (default, :class:`_DaqpWorkspace`) or the
+reference, ``MathematicalProgram`` with Drake's Clarabel (:class:`_ClarabelProgram`).
 """
 
 from __future__ import annotations

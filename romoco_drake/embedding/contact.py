@@ -232,7 +232,9 @@ class ContactModel:
             Jdv.append(internal.Jdot_v)
         if not J:
             return Output(self._names[domain], np.zeros(0), np.zeros((0, self.robot.nv)), np.zeros(0))
-        return Output(self._names[domain], np.concatenate(h), np.vstack(J), np.concatenate(Jdv))
+        if len(J) == 1:
+            return Output(self._names[domain], h[0], J[0], Jdv[0])
+        return Output(self._names[domain], np.concatenate(h), np.concatenate(J), np.concatenate(Jdv))
 
     def row_space_basis(self, context, domain: str) -> np.ndarray:
         """U (n_h × r) orthonormal, spanning the column space of ``domain``'s J_h (rank r).

@@ -42,6 +42,7 @@ STAND_SETTLE_S = 1.0
 # Each step moves the CoM height from its lift-off value to the plan's over this time (a
 # standing robot often carries its CoM higher than its walking height).
 HEIGHT_BLEND_S = 0.6
+_SINGLE_SUPPORT = {"left": Domain.LEFT, "right": Domain.RIGHT}
 # On line feet the controllers keep the centre of pressure this far inside the toe-heel
 # segment (m): at an end the other point carries nothing and the foot starts to roll off.
 COP_MARGIN = 0.01
@@ -206,7 +207,7 @@ class EmbeddingCore:
             i = self._swing_index
             y_d[i:i + 3], yd_d[i:i + 3], ydd_d[i:i + 3] = swing.trajectory.evaluate(tau)
         active = self._walking_active["single" if single else "double"]
-        domain = Domain(stance) if single else Domain.DOUBLE
+        domain = _SINGLE_SUPPORT[stance] if single else Domain.DOUBLE
         return self._pack(Mode.WALKING, domain, stance, out, y_d, yd_d, ydd_d, active, kin)
 
     def _standing(self, kin: RobotKinematics, stand: StandState | None, t: float) -> TaskReferences:

@@ -71,6 +71,9 @@ class SensorConfig:
             raise ValueError(f"seed must be >= 0, got {self.seed}")
 
 
+_NOISE_BLOCK = 1024  # noise samples drawn per generator
+
+
 def specific_force(R_WB: np.ndarray, a_WBo_W: np.ndarray, g_W: np.ndarray) -> np.ndarray:
     """Accelerometer reading f_B = R_WBᵀ (a_WBo − g_W): +g up when at rest, 0 in free fall."""
     return R_WB.T @ (a_WBo_W - g_W)
@@ -91,14 +94,17 @@ def foot_normal_forces(contacts: ContactResults, foot_bodies: Sequence[BodyIndex
     A point pair's force on body B is f_Bc_W and its normal n̂_BA_W points from B into A, so
     −f_Bc_W·n̂_BA_W is the pair's compressive normal force, the same for either body.
     """
-    forces = np.zeros(len(foot_bodies))
+    forces = [0.0] * len(foot_bodies)
+    feet = [int(body) for body in foot_bodies]
     for i in range(contacts.num_point_pair_contacts()):
         info = contacts.point_pair_contact_info(i)
-        normal_force = -info.contact_force() @ info.point_pair().nhat_BA_W
-        for k, body in enumerate(foot_bodies):
-            if body in (info.bodyA_index(), info.bodyB_index()):
+        pair = (int(info.bodyA_index()), int(info.bodyB_index()))
+        hits = [k for k, body in enumerate(feet) if body in pair]
+        if hits:
+            normal_force = -float(info.contact_force() @ info.point_pair().nhat_BA_W)
+            for k in hits:
                 forces[k] += normal_force
-    return forces
+    return np.array(forces)
 
 
 class SimulatedSensors(LeafSystem):
@@ -124,9 +130,11 @@ class SimulatedSensors(LeafSystem):
     Outputs are computed from the plant's current (discrete) state, without a hold of their
     own: a held sample is one plant step older than the state the controller would otherwise
     see, and that step of delay made Cassie fall while standing. The noise is a sampled process
-    all the same: sample k = ⌊t·rate_hz⌋ draws its vectors from ``default_rng([seed, port, k])``,
-    so a measurement depends only on the state, the seed and k (deterministic, replayable, and
-    constant within a sample period however often it is evaluated). IMU biases come from
+    all the same: sample k = ⌊t·rate_hz⌋ takes row k mod 1024 of the block of draws
+    ``default_rng([seed, port, k // 1024])`` makes, so a measurement depends only on the state,
+    the seed and k (deterministic, replayable, and constant within a sample period however
+    often it is evaluated); one generator per 1024 samples, because making one costs more than
+    the rest of a sensor update. IMU biases come from
     ``default_rng([seed, 1])`` when not given and are constant for the run (``gyro_bias``,
     ``accel_bias``).
     """
@@ -193,11 +201,13 @@ class SimulatedSensors(LeafSystem):
     def _noise(self, context, port: int, std: np.ndarray) -> np.ndarray:
         """Sample ⌊t·rate⌋'s noise for ``port`` (0 encoders, 2 IMU): a function of (seed, port, k)."""
         k = math.floor(context.get_time() * self._rate + 1e-6)
-        return std * self._standard_normal(port, k, std.size)
+        block, row = divmod(k, _NOISE_BLOCK)
+        return std * self._standard_normal(port, block, std.size)[row]
 
     @functools.lru_cache(maxsize=8)  # noqa: B019 (a memo of a pure function; outputs are re-evaluated per state)
-    def _standard_normal(self, port: int, k: int, size: int) -> np.ndarray:
-        draw = np.random.default_rng([self._seed, port, k]).standard_normal(size)
+    def _standard_normal(self, port: int, block: int, size: int) -> np.ndarray:
+        """The draws of samples block·1024 … block·1024 + 1023 (one row each) for ``port``."""
+        draw = np.random.default_rng([self._seed, port, block]).standard_normal((_NOISE_BLOCK, size))
         draw.flags.writeable = False
         return draw
 
