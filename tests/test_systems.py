@@ -81,12 +81,13 @@ def test_kinematics_of_a_non_finite_state_is_flagged_and_nan():
 def test_closed_loop_evaluates_the_kinematics_once_per_tick(monkeypatch):
     """State machine, ROM state, embedding and controller share one evaluation per controller tick."""
     calls = []
-    original = kinematics_module.RobotKinematics.update
+    original = kinematics_module.RobotKinematicsSystem._calc
 
-    def counting(self, x):
+    def counting(self, context, value):
         calls.append(1)
-        original(self, x)
+        original(self, context, value)
 
+    monkeypatch.setattr(kinematics_module.RobotKinematicsSystem, "_calc", counting)
     scenario = load_scenario("g1_walk")
     built = build_diagram(scenario)
     simulator = Simulator(built.diagram)
@@ -94,7 +95,7 @@ def test_closed_loop_evaluates_the_kinematics_once_per_tick(monkeypatch):
     plant = built.plant_station.GetSubsystemByName("plant")
     plant.SetPositions(plant.GetMyMutableContextFromRoot(root), initial_positions(built.robot, scenario))
     simulator.AdvanceTo(1.5)  # standing, then walking from 1 s
-    monkeypatch.setattr(kinematics_module.RobotKinematics, "update", counting)
+    calls.clear()
     ticks = 100
     simulator.AdvanceTo(1.5 + ticks / scenario.controller.rate_hz)
     assert built.walking.state_machine.schedule(built.walking.state_machine.GetMyContextFromRoot(root)).mode \
