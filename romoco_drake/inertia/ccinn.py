@@ -1,0 +1,162 @@
+"""Centroidal composite inertia network (CCINN, VI-MPC paper §III-B): inference in numpy.
+
+The network maps both feet's poses relative to the base to the six independent entries of
+the centroidal inertia I_G expressed in the base frame:
+
+    input  (12) = [p_BL (3), rpy_BL (3), p_BR (3), rpy_BR (3)]
+    output (6)  = [Ixx, Ixy, Ixz, Iyy, Iyz, Izz] of I_G in the base frame (kg·m²)
+
+p_BF is the foot frame's origin (the ankle) in the base frame (m); rpy_BF are Drake's
+roll-pitch-yaw angles of R_BF (R = Rz(yaw)·Ry(pitch)·Rx(roll), rad). The arms, neck and
+any joint that is not a leg joint are at the nominal pose. The network is 12 → 64 → 64 → 6
+with tanh hidden layers on standardised inputs and outputs; its weights, normalisation and
+training metadata ship as ``models/<robot>/ccinn.npz`` and ``ccinn.yaml``
+(:mod:`romoco_drake.inertia.train` makes them). Nothing here imports pydrake or scikit-learn.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from romoco_drake.errors import RomocoError
+
+MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
+FEATURES = [f"{side}_{name}" for side in ("l", "r") for name in ("x", "y", "z", "roll", "pitch", "yaw")]
+OUTPUTS = ["Ixx", "Ixy", "Ixz", "Iyy", "Iyz", "Izz"]
+# Row, column of each output entry in the symmetric 3×3 tensor (both triangles).
+_ROWS = np.array([0, 0, 0, 1, 1, 2, 1, 2, 2])
+_COLS = np.array([0, 1, 2, 1, 2, 2, 0, 0, 1])
+_SOURCE = np.array([0, 1, 2, 3, 4, 5, 1, 2, 4])
+
+
+def model_paths(robot: str) -> tuple[Path, Path]:
+    """(weights .npz, metadata .yaml) shipped for ``robot``."""
+    return MODELS_DIR / robot / "ccinn.npz", MODELS_DIR / robot / "ccinn.yaml"
+
+
+def rpy_from_rotations(R: np.ndarray) -> np.ndarray:
+    """Roll-pitch-yaw (…, 3) of rotation matrices (…, 3, 3), Drake's RollPitchYaw convention."""
+    roll = np.arctan2(R[..., 2, 1], R[..., 2, 2])
+    pitch = np.arctan2(-R[..., 2, 0], np.hypot(R[..., 0, 0], R[..., 1, 0]))
+    yaw = np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    return np.stack([roll, pitch, yaw], axis=-1)
+
+
+def foot_features(X_BL: np.ndarray, X_BR: np.ndarray) -> np.ndarray:
+    """Network inputs (N, 12) from the feet's poses in the base frame, each (N, 4, 4)."""
+    X = np.stack([X_BL, X_BR], axis=1)  # (N, 2, 4, 4)
+    rpy = rpy_from_rotations(X[..., :3, :3])
+    return np.concatenate([X[..., :3, 3], rpy], axis=-1).reshape(len(X_BL), 12)
+
+
+def inertia_from_entries(y: np.ndarray) -> np.ndarray:
+    """Symmetric tensors (N, 3, 3) from entries (N, 6) ordered as ``OUTPUTS``."""
+    out = np.empty((len(y), 3, 3))
+    out[:, _ROWS, _COLS] = y[:, _SOURCE]
+    return out
+
+
+def entries_from_inertia(inertia: np.ndarray) -> np.ndarray:
+    """The six independent entries (…, 6) of symmetric tensors (…, 3, 3), ordered as ``OUTPUTS``."""
+    return inertia[..., _ROWS[:6], _COLS[:6]]
+
+
+def as_transforms(X) -> np.ndarray:
+    """(N, 4, 4) homogeneous matrices from an array or a sequence of pydrake RigidTransforms."""
+    if isinstance(X, np.ndarray):
+        return X
+    return np.stack([x.GetAsMatrix4() for x in X])
+
+
+class Ccinn:
+    """The network's weights and normalisation; evaluates I_G in the base frame."""
+
+    def __init__(self, weights: Sequence[np.ndarray], biases: Sequence[np.ndarray], x_mean: np.ndarray,
+                 x_scale: np.ndarray, y_mean: np.ndarray, y_scale: np.ndarray):
+        self.weights = [np.asarray(w, dtype=float) for w in weights]
+        self.biases = [np.asarray(b, dtype=float) for b in biases]
+        self.x_mean, self.x_scale = np.asarray(x_mean, float), np.asarray(x_scale, float)
+        self.y_mean, self.y_scale = np.asarray(y_mean, float), np.asarray(y_scale, float)
+
+    def predict_entries(self, features: np.ndarray) -> np.ndarray:
+        """I_G entries (N, 6) in the base frame from inputs (N, 12)."""
+        h = (features - self.x_mean) / self.x_scale
+        for W, b in zip(self.weights[:-1], self.biases[:-1], strict=True):
+            h = np.tanh(h @ W + b)
+        return (h @ self.weights[-1] + self.biases[-1]) * self.y_scale + self.y_mean
+
+    def predict_base(self, X_BL: np.ndarray, X_BR: np.ndarray) -> np.ndarray:
+        """I_G (N, 3, 3) in the base frame from the feet's poses in the base frame, each (N, 4, 4)."""
+        return inertia_from_entries(self.predict_entries(foot_features(X_BL, X_BR)))
+
+    def save(self, path: Path) -> None:
+        arrays = {f"W{i}": w for i, w in enumerate(self.weights)} | {f"b{i}": b for i, b in enumerate(self.biases)}
+        np.savez(path, x_mean=self.x_mean, x_scale=self.x_scale, y_mean=self.y_mean, y_scale=self.y_scale,
+                 **arrays)
+
+
+def load_ccinn_file(path: Path) -> Ccinn:
+    """Loads and checks a weights file (layers W0, b0, W1, … chaining 12 → … → 6).
+
+    A missing or unreadable file, a missing array, a wrong shape or a non-finite entry raises a
+    one-line RomocoError naming the file.
+    """
+    path = Path(path)
+    try:
+        with np.load(path) as f:
+            data = {k: f[k] for k in f.files}
+    except FileNotFoundError:
+        raise RomocoError(f"{path}: CCINN weights not found (make them with `romoco train-inertia`)") from None
+    except (OSError, ValueError) as e:
+        raise RomocoError(f"{path}: cannot read CCINN weights ({e})") from None
+    n_layers = sum(1 for k in data if k[:1] == "W" and k[1:].isdigit())
+    if n_layers < 2:
+        raise RomocoError(f"{path}: CCINN weights need layers W0, W1, ... (found {n_layers})")
+    expected = {"x_mean": (12,), "x_scale": (12,), "y_mean": (6,), "y_scale": (6,)}
+    width = 12
+    for i in range(n_layers):
+        W = data.get(f"W{i}")
+        out = 6 if i == n_layers - 1 or W is None or W.ndim != 2 else W.shape[1]
+        expected[f"W{i}"], expected[f"b{i}"] = (width, out), (out,)
+        width = out
+    for key, shape in expected.items():
+        if key not in data:
+            raise RomocoError(f"{path}: CCINN weights lack '{key}'")
+        if data[key].shape != shape:
+            raise RomocoError(f"{path}: CCINN '{key}' has shape {data[key].shape}, expected {shape}")
+        if not np.all(np.isfinite(data[key])):
+            raise RomocoError(f"{path}: CCINN '{key}' has non-finite entries")
+    return Ccinn([data[f"W{i}"] for i in range(n_layers)], [data[f"b{i}"] for i in range(n_layers)],
+                 data["x_mean"], data["x_scale"], data["y_mean"], data["y_scale"])
+
+
+@functools.cache
+def load_ccinn(robot: str = "draco") -> Ccinn:
+    """The network shipped for ``robot`` (cached)."""
+    return load_ccinn_file(model_paths(robot)[0])
+
+
+def predict_inertia_horizon(X_WB, X_WL, X_WR, model: Ccinn | None = None) -> np.ndarray:
+    """Centroidal inertia (N, 3, 3), expressed in world, at each MPC knot.
+
+    ``X_WB``, ``X_WL``, ``X_WR``: the base's and the left and right foot frames' reference poses
+    in world at the N knots (swing feet included), each (N, 4, 4) or a sequence of N
+    RigidTransforms. I_G,W = R_WB · I_G,B(X_BL, X_BR) · R_WBᵀ, so the tensor does not depend on
+    whether the MPC's orientation state is the base's or the WBO frame's. ``model`` defaults to
+    the shipped DRACO network.
+    """
+    model = load_ccinn() if model is None else model
+    X_WB, X_WL, X_WR = as_transforms(X_WB), as_transforms(X_WL), as_transforms(X_WR)
+    R_BW = X_WB[:, :3, :3].transpose(0, 2, 1)
+    p_WB = X_WB[:, :3, 3:]
+    X_BF = np.empty((len(X_WB), 2, 4, 4))
+    X_BF[:, :, 3] = (0.0, 0.0, 0.0, 1.0)
+    for k, X_WF in enumerate((X_WL, X_WR)):
+        X_BF[:, k, :3, :3] = R_BW @ X_WF[:, :3, :3]
+        X_BF[:, k, :3, 3:] = R_BW @ (X_WF[:, :3, 3:] - p_WB)
+    I_B = model.predict_base(X_BF[:, 0], X_BF[:, 1])
+    return X_WB[:, :3, :3] @ I_B @ R_BW
