@@ -94,7 +94,8 @@ class Ccinn:
         return inertia_from_entries(self.predict_entries(foot_features(X_BL, X_BR)))
 
     def save(self, path: Path) -> None:
-        arrays = {f"W{i}": w for i, w in enumerate(self.weights)} | {f"b{i}": b for i, b in enumerate(self.biases)}
+        arrays = {f"W{i}": w for i, w in enumerate(self.weights)}
+        arrays |= {f"b{i}": b for i, b in enumerate(self.biases)}
         np.savez(path, x_mean=self.x_mean, x_scale=self.x_scale, y_mean=self.y_mean, y_scale=self.y_scale,
                  **arrays)
 
@@ -110,7 +111,8 @@ def load_ccinn_file(path: Path) -> Ccinn:
         with np.load(path) as f:
             data = {k: f[k] for k in f.files}
     except FileNotFoundError:
-        raise RomocoError(f"{path}: CCINN weights not found (make them with `romoco train-inertia`)") from None
+        raise RomocoError(f"{path}: CCINN weights not found (make them with `romoco train-inertia`)"
+                          ) from None
     except (OSError, ValueError) as e:
         raise RomocoError(f"{path}: cannot read CCINN weights ({e})") from None
     n_layers = sum(1 for k in data if k[:1] == "W" and k[1:].isdigit())

@@ -75,7 +75,8 @@ class SelfCollision:
 
     def __init__(self, plant: MultibodyPlant, robot_name: str):
         if robot_name not in MODELS:
-            raise RomocoError(f"no self-collision stand-in for robot '{robot_name}' (known: {', '.join(MODELS)})")
+            raise RomocoError(f"no self-collision stand-in for robot '{robot_name}' "
+                              f"(known: {', '.join(MODELS)})")
         capsules, pairs = MODELS[robot_name]
         self._plant = plant
         self._bodies = [plant.GetBodyByName(c.body) for c in capsules.values()]

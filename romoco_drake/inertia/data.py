@@ -48,9 +48,12 @@ class MotionBounds:
     y = −width (width in ``step_width``; mirrored for a right stance foot). ``turn``: the
     feet at ±width/2 beside the base, each yawed by up to ``turn_yaw`` from the stance foot.
     Both: feet yawed by up to ``foot_yaw`` and tilted (roll, pitch) by up to ``foot_tilt``;
-    the base above the middle of the feet within ``base_dx``, ``base_dy``, its sole-to-base
-    height in ``base_height``, roll up to ``base_roll``, pitch in ``base_pitch``, yaw within
-    ``base_yaw`` of the feet's mean yaw; swing apex in ``swing_height`` above the straight line.
+    the base above the middle of the feet within ``base_dx``, ``base_dy`` and its yaw within
+    ``base_yaw`` of the feet's mean yaw; its sole-to-base height (in ``base_height``), roll (up
+    to ``base_roll``) and pitch (in ``base_pitch``) are drawn per step and change by at most
+    ``base_height_change``, ``base_tilt_change`` within it, as a walking controller holds the
+    torso's height and attitude through a step. Swing apex in ``swing_height`` above the
+    straight line between the swing foot's end poses.
     """
 
     step_x: tuple[float, float] = (-0.35, 0.35)
@@ -63,6 +66,8 @@ class MotionBounds:
     base_height: tuple[float, float] = (0.72, 0.86)
     base_roll: float = 0.08
     base_pitch: tuple[float, float] = (-0.1, 0.15)
+    base_tilt_change: float = 0.05
+    base_height_change: float = 0.03
     base_yaw: float = 0.15
     swing_height: tuple[float, float] = (0.0, 0.15)
 
@@ -127,12 +132,13 @@ def sample_motion(rng: np.random.Generator, kind: str, bounds: MotionBounds, poi
     swing_rpy = np.array([tilt() + [swing_yaw[0]], tilt() + [swing_yaw[1]]])
     stance_rpy = np.array(tilt() + [stance_yaw])
     base_p, base_rpy = np.zeros((2, 3)), np.zeros((2, 3))
+    height0, tilt0 = u(*B.base_height), np.array([u(-B.base_roll, B.base_roll), u(*B.base_pitch)])
     for k in range(2):
         mid = 0.5 * (stance_p[:2] + swing_p[k, :2])
         base_p[k] = [mid[0] + u(-B.base_dx, B.base_dx), mid[1] + u(-B.base_dy, B.base_dy),
-                     u(*B.base_height)]
-        base_rpy[k] = [u(-B.base_roll, B.base_roll), u(*B.base_pitch),
-                       0.5 * (stance_yaw + swing_yaw[k]) + u(-B.base_yaw, B.base_yaw)]
+                     height0 + k * u(-B.base_height_change, B.base_height_change)]
+        base_rpy[k, :2] = tilt0 + k * rng.uniform(-B.base_tilt_change, B.base_tilt_change, 2)
+        base_rpy[k, 2] = 0.5 * (stance_yaw + swing_yaw[k]) + u(-B.base_yaw, B.base_yaw)
     apex = u(*B.swing_height)
     s = np.linspace(0.0, 1.0, points)[:, None]
     swing_path = (1 - s) * swing_p[0] + s * swing_p[1]
@@ -294,7 +300,8 @@ def load_dataset(path: Path) -> dict:
             raise RomocoError(f"{path}: inertia dataset lacks '{key}'")
     for key, width in need.items():
         if data[key].ndim != 2 or data[key].shape[1] != width:
-            raise RomocoError(f"{path}: inertia dataset '{key}' has shape {data[key].shape}, expected (N, {width})")
+            raise RomocoError(f"{path}: inertia dataset '{key}' has shape {data[key].shape}, "
+                              f"expected (N, {width})")
     data["meta"] = json.loads(str(data["meta"]))
     return data
 
