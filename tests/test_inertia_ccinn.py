@@ -56,8 +56,8 @@ def test_horizon_is_world_frame_inertia_of_the_ik_pose():
     rng = np.random.default_rng(5)
     motion = sample_motion(rng, "step", MotionBounds(), 10, 0.0878)
     X_BL, X_BR = motion.feet_in_base()
-    X_WB = np.array([RigidTransform(RollPitchYaw(rng.uniform(-0.3, 0.3, 3)), rng.uniform(-1, 1, 3)).GetAsMatrix4()
-                     for _ in range(10)])
+    X_WB = np.array([RigidTransform(RollPitchYaw(rng.uniform(-0.3, 0.3, 3)), rng.uniform(-1, 1, 3))
+                     .GetAsMatrix4() for _ in range(10)])
     X_WL, X_WR = X_WB @ X_BL, X_WB @ X_BR
     pred = predict_inertia_horizon(X_WB, X_WL, X_WR)
     as_rigid = [[RigidTransform(X) for X in Xs] for Xs in (X_WB, X_WL, X_WR)]
@@ -103,7 +103,8 @@ def test_missing_or_malformed_weights_name_the_file(tmp_path):
     good = dict(np.load(model_paths("draco")[0]))
     bad = tmp_path / "bad.npz"
     np.savez(bad, **(good | {"W1": np.zeros((64, 32))}))
-    with pytest.raises(RomocoError, match=f"^{bad}: CCINN 'W1' has shape \\(64, 32\\), expected \\(64, 64\\)$"):
+    shape_msg = "CCINN 'W1' has shape \\(64, 32\\), expected \\(64, 64\\)$"
+    with pytest.raises(RomocoError, match=f"^{bad}: {shape_msg}"):
         load_ccinn_file(bad)
     np.savez(bad, **{k: v for k, v in good.items() if k != "y_scale"})
     with pytest.raises(RomocoError, match=f"^{bad}: CCINN weights lack 'y_scale'$"):

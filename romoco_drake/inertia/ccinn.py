@@ -120,9 +120,9 @@ def load_ccinn_file(path: Path) -> Ccinn:
         raise RomocoError(f"{path}: CCINN weights need layers W0, W1, ... (found {n_layers})")
     expected = {"x_mean": (12,), "x_scale": (12,), "y_mean": (6,), "y_scale": (6,)}
     width = 12
-    for i in range(n_layers):
-        W = data.get(f"W{i}")
-        out = 6 if i == n_layers - 1 or W is None or W.ndim != 2 else W.shape[1]
+    for i in range(n_layers):  # hidden widths as the biases say
+        b = data.get(f"b{i}")
+        out = 6 if i == n_layers - 1 or b is None or b.ndim != 1 else b.shape[0]
         expected[f"W{i}"], expected[f"b{i}"] = (width, out), (out,)
         width = out
     for key, shape in expected.items():
