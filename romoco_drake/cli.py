@@ -308,7 +308,7 @@ def _default_inertia_data(robot: str) -> Path:
 def _cmd_bench_inertia(args) -> int:
     from romoco_drake.bench.inertia import bench_inertia
 
-    s = bench_inertia(args.robot, knots=args.knots, repeats=args.repeats)
+    s = bench_inertia(args.robot, knots=args.knots, repeats=args.repeats, weights=args.weights)
     if args.json:
         print(json.dumps(s))
     else:
@@ -410,6 +410,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot", default="draco")
     p.add_argument("--knots", type=int, default=10)
     p.add_argument("--repeats", type=int, default=5000)
+    p.add_argument("--weights", type=Path, metavar="FILE.npz", help="default: models/ROBOT/ccinn.npz")
     p.add_argument("--json", action="store_true", help="print the result as JSON (last line)")
     p.set_defaults(func=_cmd_bench_inertia)
     return parser

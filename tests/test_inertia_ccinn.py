@@ -114,8 +114,13 @@ def test_missing_or_malformed_weights_name_the_file(tmp_path):
         load_ccinn_file(bad)
 
 
-def test_cli_reports_missing_weights(capsys):
+def test_cli_reports_missing_or_malformed_weights(tmp_path, capsys):
     assert main(["bench", "inertia", "--robot", "g1", "--repeats", "5"]) == 2
-    err = capsys.readouterr().err.strip()
+    err = capsys.readouterr().err
     assert err.startswith("romoco: error: ") and "models/g1/ccinn.npz: CCINN weights not found" in err
-    assert "\n" not in err
+    assert err.count("\n") == 1
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, **(dict(np.load(model_paths("draco")[0])) | {"x_mean": np.zeros(11)}))
+    assert main(["bench", "inertia", "--weights", str(bad), "--repeats", "5"]) == 2
+    expected = f"romoco: error: {bad}: CCINN 'x_mean' has shape (11,), expected (12,)\n"
+    assert capsys.readouterr().err == expected

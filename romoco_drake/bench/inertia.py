@@ -3,23 +3,27 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 
 from romoco_drake.bench.rom import percentiles
-from romoco_drake.inertia.ccinn import load_ccinn, predict_inertia_horizon
+from romoco_drake.inertia.ccinn import load_ccinn, load_ccinn_file, predict_inertia_horizon
 from romoco_drake.inertia.data import MotionBounds, sample_motion
 from romoco_drake.inertia.system import InertiaHorizon, KnotPoses
 
 
-def bench_inertia(robot: str = "draco", knots: int = 10, repeats: int = 5000, seed: int = 0) -> dict:
+def bench_inertia(robot: str = "draco", knots: int = 10, repeats: int = 5000, seed: int = 0,
+                  weights: Path | None = None) -> dict:
     """Times ``predict_inertia_horizon`` for ``knots`` knots of sampled step motions (µs).
+
+    ``weights``: a CCINN file to time instead of the one shipped for ``robot``.
 
     Reference in the same run: one bare numpy op of the same size class, the (knots × 64) by
     (64 × 64) product with tanh of the network's middle layer. Also times the
     :class:`InertiaHorizon` system's output evaluation.
     """
-    model = load_ccinn(robot)
+    model = load_ccinn(robot) if weights is None else load_ccinn_file(weights)
     rng = np.random.default_rng(seed)
     motions = [sample_motion(rng, kind, MotionBounds(), knots, 0.0878) for kind in ("step", "turn") * 8]
     h = rng.standard_normal((knots, 64))

@@ -184,6 +184,9 @@ def predict_inertia_horizon(X_WB, X_WL, X_WR, model: Ccinn | None = None) -> np.
     RigidTransforms. I_G,W = R_WB · I_G,B(X_BL, X_BR) · R_WBᵀ, so the tensor does not depend on
     whether the MPC's orientation state is the base's or the WBO frame's. ``model`` defaults to
     the shipped DRACO network.
+
+    Note for the MPC: the paper's eq. 8, I ω̇ = Σ r × f + τ, drops İ ω from d/dt(I ω) (its
+    eq. 3), which is no longer zero once I varies; İ between knots is a difference of these.
     """
     model = load_ccinn() if model is None else model
     X_WB, X_WL, X_WR = as_transforms(X_WB), as_transforms(X_WL), as_transforms(X_WR)

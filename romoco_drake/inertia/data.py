@@ -235,7 +235,7 @@ def generate_dataset(robot_name: str, samples: int, seed: int = 0, points_per_mo
     rng = np.random.default_rng(seed)
     bar = _Progress(samples, f"inertia-data {robot_name}") if progress else None
     rows: dict[str, list] = {k: [] for k in ("features", "inertia", "q_legs", "motion", "knot")}
-    tried = kept_total = n_motions = 0
+    tried = kept_total = n_motions = ik_failures = collisions = 0
     start = time.monotonic()
     while kept_total < samples:
         motion = sample_motion(rng, MOTIONS[int(rng.integers(len(MOTIONS)))], bounds, points_per_motion,
@@ -248,9 +248,11 @@ def generate_dataset(robot_name: str, samples: int, seed: int = 0, points_per_mo
             tried += 1
             q = ik.solve(X_BL[k], X_BR[k], q_guess)
             if q is None:
+                ik_failures += 1
                 continue
             robot.plant.SetPositions(context, q)
             if collision.in_collision(context):
+                collisions += 1
                 continue
             q_guess = q
             kept[k] = True
@@ -269,7 +271,8 @@ def generate_dataset(robot_name: str, samples: int, seed: int = 0, points_per_mo
             bar.update(kept_total)
     meta = {
         "robot": robot_name, "samples": samples, "seed": seed, "points_per_motion": points_per_motion,
-        "motions": n_motions, "knots_tried": tried, "kept_fraction": round(kept_total / tried, 4),
+        "motions": n_motions, "knots_tried": tried, "ik_failures": ik_failures, "collisions": collisions,
+        "kept_fraction": round(kept_total / tried, 4),
         "wall_s": round(time.monotonic() - start, 1), "bounds": dataclasses.asdict(bounds),
         "leg_joints": ik.leg_joints,
     }
