@@ -7,12 +7,12 @@ from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from romoco_drake.cli import main
 from romoco_drake.errors import RomocoError
 from romoco_drake.inertia.ccinn import (
+    ccinn_path,
     entries_from_inertia,
     foot_features,
     inertia_from_entries,
     load_ccinn,
     load_ccinn_file,
-    model_paths,
     predict_inertia_horizon,
     rpy_from_rotations,
 )
@@ -44,7 +44,7 @@ def test_shipped_weights_match_fresh_ik_samples():
     data = generate_dataset("draco", 60, seed=20240)
     model = load_ccinn("draco")
     I_true = inertia_from_entries(data["inertia"])
-    I_pred = inertia_from_entries(model.predict_entries(data["features"]))
+    I_pred = model.predict_tensors(data["features"])
     err = np.linalg.norm(I_pred - I_true, axis=(1, 2)) / np.linalg.norm(I_true, axis=(1, 2))
     assert np.median(err) < 0.03 and err.max() < 0.10, err
 
@@ -100,7 +100,7 @@ def test_missing_or_malformed_weights_name_the_file(tmp_path):
     with pytest.raises(RomocoError, match=f"^{missing}: CCINN weights not found") as e:
         load_ccinn_file(missing)
     assert "\n" not in str(e.value)
-    good = dict(np.load(model_paths("draco")[0]))
+    good = dict(np.load(ccinn_path("draco")))
     bad = tmp_path / "bad.npz"
     np.savez(bad, **(good | {"W1": np.zeros((64, 32))}))
     shape_msg = "CCINN 'W1' has shape \\(64, 32\\), expected \\(64, 64\\)$"
@@ -120,7 +120,7 @@ def test_cli_reports_missing_or_malformed_weights(tmp_path, capsys):
     assert err.startswith("romoco: error: ") and "models/g1/ccinn.npz: CCINN weights not found" in err
     assert err.count("\n") == 1
     bad = tmp_path / "bad.npz"
-    np.savez(bad, **(dict(np.load(model_paths("draco")[0])) | {"x_mean": np.zeros(11)}))
+    np.savez(bad, **(dict(np.load(ccinn_path("draco"))) | {"x_mean": np.zeros(11)}))
     assert main(["bench", "inertia", "--weights", str(bad), "--repeats", "5"]) == 2
     expected = f"romoco: error: {bad}: CCINN 'x_mean' has shape (11,), expected (12,)\n"
     assert capsys.readouterr().err == expected

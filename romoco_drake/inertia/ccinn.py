@@ -36,9 +36,9 @@ _TO_TENSOR = np.zeros((6, 9))
 _TO_TENSOR[_SOURCE, 3 * _ROWS + _COLS] = 1.0
 
 
-def model_paths(robot: str) -> tuple[Path, Path]:
-    """(weights .npz, metadata .yaml) shipped for ``robot``."""
-    return MODELS_DIR / robot / "ccinn.npz", MODELS_DIR / robot / "ccinn.yaml"
+def ccinn_path(robot: str) -> Path:
+    """The weights file shipped for ``robot`` (its metadata is ``ccinn.yaml`` beside it)."""
+    return MODELS_DIR / robot / "ccinn.npz"
 
 
 def rpy_from_rotations(R: np.ndarray) -> np.ndarray:
@@ -119,14 +119,6 @@ class Ccinn:
         y += b
         return y.astype(float).reshape(len(features), 3, 3)
 
-    def predict_entries(self, features: np.ndarray) -> np.ndarray:
-        """I_G entries (N, 6) in the base frame from inputs (N, 12)."""
-        return entries_from_inertia(self.predict_tensors(features))
-
-    def predict_base(self, X_BL: np.ndarray, X_BR: np.ndarray) -> np.ndarray:
-        """I_G (N, 3, 3) in the base frame from the feet's poses in the base frame, each (N, 4, 4)."""
-        return self.predict_tensors(foot_features(X_BL, X_BR))
-
     def save(self, path: Path) -> None:
         arrays = {f"W{i}": w for i, w in enumerate(self.weights)}
         arrays |= {f"b{i}": b for i, b in enumerate(self.biases)}
@@ -173,7 +165,7 @@ def load_ccinn_file(path: Path) -> Ccinn:
 @functools.cache
 def load_ccinn(robot: str = "draco") -> Ccinn:
     """The network shipped for ``robot`` (cached)."""
-    return load_ccinn_file(model_paths(robot)[0])
+    return load_ccinn_file(ccinn_path(robot))
 
 
 def predict_inertia_horizon(X_WB, X_WL, X_WR, model: Ccinn | None = None) -> np.ndarray:

@@ -20,7 +20,6 @@ import dataclasses
 import json
 import sys
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -162,7 +161,6 @@ class LegIk:
 
     def __init__(self, robot: RobotModel):
         plant = self.plant = robot.plant
-        self.robot = robot
         self.q_fixed = robot.nominal.q.copy()
         self.q_fixed[robot.base_q_start:robot.base_q_start + 7] = [1, 0, 0, 0, 0, 0, 0]
         self.leg_joints = [n for n in robot.joint_names if n.startswith(LEG_PREFIXES)]
@@ -216,13 +214,11 @@ class _Progress:
 
 
 def generate_dataset(robot_name: str, samples: int, seed: int = 0, points_per_motion: int = 20,
-                     bounds: MotionBounds | None = None, progress: bool = False,
-                     on_motion: Callable[[Motion, np.ndarray], None] | None = None) -> dict:
+                     bounds: MotionBounds | None = None, progress: bool = False) -> dict:
     """IK samples until ``samples`` knots are kept; returns the dataset's arrays and metadata.
 
     Arrays: ``features`` (N, 12), ``inertia`` (N, 6), ``q_legs`` (N, n_legs) in the order of
     ``leg_joints``, ``motion`` (N,) the motion's index and ``knot`` (N,) the knot's index in it.
-    ``on_motion(motion, kept)`` sees each motion and its kept-knot mask.
     """
     if samples < 1:
         raise RomocoError(f"--samples must be positive (got {samples})")
@@ -242,7 +238,6 @@ def generate_dataset(robot_name: str, samples: int, seed: int = 0, points_per_mo
                                ankle_height)
         X_BL, X_BR = motion.feet_in_base()
         features = foot_features(X_BL, X_BR)
-        kept = np.zeros(points_per_motion, dtype=bool)
         q_guess = ik.q_fixed
         for k in range(points_per_motion):
             tried += 1
@@ -255,7 +250,6 @@ def generate_dataset(robot_name: str, samples: int, seed: int = 0, points_per_mo
                 collisions += 1
                 continue
             q_guess = q
-            kept[k] = True
             rows["features"].append(features[k])
             rows["inertia"].append(entries_from_inertia(centroidal_inertia(robot.plant, context)))
             rows["q_legs"].append(q[ik.leg_q_index])
@@ -264,8 +258,6 @@ def generate_dataset(robot_name: str, samples: int, seed: int = 0, points_per_mo
             kept_total += 1
             if kept_total == samples:
                 break
-        if on_motion is not None:
-            on_motion(motion, kept)
         n_motions += 1
         if bar is not None:
             bar.update(kept_total)

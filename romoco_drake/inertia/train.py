@@ -45,7 +45,7 @@ def validation_motions(motion: np.ndarray, seed: int) -> np.ndarray:
 def relative_errors(model: Ccinn, features: np.ndarray, inertia: np.ndarray) -> np.ndarray:
     """|I_pred − I|_F / |I|_F per sample; ``inertia`` as entries (N, 6)."""
     true = inertia_from_entries(inertia)
-    pred = inertia_from_entries(model.predict_entries(features))
+    pred = model.predict_tensors(features)
     return np.linalg.norm(pred - true, axis=(1, 2)) / np.linalg.norm(true, axis=(1, 2))
 
 

@@ -37,13 +37,13 @@ def relative_wbo_velocities(robot: RobotModel, q: np.ndarray, v_joints: np.ndarr
     return out
 
 
-def rate_samples(robot: RobotModel, data: dict, rows: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
-    """(x, ẋ, ω_rel) at the dataset's interior knots (optionally only where ``rows`` is True)."""
+def rate_samples(robot: RobotModel, data: dict, rows: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(x, ẋ, ω_rel) at the dataset's interior knots among ``rows`` (a mask over the dataset)."""
     ik = LegIk(robot)
     q_legs, motion, knot = data["q_legs"], data["motion"], data["knot"]
     prev_ok = np.r_[False, (motion[1:] == motion[:-1]) & (knot[1:] == knot[:-1] + 1)]
     next_ok = np.r_[prev_ok[1:], False]
-    inner = np.flatnonzero(prev_ok & next_ok & (True if rows is None else rows))
+    inner = np.flatnonzero(prev_ok & next_ok & rows)
     qdot = 0.5 * (q_legs[inner + 1] - q_legs[inner - 1])
     q = base_fixed_positions(ik, q_legs[inner])
     omega = relative_wbo_velocities(robot, q, qdot, ik.leg_joints)
@@ -69,7 +69,7 @@ def fit_theta(x: np.ndarray, xdot: np.ndarray, omega: np.ndarray, x_ref: np.ndar
 
 
 def rate_residual(wbo: Wbo, x: np.ndarray, xdot: np.ndarray, omega: np.ndarray) -> float:
-    """|ε̇_map − ½(ηI − [ε]×)ω_rel| summed over samples, relative to |½(ηI − [ε]×)ω_rel|."""
+    """‖ε̇_map − ½(ηI − [ε]×)ω_rel‖ / ‖½(ηI − [ε]×)ω_rel‖, norms over all samples' entries."""
     Q = wbo.quaternion(x)
     eta, eps = Q[:, :1], Q[:, 1:]
     target = 0.5 * (eta * omega + np.cross(omega, eps))
