@@ -1,5 +1,7 @@
 """WBO map: derivatives, the quaternion rate relation, and the shipped Θ against ω_WBO."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from pydrake.math import RotationMatrix
@@ -18,6 +20,7 @@ from romoco_drake.inertia.wbo import (
 )
 from romoco_drake.inertia.wbo_fit import (
     integrate_along_motion,
+    integrate_wbo,
     rate_residual,
     relative_wbo_velocities,
     solve_motion,
@@ -116,6 +119,24 @@ def test_shipped_map_agrees_with_integrated_wbo(held_out_motions):
     excursion = np.array([r["max_excursion_deg"] for r in results])
     assert np.median(excursion) > 3.0  # the check is not vacuous
     assert np.median(error) < 1.5 and error.max() < 3.0, (error, excursion)
+
+
+def test_wbo_is_path_dependent():
+    """Why no map Θλ(q) tracks every motion: two swings between the same end poses (apex 0 and
+    0.15 m) end with different integrated WBO orientations, while any map gives both the same."""
+    robot = load_robot("draco")
+    ik = LegIk(robot)
+    ends, q_ends = [], []
+    for apex in (0.0, 0.15):
+        bounds = dataclasses.replace(MotionBounds(), swing_height=(apex, apex))
+        motion = sample_motion(np.random.default_rng(11), "step", bounds, 30, 0.0878)
+        q = solve_motion(ik, motion)
+        assert q is not None
+        ends.append(integrate_wbo(robot, motion, q, np.eye(3))[-1])
+        q_ends.append(q[-1])
+    assert np.allclose(q_ends[0], q_ends[1], atol=5e-3)  # same end pose (to the IK tolerance)
+    gap = np.degrees(np.arccos(np.clip((np.trace(ends[0].T @ ends[1]) - 1) / 2, -1, 1)))
+    assert gap > 0.3, gap
 
 
 def test_bad_wbo_file_names_it(tmp_path):

@@ -28,6 +28,11 @@ The map gives ε̇ = Θ (∂λ/∂x) ẋ. ω_rel depends on the joint positions 
 rigid motion of the whole robot has ω_WBO = ω_B), so the fit matches the two along sampled
 joint motions. Linearising at ε = 0 gives the least-squares problem Θ (∂λ/∂x) ẋ ≈ ½ ω_rel;
 the fit then re-solves with η and ε taken from the previous Θ until it settles.
+
+No map of q matches ω_WBO exactly: the centroidal angular momentum is not integrable (the
+same swing at two apex heights ends with WBO orientations about 0.8° apart, see
+tests/test_inertia_wbo.py), so Θ is a least-squares compromise; ``models/<robot>/wbo.yaml``
+records how far integrated ω_WBO and the map drift apart on held-out motions.
 """
 
 from __future__ import annotations

@@ -94,23 +94,19 @@ def _angle(R: np.ndarray) -> float:
     return float(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
 
 
-def integrate_along_motion(robot: RobotModel, wbo: Wbo, motion: Motion, q: np.ndarray) -> dict:
-    """Integrates ω_WBO along a motion in world and compares with the fitted Q_B ⊗ Q_B,WBO.
+def integrate_wbo(robot: RobotModel, motion: Motion, q: np.ndarray, R_start: np.ndarray) -> np.ndarray:
+    """R_W,WBO (P, 3, 3) at the knots, integrating ω_WBO in world from ``R_start`` at the first.
 
     ``q`` (P, nq): IK positions at the motion's knots (base at the origin); the base then moves
     as ``motion.X_WB``. Each interval takes ω_WBO at its midpoint (base rotation half way,
     joints averaged; base angular velocity from the relative rotation, joint velocities from
-    differences) and steps R_W,WBO by the exponential map. Returns the largest angle (deg)
-    between the integrated and the fitted WBO orientation, and the largest excursion (deg) of
-    each from the base.
+    differences) and steps R_W,WBO by the exponential map.
     """
     plant = robot.plant
     context = plant.CreateDefaultContext()
     b = robot.base_q_start
     R_WB, p_WB = motion.X_WB[:, :3, :3], motion.X_WB[:, :3, 3]
-    R_fit = R_WB @ wbo.rotation(wbo.coordinates(q))
-    R = R_fit[0]
-    error = excursion_int = 0.0
+    out = [R_start]
     for k in range(len(q) - 1):
         w_B = _log(R_WB[k + 1] @ R_WB[k].T)
         q_mid = 0.5 * (q[k] + q[k + 1])
@@ -121,12 +117,26 @@ def integrate_along_motion(robot: RobotModel, wbo: Wbo, motion: Motion, q: np.nd
         v[robot.joint_v_index] = (q[k + 1] - q[k])[robot.joint_q_index]
         plant.SetPositions(context, q_mid)
         plant.SetVelocities(context, v)
-        R = _exp(wbo_angular_velocity(plant, context)) @ R
-        error = max(error, _angle(R.T @ R_fit[k + 1]))
-        excursion_int = max(excursion_int, _angle(R_WB[k + 1].T @ R))
-    excursion_fit = max(_angle(R_WB[k].T @ R_fit[k]) for k in range(len(q)))
-    return {"max_error_deg": float(np.degrees(error)), "max_excursion_deg": float(np.degrees(excursion_int)),
-            "max_fitted_excursion_deg": float(np.degrees(excursion_fit))}
+        out.append(_exp(wbo_angular_velocity(plant, context)) @ out[-1])
+    return np.array(out)
+
+
+def integrate_along_motion(robot: RobotModel, wbo: Wbo, motion: Motion, q: np.ndarray) -> dict:
+    """Integrates ω_WBO along a motion (:func:`integrate_wbo`) from the fitted Q_B ⊗ Q_B,WBO at its start.
+
+    Returns the largest angle (deg) between the integrated and the fitted WBO orientation, and
+    the largest excursion (deg) of each from the base.
+    """
+    R_WB = motion.X_WB[:, :3, :3]
+    R_fit = R_WB @ wbo.rotation(wbo.coordinates(q))
+    R_int = integrate_wbo(robot, motion, q, R_fit[0])
+    return {"max_error_deg": _max_angle_deg(R_int, R_fit), "max_excursion_deg": _max_angle_deg(R_WB, R_int),
+            "max_fitted_excursion_deg": _max_angle_deg(R_WB, R_fit)}
+
+
+def _max_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
+    """Largest rotation angle (deg) between paired rotations."""
+    return float(np.degrees(max(_angle(A.T @ B) for A, B in zip(R_a, R_b, strict=True))))
 
 
 def solve_motion(ik: LegIk, motion: Motion) -> np.ndarray | None:
