@@ -286,8 +286,8 @@ def _cmd_inertia_data(args) -> int:
 
 
 def _cmd_train_inertia(args) -> int:
-    from romoco_drake.inertia.ccinn import MODELS_DIR
     from romoco_drake.inertia.train import train_inertia
+    from romoco_drake.robots.source import MODELS_DIR
 
     out = args.out or MODELS_DIR / args.robot
     s = train_inertia(args.robot, args.data or _default_inertia_data(args.robot), out, seed=args.seed)

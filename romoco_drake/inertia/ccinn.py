@@ -11,7 +11,8 @@ roll-pitch-yaw angles of R_BF (R = Rz(yaw)·Ry(pitch)·Rx(roll), rad). The arms,
 any joint that is not a leg joint are at the nominal pose. The network is 12 → 64 → 64 → 6
 with tanh hidden layers on standardised inputs and outputs; its weights, normalisation and
 training metadata ship as ``models/<robot>/ccinn.npz`` and ``ccinn.yaml``
-(:mod:`romoco_drake.inertia.train` makes them). Nothing here imports pydrake or scikit-learn.
+(:mod:`romoco_drake.inertia.train` makes them). The computation is plain numpy; nothing here
+imports scikit-learn.
 """
 
 from __future__ import annotations
@@ -23,8 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from romoco_drake.errors import RomocoError
+from romoco_drake.robots.source import MODELS_DIR
 
-MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
 FEATURES = [f"{side}_{name}" for side in ("l", "r") for name in ("x", "y", "z", "roll", "pitch", "yaw")]
 OUTPUTS = ["Ixx", "Ixy", "Ixz", "Iyy", "Iyz", "Izz"]
 # Row, column of each output entry in the symmetric 3×3 tensor (both triangles).

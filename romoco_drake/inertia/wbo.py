@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from romoco_drake.errors import RomocoError
-from romoco_drake.inertia.ccinn import MODELS_DIR
+from romoco_drake.robots.source import MODELS_DIR
 
 WBO_JOINTS = [f"{s}_{j}" for s in ("l", "r") for j in ("hip_ie", "hip_aa", "hip_fe", "knee_fe_jd")]
 
