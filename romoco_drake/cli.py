@@ -276,6 +276,52 @@ def _print_rom_summary(s: dict) -> None:
         print(f"  wrote {path}")
 
 
+def _cmd_inertia_data(args) -> int:
+    from romoco_drake.inertia.data import generate_dataset, save_dataset
+
+    out = args.out or _default_inertia_data(args.robot)
+    data = generate_dataset(args.robot, args.samples, seed=args.seed, points_per_motion=args.points,
+                            progress=True)
+    save_dataset(out, data)
+    m = data["meta"]
+    print(f"wrote {out}: {m['samples']} samples from {m['motions']} motions "
+          f"({m['kept_fraction']:.1%} of {m['knots_tried']} IK knots kept) in {m['wall_s']} s")
+    return 0
+
+
+def _cmd_train_inertia(args) -> int:
+    from romoco_drake.inertia.train import train_inertia
+    from romoco_drake.robots.source import MODELS_DIR
+
+    out = args.out or MODELS_DIR / args.robot
+    s = train_inertia(args.robot, args.data or _default_inertia_data(args.robot), out, seed=args.seed)
+    v, w = s["ccinn"]["validation"], s["wbo_integration"]
+    print(f"wrote {out}/ccinn.npz, ccinn.yaml, wbo.npz, wbo.yaml in {s['wall_s']} s")
+    print(f"  CCINN held-out relative Frobenius error: median {v['median']:.2%}, p99 {v['p99']:.2%} "
+          f"({v['samples']} samples)")
+    print(f"  WBO: integrated vs fitted max error {w['max_error_deg']['max']:.2f} deg (median "
+          f"{w['max_error_deg']['median']:.2f}) over {w['motions']} held-out motions; max excursion "
+          f"{w['max_excursion_deg']['max']:.1f} deg")
+    return 0
+
+
+def _default_inertia_data(robot: str) -> Path:
+    return Path("out") / f"inertia_{robot}.npz"
+
+
+def _cmd_bench_inertia(args) -> int:
+    from romoco_drake.bench.inertia import bench_inertia
+
+    s = bench_inertia(args.robot, knots=args.knots, repeats=args.repeats, weights=args.weights)
+    if args.json:
+        print(json.dumps(s))
+    else:
+        print(f"CCINN on {s['robot']}, {s['knots']} knots, {s['repeats']} repeats:")
+        for key in ("predict_us", "system_eval_us", "reference_tanh_matmul_us"):
+            print(f"  {key[:-3]:26s} {s[key]['median']:8.2f} us median  {s[key]['p99']:8.2f} us p99")
+    return 0
+
+
 def make_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="romoco", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -352,6 +398,27 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--ticks", type=int, default=500)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_bench_tick)
+    # Centroidal inertia (issue 14): data generation, training and the horizon benchmark.
+    p = sub.add_parser("inertia-data", help="IK samples of foot poses -> centroidal inertia (CCINN data)")
+    p.add_argument("robot")
+    p.add_argument("--samples", type=int, default=20000, help="kept IK samples")
+    p.add_argument("--out", type=Path, metavar="FILE.npz", help="default: out/inertia_ROBOT.npz")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--points", type=int, default=20, help="knots per sampled motion")
+    p.set_defaults(func=_cmd_inertia_data)
+    p = sub.add_parser("train-inertia", help="train the CCINN and fit the WBO map from inertia-data")
+    p.add_argument("robot")
+    p.add_argument("--data", type=Path, metavar="FILE.npz", help="default: out/inertia_ROBOT.npz")
+    p.add_argument("--out", type=Path, metavar="DIR", help="default: models/ROBOT/")
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=_cmd_train_inertia)
+    p = bench.add_parser("inertia", help="CCINN inertia prediction over an MPC horizon")
+    p.add_argument("--robot", default="draco")
+    p.add_argument("--knots", type=int, default=10)
+    p.add_argument("--repeats", type=int, default=5000)
+    p.add_argument("--weights", type=Path, metavar="FILE.npz", help="default: models/ROBOT/ccinn.npz")
+    p.add_argument("--json", action="store_true", help="print the result as JSON (last line)")
+    p.set_defaults(func=_cmd_bench_inertia)
     return parser
 
 
