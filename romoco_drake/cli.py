@@ -270,8 +270,10 @@ def _print_rom_summary(s: dict) -> None:
         conv = r["steps_to_converge"] if r["steps_to_converge"] is not None else "never"
         print(f"  {r['start_s']:5.1f}-{r['end_s']:5.1f} s   ({r['command'][0]:4.2f}, {r['command'][1]:4.2f})"
               f"         {conv!s:>5}           {r['settled_rms_error']!s:>9}       {r['rms_error']!s:>8}")
-    print(f"  planner update {cost['update_us']['median']} us median ({cost['update_us']['p99']} p99); "
-          f"system output eval {cost['system_eval_us']['median']} us median")
+    update, output, ref = cost["update_us"], cost["system_eval_us"], cost["reference_us"]
+    print(f"  planner update {update['median']} us median ({update['p99']} p99); system output eval "
+          f"{output['median']} us median ({output['p99']} p99); reference (1000 multiply-adds) "
+          f"{ref['median']} us median")
     for path in s.get("plots", []):
         print(f"  wrote {path}")
 

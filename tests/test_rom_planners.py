@@ -9,11 +9,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from romoco_drake.errors import RomocoError
+from romoco_drake.rom import alip, alip_general
+from romoco_drake.rom.dcm import dcm_s2s
 from romoco_drake.rom.hlip import hlip_s2s
 from romoco_drake.rom.lip import ds_flow, omega, ss_flow
 from romoco_drake.rom.mlip import mlip_domain_flow, mlip_s2s
 from romoco_drake.rom.planners import PLANNERS, PlannerParams, make_planner
-from romoco_drake.rom.s2s import converging_gain
+from romoco_drake.rom.s2s import converging_gain, lqr_gain
 from romoco_drake.rom.types import SIDES, PlannerOutput, WalkCommand, other_side
 
 ATOL = 1e-9
@@ -240,3 +242,116 @@ def test_make_planner_rejects_bad_params(name):
     for params, what in bad:
         with pytest.raises(RomocoError, match=what):
             make_planner(name, params)
+
+
+# --- Every law against a plain numpy reference of the same plan ---------------------------------
+
+
+def _reference_orbits(s2s, ux: float, uy: float, uy_next: float) -> np.ndarray:
+    """(2, n): the period-1 sagittal and period-2 lateral orbit states for these steps."""
+    return np.array([s2s.period1_orbit(ux), s2s.period2_orbit(uy, uy_next)[0]])
+
+
+def _reference_plan(name: str, params: PlannerParams, state, side: str, t_in: float,
+                    cmd: WalkCommand) -> dict:
+    """The plan computed with matrices straight from the ROM modules (PlannerOutput's fields)."""
+    m, g = params.mass, params.g
+    t_ds = 0.0 if name in ("alip", "alip_general") else params.t_ds
+    t_left = min(max(cmd.step_time - t_in, 0.0), cmd.step_time)
+    planes = np.array([[state[0], state[4] / m], [state[1], -state[3] / m]])
+    valid = cmd.problem() is None and bool(np.isfinite(planes).all()) and math.isfinite(t_in)
+    if not valid and cmd.problem() is not None:
+        cmd = WalkCommand()
+    z0, t = cmd.com_height, cmd.step_time
+    pre = planes @ ss_flow(t_left, z0, g).T if valid else np.full((2, 2), np.nan)
+    w = -cmd.step_width if side == "left" else cmd.step_width
+    ux, uy, uy_next = cmd.vx * (t + t_ds), w + cmd.vy * (t + t_ds), -w + cmd.vy * (t + t_ds)
+    if name in S2S_LAWS:
+        s2s, coords, report = S2S_LAWS[name](z0, t, t_ds, g)
+        if params.gain == "lqr":
+            gain = lqr_gain(s2s, np.diag(params.lqr_q), params.lqr_r)
+        else:
+            gain = converging_gain(s2s, 0.0 if params.gain == "deadbeat" else params.alpha)
+        orbit = _reference_orbits(report, ux, uy, uy_next)
+        x_star = _reference_orbits(s2s, ux, uy, uy_next)
+        step = np.array([ux, uy]) + (pre @ coords.T - x_star) @ gain
+        nominal = np.array([ux, uy])
+    elif name == "alip":
+        alpha = 0.0 if params.gain == "deadbeat" else params.alpha
+        s2s = hlip_s2s(z0, t, 0.0, g)
+        orbit = _reference_orbits(s2s, ux, uy, uy_next)
+        orbit_next_lat = s2s.period2_orbit(uy_next, uy)[0]
+        l_sag = alip.symmetric_orbit_momentum(cmd.vx, t, z0, g)
+        l_target = (l_sag + alpha * (pre[0, 1] - l_sag),
+                    orbit_next_lat[1] + alpha * (pre[1, 1] - orbit[1, 1]))
+        step = np.array([alip.alip_step(*pre[i], t, z0, l_target[i], g) for i in range(2)])
+        nominal = np.array([ux, uy])
+    else:
+        p_star = alip_general.lateral_offset(cmd.vy, t, cmd.step_width, side)
+        p_start = alip_general.lateral_offset(cmd.vy, t, cmd.step_width, other_side(side))
+        l_cy = alip_general.desired_momentum_y(cmd.vx, t, m, z0, g)
+        l_cx = alip_general.desired_momentum_x(p_star, cmd.vy, t, m, z0, g)
+        l_cx_orbit = alip_general.desired_momentum_x(p_start, cmd.vy, t, m, z0, g)
+        step = np.array([pre[0, 0] - alip_general.post_impact_com_x(l_cy, m * pre[0, 1], t, m, z0, g),
+                         pre[1, 0] - alip_general.post_impact_com_y(l_cx, -m * pre[1, 1], t, m, z0, g)])
+        orbit = np.array([[0.5 * cmd.vx * t, l_cy / m], [p_start + cmd.vy * t, -l_cx_orbit / m]])
+        nominal = np.array([cmd.vx * t, p_start + cmd.vy * t - p_star])
+    return {
+        "planner": name, "stance_side": side, "swing_target": np.array([*(step if valid else nominal), 0.0]),
+        "swing_yaw": cmd.wz * (t + t_ds), "t_ss": t, "t_ds": t_ds, "time_to_touchdown": t_left,
+        "com_height": z0, "pre_impact": pre, "orbit_pre_impact": orbit, "nominal_step": nominal,
+        "valid": valid,
+    }
+
+
+def _dcm_reference(z0: float, t_ss: float, t_ds: float, g: float):
+    coords = np.array([[1.0, 1.0 / (omega(z0, g) * z0)]])
+    return dcm_s2s(z0, t_ss, t_ds, g), coords, mlip_s2s(z0, t_ss, t_ds, g)
+
+
+S2S_LAWS = {
+    "hlip": lambda z0, t, t_ds, g: (hlip_s2s(z0, t, t_ds, g), np.eye(2), hlip_s2s(z0, t, t_ds, g)),
+    "mlip": lambda z0, t, t_ds, g: (mlip_s2s(z0, t, t_ds, g), np.eye(2), mlip_s2s(z0, t, t_ds, g)),
+    "dcm": _dcm_reference,
+}
+LAW_GAINS = [(name, gain) for name, law in PLANNERS.items() for gain in law.supported_gains]
+
+
+def _battery(rng: np.random.Generator, n: int):
+    """(state, side, time in step, command): random walking inputs, some out of the step's time
+    range, some with a bad state entry, time or command."""
+    for k in range(n):
+        cmd = WalkCommand(vx=rng.uniform(-1.0, 1.0), vy=rng.uniform(-0.3, 0.3), wz=rng.uniform(-0.5, 0.5),
+                          step_width=rng.uniform(0.0, 0.3), com_height=rng.uniform(0.5, 1.1),
+                          step_time=rng.uniform(0.2, 0.5))
+        m = 30.0
+        p = rng.uniform(-0.2, 0.2, 2)
+        v = rng.uniform(-1.0, 1.0, 2)
+        state = np.array([p[0], p[1], cmd.com_height, -m * cmd.com_height * v[1],
+                          m * cmd.com_height * v[0], rng.uniform(-1.0, 1.0)])
+        t_in = rng.uniform(-0.1, 1.2) * cmd.step_time
+        if k % 10 == 7:
+            state[rng.integers(6) if k % 20 == 7 else 4] = rng.choice([math.nan, math.inf])
+        elif k % 10 == 8:
+            cmd = BAD_COMMANDS[k // 10 % len(BAD_COMMANDS)]
+        elif k % 30 == 9:
+            t_in = math.nan
+        yield state, SIDES[k % 2], t_in, cmd
+
+
+@pytest.mark.parametrize(("name", "gain"), LAW_GAINS)
+def test_plans_match_the_reference(name, gain):
+    params = PlannerParams(mass=30.0, t_ds=0.08, gain=gain, alpha=0.35, lqr_q=(2.0, 0.5), lqr_r=0.7)
+    law = make_planner(name, params)
+    rng = np.random.default_rng(sum(map(ord, name + gain)))
+    for state, side, t_in, cmd in _battery(rng, 200):
+        plan = law.plan(state, side, t_in, cmd)
+        for field, expected in _reference_plan(name, params, state, side, t_in, cmd).items():
+            got = getattr(plan, field)
+            if isinstance(expected, np.ndarray):
+                assert isinstance(got, np.ndarray) and got.shape == expected.shape, field
+                np.testing.assert_allclose(got, expected, rtol=0.0, atol=1e-12, err_msg=field)
+            elif isinstance(expected, float):
+                assert got == pytest.approx(expected, rel=0.0, abs=1e-12, nan_ok=True), field
+            else:
+                assert got == expected, field

@@ -45,10 +45,10 @@ class FootPlacementPlanner(LeafSystem):
         return self.law.plan(state, "left", 0.0, cmd)
 
     def _calc_plan(self, context, value) -> None:
-        phase = self.gait_phase_port.Eval(context)
+        sign, t_in_step = self.gait_phase_port.Eval(context).tolist()
         cmd = WalkCommand.from_vector(self.command_port.Eval(context))
-        value.set_value(self.law.plan(self.rom_state_port.Eval(context), side_from_sign(phase[0]),
-                                      float(phase[1]), cmd))
+        value.set_value(self.law.plan(self.rom_state_port.Eval(context).tolist(), side_from_sign(sign),
+                                      t_in_step, cmd))
 
 
 def make_foot_placement_planner(name: str, params: PlannerParams) -> FootPlacementPlanner:

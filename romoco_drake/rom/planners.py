@@ -12,6 +12,7 @@ from __future__ import annotations
 import functools
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -48,8 +49,24 @@ class PlannerParams:
     g: float = GRAVITY
 
 
+Plane = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class _Constants:
+    """What a law needs each tick for one (z0, T_SS), as plain floats; λ and z0 λ serve the
+    end-of-step prediction that every law makes."""
+
+    lam: float  # λ = sqrt(g / z0)
+    k: float  # z0 λ
+
+
 class FootPlacementLaw(ABC):
-    """Common plumbing: split the ROM state into planes, predict to touchdown, pack the output."""
+    """Common plumbing: split the ROM state into planes, predict to touchdown, pack the output.
+
+    Each law keeps its per-(z0, T_SS) constants in an LRU cache, so a tick does scalar arithmetic
+    only; the commanded height and step time rarely change.
+    """
 
     name: str
     ds_model: DsModel
@@ -67,6 +84,11 @@ class FootPlacementLaw(ABC):
             raise RomocoError(f"t_ds must be non-negative, got {params.t_ds}")
         self.params = params
         self.t_ds = params.t_ds if self.ds_model != "none" else 0.0
+        self._constants = functools.lru_cache(maxsize=64)(self._build_constants)
+
+    @abstractmethod
+    def _build_constants(self, z0: float, t_ss: float) -> _Constants:
+        """The law's constants for CoM height ``z0`` and single-support time ``t_ss``."""
 
     def nominal_steps(self, stance_side: str, cmd: WalkCommand) -> tuple[float, float, float]:
         """(u*_x, u*_y for this stance, u*_y for the next stance)."""
@@ -74,27 +96,31 @@ class FootPlacementLaw(ABC):
         w = -cmd.step_width if stance_side == "left" else cmd.step_width
         return cmd.vx * t, w + cmd.vy * t, -w + cmd.vy * t
 
-    def plan(self, rom_state, stance_side: str, t_in_step: float, cmd: WalkCommand) -> PlannerOutput:
-        """The foot placement for the current step. Falls back to u* on unusable inputs."""
-        m, z0 = self.params.mass, cmd.com_height
-        t_left = min(max(cmd.step_time - t_in_step, 0.0), cmd.step_time)
-        sag = (float(rom_state[0]), float(rom_state[4]) / m)
-        lat = (float(rom_state[1]), -float(rom_state[3]) / m)
-        ok = cmd.problem() is None and all(map(math.isfinite, (*sag, *lat, t_in_step)))
-        if not ok:
+    def plan(self, rom_state: Sequence[float], stance_side: str, t_in_step: float, cmd: WalkCommand
+             ) -> PlannerOutput:
+        """The foot placement for the current step. Falls back to u* on unusable inputs.
+
+        ``rom_state`` is the six numbers of the ``rom_state`` port; a list of floats is fastest.
+        """
+        m, t_ss = self.params.mass, cmd.step_time
+        t_left = min(max(t_ss - t_in_step, 0.0), t_ss)
+        sag_p, lat_p, _, l_x, l_y, _ = rom_state
+        sag_l, lat_l = l_y / m, -l_x / m
+        isfinite = math.isfinite
+        if not (cmd.problem() is None and isfinite(sag_p) and isfinite(sag_l) and isfinite(lat_p)
+                and isfinite(lat_l) and isfinite(t_in_step)):
             return self._fallback(stance_side, cmd, t_left)
-        lam = omega(z0, self.params.g)
-        c, s = math.cosh(lam * t_left), math.sinh(lam * t_left)
-        k = z0 * lam
-        pre = ((c * sag[0] + s / k * sag[1], k * s * sag[0] + c * sag[1]),
-               (c * lat[0] + s / k * lat[1], k * s * lat[0] + c * lat[1]))
-        u_x, u_y, orbit, nominal = self._place(pre, stance_side, cmd)
-        return self._output(stance_side, cmd, t_left, np.array([u_x, u_y, 0.0]), np.array(pre), orbit,
-                            nominal, True)
+        consts = self._constants(cmd.com_height, t_ss)
+        x = consts.lam * t_left
+        c, s, k = math.cosh(x), math.sinh(x), consts.k
+        pre = ((c * sag_p + s / k * sag_l, k * s * sag_p + c * sag_l),
+               (c * lat_p + s / k * lat_l, k * s * lat_p + c * lat_l))
+        u_x, u_y, orbit, nominal = self._place(pre, stance_side, cmd, consts)
+        return self._output(stance_side, cmd, t_left, (u_x, u_y, 0.0), np.array(pre), orbit, nominal, True)
 
     @abstractmethod
-    def _place(self, pre: tuple[tuple[float, float], tuple[float, float]], stance_side: str,
-               cmd: WalkCommand) -> tuple[float, float, np.ndarray, np.ndarray]:
+    def _place(self, pre: tuple[Plane, Plane], stance_side: str, cmd: WalkCommand, consts: _Constants
+               ) -> tuple[float, float, tuple[Plane, Plane], Plane]:
         """(u_x, u_y, orbit pre-impact state (2, 2), nominal steps (2,)) from the predicted
         end-of-SS state ((p_x, L_x/m), (p_y, L_y/m)) in LIP coordinates."""
 
@@ -102,55 +128,38 @@ class FootPlacementLaw(ABC):
         """The law's own orbit step (its nominal step), flagged invalid."""
         if cmd.problem() is not None:
             cmd = WalkCommand()
-        _, _, orbit, nominal = self._place(((0.0, 0.0), (0.0, 0.0)), stance_side, cmd)
-        return self._output(stance_side, cmd, t_left, np.array([nominal[0], nominal[1], 0.0]),
-                            np.full((2, 2), np.nan), orbit, nominal, False)
+        consts = self._constants(cmd.com_height, cmd.step_time)
+        _, _, orbit, nominal = self._place(((0.0, 0.0), (0.0, 0.0)), stance_side, cmd, consts)
+        return self._output(stance_side, cmd, t_left, (*nominal, 0.0), np.full((2, 2), np.nan), orbit,
+                            nominal, False)
 
-    def _output(self, stance_side, cmd, t_left, target, pre, orbit, nominal, valid) -> PlannerOutput:
-        return PlannerOutput(
-            planner=self.name, stance_side=stance_side, swing_target=target,
-            swing_yaw=cmd.wz * (cmd.step_time + self.t_ds), t_ss=cmd.step_time, t_ds=self.t_ds,
-            time_to_touchdown=t_left, com_height=cmd.com_height, pre_impact=pre,
-            orbit_pre_impact=orbit, nominal_step=nominal, valid=valid,
-        )
+    def _output(self, stance_side: str, cmd: WalkCommand, t_left: float, target: tuple[float, ...],
+                pre: np.ndarray, orbit: tuple[Plane, Plane], nominal: Plane, valid: bool) -> PlannerOutput:
+        # Positional arguments: keywords cost about 1 µs more per tick.
+        return PlannerOutput(self.name, stance_side, np.array(target), cmd.wz * (cmd.step_time + self.t_ds),
+                             cmd.step_time, self.t_ds, t_left, cmd.com_height, pre, np.array(orbit),
+                             np.array(nominal), valid)
 
 
 @dataclass(frozen=True)
-class _S2SMaps:
-    """Per-(z0, T_SS, T_DS) constants of an S2S law, as plain floats (the update runs per tick).
+class _S2SMaps(_Constants):
+    """Constants of an S2S law. The orbits are linear in the steps, so u = u* + K (C x̂⁻ − x*)
+    is folded into a gain on (p, L/m) and gains on the steps that set x*."""
 
-    The orbits are linear in the steps, so they are stored per unit step.
-    """
-
-    coords: tuple[tuple[float, float], ...]  # rows: the law's state from (p, L/m)
-    gain: tuple[float, ...]
-    period1: tuple[float, ...]  # x* per unit step
-    period2_own: tuple[float, ...]  # x*_a per unit u_a (x_a is followed by u_a)
-    period2_next: tuple[float, ...]  # x*_a per unit u_b
-    report: np.ndarray  # (3, 2): the same three orbits in (p, L/m)
+    gain: Plane  # K C
+    orbit_gain: tuple[float, float, float]  # K x* per unit step: period-1, period-2 own, next
+    report: tuple[Plane, Plane, Plane]  # the same three orbits in (p, L/m), per unit step
 
 
-def _orbit_basis(s2s: StepToStep) -> np.ndarray:
-    """Rows: period-1 orbit, period-2 orbit per unit own step, per unit next step."""
+def _orbit_basis(s2s: StepToStep) -> tuple[Plane, Plane, Plane]:
+    """Period-1 orbit, period-2 orbit per unit own step, per unit next step."""
     own, _ = s2s.period2_orbit(1.0, 0.0)
     nxt, _ = s2s.period2_orbit(0.0, 1.0)
-    return np.vstack([s2s.period1_orbit(1.0), own, nxt])
-
-
-def _feedback(maps: _S2SMaps, pre: tuple[float, float], u_star: float, orbit: tuple[float, ...]) -> float:
-    """u* + K (C x̂⁻ − x*) in scalar arithmetic."""
-    u = u_star
-    for row, k, x_star in zip(maps.coords, maps.gain, orbit, strict=True):
-        u += k * (row[0] * pre[0] + row[1] * pre[1] - x_star)
-    return u
+    return tuple(tuple(map(float, row)) for row in (s2s.period1_orbit(1.0), own, nxt))
 
 
 class S2SLaw(FootPlacementLaw):
     """u = u* + K (C x̂⁻ − x*) on a linear S2S map (eq. 7); C maps (p, L/m) to the law's state."""
-
-    def __init__(self, params: PlannerParams):
-        super().__init__(params)
-        self._maps = functools.lru_cache(maxsize=64)(self._build_maps)
 
     @abstractmethod
     def _s2s(self, z0: float, t_ss: float) -> StepToStep:
@@ -163,34 +172,31 @@ class S2SLaw(FootPlacementLaw):
         """The (p, L/m) S2S map whose orbit is reported."""
         return self._s2s(z0, t_ss)
 
-    def _build_maps(self, z0: float, t_ss: float) -> _S2SMaps:
+    def _build_constants(self, z0: float, t_ss: float) -> _S2SMaps:
         s2s = self._s2s(z0, t_ss)
         p = self.params
         if p.gain == "lqr":
             gain = lqr_gain(s2s, np.diag(p.lqr_q), p.lqr_r)
         else:
             gain = converging_gain(s2s, 0.0 if p.gain == "deadbeat" else p.alpha)
-        basis = _orbit_basis(s2s)
+        lam = omega(z0, p.g)
         return _S2SMaps(
-            coords=tuple(tuple(map(float, row)) for row in self._coords(z0)),
-            gain=tuple(map(float, gain)),
-            period1=tuple(map(float, basis[0])),
-            period2_own=tuple(map(float, basis[1])),
-            period2_next=tuple(map(float, basis[2])),
+            lam=lam, k=z0 * lam,
+            gain=tuple(map(float, gain @ self._coords(z0))),
+            orbit_gain=tuple(float(gain @ row) for row in _orbit_basis(s2s)),
             report=_orbit_basis(self._report_s2s(z0, t_ss)),
         )
 
-    def _place(self, pre, stance_side, cmd):
-        maps = self._maps(cmd.com_height, cmd.step_time)
-        ux_star, uy_star, uy_next = self.nominal_steps(stance_side, cmd)
-        orbit_sag = tuple(a * ux_star for a in maps.period1)
-        orbit_lat = tuple(a * uy_star + b * uy_next for a, b in zip(maps.period2_own, maps.period2_next,
-                                                                   strict=True))
-        u_x = _feedback(maps, pre[0], ux_star, orbit_sag)
-        u_y = _feedback(maps, pre[1], uy_star, orbit_lat)
-        r = maps.report
-        orbit = np.array([r[0] * ux_star, r[1] * uy_star + r[2] * uy_next])
-        return u_x, u_y, orbit, np.array([ux_star, uy_star])
+    def _place(self, pre, stance_side, cmd, consts: _S2SMaps):
+        ux, uy, uy_next = self.nominal_steps(stance_side, cmd)
+        (gp, gl), (k_p1, k_own, k_next) = consts.gain, consts.orbit_gain
+        (sag_p, sag_l), (lat_p, lat_l) = pre
+        u_x = ux + (gp * sag_p + gl * sag_l - k_p1 * ux)
+        u_y = uy + (gp * lat_p + gl * lat_l - (k_own * uy + k_next * uy_next))
+        r1, r_own, r_next = consts.report
+        orbit = ((r1[0] * ux, r1[1] * ux),
+                 (r_own[0] * uy + r_next[0] * uy_next, r_own[1] * uy + r_next[1] * uy_next))
+        return u_x, u_y, orbit, (ux, uy)
 
 
 class HlipLaw(S2SLaw):
@@ -231,6 +237,23 @@ class DcmLaw(S2SLaw):
         return mlip_s2s(z0, t_ss, self.t_ds, self.params.g)
 
 
+@dataclass(frozen=True)
+class _AlipConstants(_Constants):
+    """Constants of the ALIP laws for one step time T (no double support)."""
+
+    cosh_t: float  # cosh λT
+    ks_t: float  # z0 λ sinh λT
+    l_sag: float  # the symmetric orbit's pre-impact L/m per unit v_x
+    orbit: tuple[Plane, Plane, Plane]  # H-LIP orbits per unit step (see _orbit_basis)
+
+
+def _alip_constants(z0: float, t: float, g: float) -> _AlipConstants:
+    lam = omega(z0, g)
+    return _AlipConstants(lam=lam, k=z0 * lam, cosh_t=math.cosh(lam * t), ks_t=z0 * lam * math.sinh(lam * t),
+                          l_sag=alip.symmetric_orbit_momentum(1.0, t, z0, g),
+                          orbit=_orbit_basis(hlip_s2s(z0, t, 0.0, g)))
+
+
 class AlipLaw(FootPlacementLaw):
     """ALIP (Gong & Grizzle): choose the step so the momentum at the end of the next step is the
     orbit's (deadbeat) or the orbit's plus α times the current error (converging)."""
@@ -241,24 +264,36 @@ class AlipLaw(FootPlacementLaw):
     def __init__(self, params: PlannerParams):
         super().__init__(params)
         self._alpha = 0.0 if params.gain == "deadbeat" else params.alpha
-        self._orbit = functools.lru_cache(maxsize=64)(self._build_orbit)
 
-    def _build_orbit(self, z0: float, t_ss: float) -> np.ndarray:
-        return _orbit_basis(hlip_s2s(z0, t_ss, 0.0, self.params.g))
+    def _build_constants(self, z0: float, t_ss: float) -> _AlipConstants:
+        return _alip_constants(z0, t_ss, self.params.g)
 
-    def _place(self, pre, stance_side, cmd):
-        z0, t, g = cmd.com_height, cmd.step_time, self.params.g
-        ux_star, uy_star, uy_next = self.nominal_steps(stance_side, cmd)
-        p1, own, nxt = self._orbit(z0, t)
-        orbit_lat = own * uy_star + nxt * uy_next
-        orbit_lat_next = own * uy_next + nxt * uy_star
-        l_sag = alip.symmetric_orbit_momentum(cmd.vx, t, z0, g)
-        l_x = alip.target_momentum(pre[0][1], l_sag, l_sag, self._alpha)
-        l_y = alip.target_momentum(pre[1][1], orbit_lat[1], orbit_lat_next[1], self._alpha)
-        u_x = alip.alip_step(pre[0][0], pre[0][1], t, z0, l_x, g)
-        u_y = alip.alip_step(pre[1][0], pre[1][1], t, z0, l_y, g)
-        orbit = np.vstack([p1 * ux_star, orbit_lat])
-        return u_x, u_y, orbit, np.array([ux_star, uy_star])
+    def _place(self, pre, stance_side, cmd, consts: _AlipConstants):
+        ux, uy, uy_next = self.nominal_steps(stance_side, cmd)
+        p1, own, nxt = consts.orbit
+        orbit_lat = (own[0] * uy + nxt[0] * uy_next, own[1] * uy + nxt[1] * uy_next)
+        l_lat_next = own[1] * uy_next + nxt[1] * uy  # the orbit's L/m at the end of the next step
+        l_sag = consts.l_sag * cmd.vx
+        # alip.target_momentum and alip.alip_step with the step-time constants hoisted.
+        alpha, c, ks = self._alpha, consts.cosh_t, consts.ks_t
+        (sag_p, sag_l), (lat_p, lat_l) = pre
+        l_x = l_sag + alpha * (sag_l - l_sag)
+        l_y = l_lat_next + alpha * (lat_l - orbit_lat[1])
+        u_x = (c * sag_l + ks * sag_p - l_x) / ks
+        u_y = (c * lat_l + ks * lat_p - l_y) / ks
+        return u_x, u_y, ((p1[0] * ux, p1[1] * ux), orbit_lat), (ux, uy)
+
+
+@dataclass(frozen=True)
+class _AlipGeneralConstants(_Constants):
+    """Constants of the XO law for one step time T: its desired momenta are linear in p* and the
+    velocities."""
+
+    cosh_t: float  # cosh λT
+    mks_t: float  # m z0 λ sinh λT
+    l_cy_per_vx: float  # eq. 14 per unit v_x
+    l_cx_per_p: float  # eq. 17 per unit p*
+    l_cx_per_vy: float  # eq. 17 per unit v_y
 
 
 class AlipGeneralLaw(FootPlacementLaw):
@@ -272,21 +307,31 @@ class AlipGeneralLaw(FootPlacementLaw):
     ds_model = "none"
     supported_gains = ("deadbeat",)
 
-    def _place(self, pre, stance_side, cmd):
-        m, z0, t, g = self.params.mass, cmd.com_height, cmd.step_time, self.params.g
-        l_cy_pre = m * pre[0][1]
-        l_cx_pre = -m * pre[1][1]
-        l_cy_d = alip_general.desired_momentum_y(cmd.vx, t, m, z0, g)
-        p_star = alip_general.lateral_offset(cmd.vy, t, cmd.step_width, stance_side)
-        l_cx_d = alip_general.desired_momentum_x(p_star, cmd.vy, t, m, z0, g)
-        u_x = pre[0][0] - alip_general.post_impact_com_x(l_cy_d, l_cy_pre, t, m, z0, g)
-        u_y = pre[1][0] - alip_general.post_impact_com_y(l_cx_d, l_cx_pre, t, m, z0, g)
+    def _build_constants(self, z0: float, t_ss: float) -> _AlipGeneralConstants:
+        m, g = self.params.mass, self.params.g
+        lam = omega(z0, g)
+        return _AlipGeneralConstants(
+            lam=lam, k=z0 * lam, cosh_t=math.cosh(lam * t_ss), mks_t=m * z0 * lam * math.sinh(lam * t_ss),
+            l_cy_per_vx=alip_general.desired_momentum_y(1.0, t_ss, m, z0, g),
+            l_cx_per_p=alip_general.desired_momentum_x(1.0, 0.0, t_ss, m, z0, g),
+            l_cx_per_vy=alip_general.desired_momentum_x(0.0, 1.0, t_ss, m, z0, g),
+        )
+
+    def _place(self, pre, stance_side, cmd, consts: _AlipGeneralConstants):
+        m, t, vx, vy = self.params.mass, cmd.step_time, cmd.vx, cmd.vy
+        (sag_p, sag_l), (lat_p, lat_l) = pre
+        l_cy_d = consts.l_cy_per_vx * vx
+        p_star = alip_general.lateral_offset(vy, t, cmd.step_width, stance_side)
+        l_cx_d = consts.l_cx_per_p * p_star + consts.l_cx_per_vy * vy
+        # eq. 15 and 19 (alip_general.post_impact_com_x/y) on the contact momenta m L/m.
+        c, mks = consts.cosh_t, consts.mks_t
+        u_x = sag_p - (l_cy_d - c * (m * sag_l)) / mks
+        u_y = lat_p + (l_cx_d - c * (-m * lat_l)) / mks
         # The current step's orbit: it began at the offset planned in the other stance.
-        p_start = alip_general.lateral_offset(cmd.vy, t, cmd.step_width, other_side(stance_side))
-        l_cx_orbit = alip_general.desired_momentum_x(p_start, cmd.vy, t, m, z0, g)
-        orbit = np.array([[0.5 * cmd.vx * t, l_cy_d / m], [p_start + cmd.vy * t, -l_cx_orbit / m]])
-        nominal = np.array([cmd.vx * t, p_start + cmd.vy * t - p_star])
-        return u_x, u_y, orbit, nominal
+        p_start = alip_general.lateral_offset(vy, t, cmd.step_width, other_side(stance_side))
+        l_cx_orbit = consts.l_cx_per_p * p_start + consts.l_cx_per_vy * vy
+        orbit = ((0.5 * vx * t, l_cy_d / m), (p_start + vy * t, -l_cx_orbit / m))
+        return u_x, u_y, orbit, (vx * t, p_start + vy * t - p_star)
 
 
 PLANNERS = Registry("planner")

@@ -44,15 +44,16 @@ class WalkCommand:
 
     @classmethod
     def from_vector(cls, v) -> WalkCommand:
-        return cls(*(float(x) for x in v))
+        return cls(*np.asarray(v, dtype=float).tolist())
 
     def to_vector(self) -> np.ndarray:
         return np.array([self.vx, self.vy, self.wz, self.step_width, self.com_height, self.step_time])
 
     def problem(self) -> str | None:
         """Why this command cannot be walked, or None."""
-        if not all(map(math.isfinite, (self.vx, self.vy, self.wz, self.step_width, self.com_height,
-                                       self.step_time))):
+        isfinite = math.isfinite
+        if not (isfinite(self.vx) and isfinite(self.vy) and isfinite(self.wz) and isfinite(self.step_width)
+                and isfinite(self.com_height) and isfinite(self.step_time)):
             return "command has a non-finite entry"
         if self.com_height <= 0.0:
             return f"com_height must be positive, got {self.com_height}"
