@@ -314,7 +314,7 @@ S2S_LAWS = {
     "mlip": lambda z0, t, t_ds, g: (mlip_s2s(z0, t, t_ds, g), np.eye(2), mlip_s2s(z0, t, t_ds, g)),
     "dcm": _dcm_reference,
 }
-LAW_GAINS = [(name, gain) for name, law in PLANNERS.items() for gain in law.supported_gains]
+LAW_GAINS = [(name, gain) for name, entry in PLANNERS.items() for gain in entry.facts["gains"]]
 
 
 def _battery(rng: np.random.Generator, n: int):
