@@ -10,6 +10,7 @@ from pydrake.math import RigidTransform, RollPitchYaw
 
 from romoco_drake.embedding import ContactModel, select_contact_points, sole_frame, wrench_map
 from romoco_drake.embedding.references import EmbeddingCore
+from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import load_robot
 
 MARGINS = {"friction_margin": 0.1, "cop_margin": 0.01, "min_normal_force": 5.0}
@@ -128,8 +129,9 @@ def test_force_limits_in_world_follow_the_tilted_sole(name):
     for side in ("left", "right"):
         foot = contact.feet[side]
         k = len(foot.point_names)
-        A, b = contact.friction_constraints(context, side)
-        R_WS = contact.sole_rotation(context, side)
+        kin = RobotKinematics(robot, plant.GetPositionsAndVelocities(context))
+        A, b = contact.friction_constraints(kin, side)
+        R_WS = contact.sole_rotation(kin, side)
         # Equal pushes along the sole normal: feasible; tilting each by more than the friction
         # angle, or pulling: not.
         push = np.tile([0.0, 0.0, 100.0], k)
@@ -164,9 +166,10 @@ def test_row_space_basis_spans_the_contact_rows_without_redundancy(name):
     q[robot.joint_q_index] += 0.1 * rng.standard_normal(len(robot.joint_q_index))
     plant.SetPositions(context, q)
     plant.SetFreeBodyPose(context, robot.base_body, RigidTransform(RollPitchYaw(0.2, -0.3, 1.1), [0, 0, 1]))
+    kin = RobotKinematics(robot, plant.GetPositionsAndVelocities(context))
     for domain in ("left", "right", "double", "none"):
-        J = contact.constraints(context, domain).J
-        U = contact.row_space_basis(context, domain)
+        J = contact.constraints(kin, domain).J
+        U = contact.row_space_basis(kin, domain)
         assert U.shape == (J.shape[0], np.linalg.matrix_rank(J))
         np.testing.assert_allclose(U.T @ U, np.eye(U.shape[1]), atol=1e-12)
         np.testing.assert_allclose(J - U @ (U.T @ J), 0.0, atol=1e-10)

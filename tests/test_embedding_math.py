@@ -115,7 +115,7 @@ def test_standing_and_in_air_output_derivatives(robot):
 @pytest.mark.parametrize("domain", list(DOMAINS))
 def test_contact_constraint_derivatives(robot, domain):
     contact = ContactModel(robot)
-    out = _check_derivatives(robot, lambda kin: contact.constraints(kin.context, domain), seed=5)
+    out = _check_derivatives(robot, lambda kin: contact.constraints(kin, domain), seed=5)
     points = sum(len(contact.feet[s].point_names) for s in DOMAINS[domain])
     assert len(out.names) == 3 * points + robot.num_internal_constraints()
 
@@ -132,7 +132,7 @@ def _nominal_context(robot):
 
 
 def test_constraints_hold_at_nominal(robot):
-    out = ContactModel(robot).constraints(_nominal_context(robot), "double")
+    out = ContactModel(robot).constraints(RobotKinematics(robot), "double")
     m = robot.num_internal_constraints()
     assert np.all(np.abs(out.y[len(out.y) - m:]) < 1e-5)
     # Every contact point on the ground; rank 5 (line) or 6 (plane) per foot.
@@ -182,10 +182,10 @@ def test_point_forces_and_foot_wrench_do_the_same_virtual_work(robot):
     W = plant.world_frame()
     for side in ("left", "right"):
         foot = contact.feet[side]
-        J_points = contact.constraints(context, side).J[: 3 * len(foot.point_names)]
+        J_points = contact.constraints(_kin(robot, context), side).J[: 3 * len(foot.point_names)]
         J_foot = plant.CalcJacobianSpatialVelocity(
             context, JacobianWrtVariable.kV, foot.frame, foot.p_FS, W, W)
-        R_WS = contact.sole_rotation(context, side)
+        R_WS = contact.sole_rotation(_kin(robot, context), side)
         f_W = rng.standard_normal(J_points.shape[0])
         f_S = (f_W.reshape(-1, 3) @ R_WS).ravel()  # each f_S,i = R_SW f_W,i
         w_S = foot.wrench_map @ f_S
@@ -194,3 +194,27 @@ def test_point_forces_and_foot_wrench_do_the_same_virtual_work(robot):
         X_WF = foot.frame.CalcPoseInWorld(context)
         offsets = X_WF.rotation().matrix() @ (foot.points_F - foot.p_FS[:, None])
         np.testing.assert_allclose(wrench_map(offsets) @ f_W, np.concatenate([f_net, m]), atol=1e-10)
+
+
+@pytest.mark.parametrize("name", ["g1", "cassie", "draco"])
+def test_contact_rows_match_drakes_point_queries(name):
+    """h, J_h and J̇_h·v assembled from the feet's spatial Jacobians equal Drake's per-point answers."""
+    robot = load_robot(name)
+    contact = ContactModel(robot)
+    plant, W, kV = robot.plant, robot.plant.world_frame(), JacobianWrtVariable.kV
+    q, v = _random_state(robot, 11)
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, q)
+    plant.SetVelocities(context, v)
+    out = contact.constraints(_kin(robot, context), "double")
+    h, J, Jdv = [], [], []
+    for side in ("left", "right"):
+        foot = contact.feet[side]
+        h.append(plant.CalcPointsPositions(context, foot.frame, foot.points_F, W).ravel(order="F"))
+        J.append(plant.CalcJacobianTranslationalVelocity(context, kV, foot.frame, foot.points_F, W, W))
+        Jdv.append(plant.CalcBiasTranslationalAcceleration(context, kV, foot.frame, foot.points_F, W, W)
+                   .ravel(order="F"))
+    n = sum(len(x) for x in h)
+    np.testing.assert_allclose(out.y[:n], np.concatenate(h), atol=1e-12)
+    np.testing.assert_allclose(out.J[:n], np.vstack(J), atol=1e-12)
+    np.testing.assert_allclose(out.Jdot_v[:n], np.concatenate(Jdv), atol=1e-10)

@@ -134,7 +134,7 @@ class InverseDynamics:
         targets = [a_cmd - t.Jdot_v - t.J @ vdot_p, -vdot_p, -tau_p, -lam_p]
         weights = [t.weight, np.full(r.nv, eps_v), np.full(r.nu, eps_tau), np.full(len(lam_p), eps_lam)]
         if refs.domain.single_support and self.w_pivot > 0.0:
-            G = pivot_moment_map(self.contact, kin.context, refs)
+            G = pivot_moment_map(self.contact, kin, refs)
             n_f = refs.num_contact_forces
             rows.append(G @ L[:n_f])
             targets.append(-G @ lam_p[:n_f])

@@ -202,7 +202,7 @@ class PositionIK:
             k += 1
             self._iterate.update(np.concatenate([q, kin.v]))
             out = self._outputs(self._iterate, refs)
-            hol = self.core.contact.constraints(self._iterate.context, refs.domain)
+            hol = self.core.contact.constraints(self._iterate, refs.domain)
             t = tasks.evaluate(dataclasses.replace(refs, y=out.y, J=out.J, Jdot_v=out.Jdot_v), q)
         return PositionIkSolution(q, self.velocity.solve(kin, refs, feedback=False), k, residual)
 

@@ -158,16 +158,14 @@ def weighted_least_squares(A: np.ndarray, b: np.ndarray, w: np.ndarray, damping:
     return np.linalg.solve(H, g)
 
 
-def pivot_moment_map(contact: ContactModel, context, refs: TaskReferences) -> np.ndarray:
+def pivot_moment_map(contact: ContactModel, kin: RobotKinematics, refs: TaskReferences) -> np.ndarray:
     """G (2 × n_f): horizontal moment of the single-support contact forces about the sole centroid.
 
     The ROM planners assume the stance foot is a pivot (no ankle torque about the sole
     centroid, LIP eq. 1); penalising G λ, as TSC-QP does, keeps the centre of pressure near
     that point in single support so the robot's momentum evolves as the planner predicts.
     """
-    foot = contact.feet[refs.domain]
-    plant = contact.robot.plant
-    pivot = plant.CalcPointsPositions(context, foot.frame, foot.p_FS, plant.world_frame()).ravel()
+    pivot = contact.sole_center(kin, refs.domain)
     r = refs.holonomic.y[:refs.num_contact_forces].reshape(-1, 3) - pivot
     G = np.zeros((2, refs.num_contact_forces))
     # (r × f)_x = r_y f_z − r_z f_y ; (r × f)_y = r_z f_x − r_x f_z

@@ -227,7 +227,7 @@ class TscQp:
         S[k:k + nu] = self._sqrt_eps_tau * T
         s[k:k + nu] = -self._sqrt_eps_tau * c
         if single:
-            S[k + nu:, f] = math.sqrt(self.w_pivot) * pivot_moment_map(self.contact, kin.context, refs)
+            S[k + nu:, f] = math.sqrt(self.w_pivot) * pivot_moment_map(self.contact, kin, refs)
             s[k + nu:] = 0.0
         elif split:
             root = math.sqrt(self.w_split)
@@ -241,7 +241,7 @@ class TscQp:
         # redundant (rank 6 of 9 for a plane foot): an interior-point solver reads the round-off
         # in redundant rows as infeasibility, an active-set one as a singular KKT system.
         u = self._rows_u
-        U = self.contact.row_space_basis(kin.context, refs.domain) if n_h else np.zeros((0, 0))
+        U = self.contact.row_space_basis(kin, refs.domain) if n_h else np.zeros((0, 0))
         n_u, rank = len(u), U.shape[1]
         n_eq = n_u + rank
         n_fric = refs.A_f.shape[0]

@@ -23,10 +23,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.multibody.tree import Frame, JacobianWrtVariable
+from pydrake.multibody.tree import Frame
 
 from romoco_drake.embedding.outputs import Output, sole_frame
 from romoco_drake.errors import RomocoError
+from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
 
 SIDES = ("left", "right")
@@ -65,6 +66,14 @@ def select_contact_points(robot: RobotModel, side: str, line: bool | None = None
 
 def _skew(p: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -p[2], p[1]], [p[2], 0.0, -p[0]], [-p[1], p[0], 0.0]])
+
+
+def _skew_stack(p: np.ndarray) -> np.ndarray:
+    """[p_i]× for each row p_i of p (k×3): (k, 3, 3)."""
+    S = np.zeros((len(p), 3, 3))
+    S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -p[:, 2], p[:, 1], -p[:, 0]
+    S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = p[:, 2], -p[:, 1], p[:, 0]
+    return S
 
 
 def wrench_map(points: np.ndarray) -> np.ndarray:
@@ -131,6 +140,7 @@ class FootContact:
     A_S: np.ndarray
     b: np.ndarray
     motion_basis: np.ndarray  # 3k × r orthonormal: the point velocities a rigid foot can have, in S
+    offsets_F: np.ndarray  # 3×k: the contact points relative to the sole centroid, foot frame
 
 
 class ContactModel:
@@ -191,7 +201,8 @@ class ContactModel:
             # of 3k for a plane foot, 5 for a line (no spin about the line moves its points).
             U, sv, _ = np.linalg.svd(G.T, full_matrices=False)
             motion = U[:, sv > 1e-9 * sv[0]]
-            arrays = (np.asfortranarray(points_F), R_FS, p_FS, G, A_w @ G, b, motion)
+            offsets = points_F - p_FS[:, None]
+            arrays = (np.asfortranarray(points_F), R_FS, p_FS, G, A_w @ G, b, motion, offsets)
             for a in arrays:
                 a.setflags(write=False)
             self.feet[side] = FootContact(side, robot.foot_frames[side], names, *arrays)
@@ -200,7 +211,6 @@ class ContactModel:
             + tuple(f"internal_{i}" for i in range(robot.num_internal_constraints()))
             for domain, sides in DOMAINS.items()
         }
-        self._world = plant.world_frame()
         m = robot.num_internal_constraints()
         self._eye_internal = np.eye(m)
         self._basis_shapes = {domain: (sum(self.feet[s].motion_basis.shape[0] for s in sides) + m,
@@ -212,21 +222,31 @@ class ContactModel:
             if np.linalg.matrix_rank(robot.internal_constraints(context).J) < m:
                 raise RomocoError(f"{robot.yaml_path}: the internal constraints are not independent")
 
-    def constraints(self, context, domain: str) -> Output:
-        """h (as ``y``), J_h and J̇_h·v of ``domain`` on the controller-plant ``context``."""
+    def constraints(self, kin: RobotKinematics, domain: str) -> Output:
+        """h (as ``y``), J_h and J̇_h·v of ``domain`` at the state of ``kin``.
+
+        A foot's point rows come from its spatial Jacobian at the sole centroid c, which the
+        walking outputs read too (one Drake query a foot a tick): for a point P fixed in the
+        foot at r = p_P − p_c (world), v_P = v_c + ω × r, so J_P = J_v − [r]× J_ω, and the bias
+        a_P = a_c + α × r + ω × (ω × r).
+        """
         if domain not in DOMAINS:
             raise ValueError(f"unknown contact domain '{domain}' (one of {', '.join(DOMAINS)})")
-        plant, W = self.robot.plant, self._world
         h, J, Jdv = [], [], []
         for side in DOMAINS[domain]:
             foot = self.feet[side]
-            h.append(plant.CalcPointsPositions(context, foot.frame, foot.points_F, W).ravel(order="F"))
-            J.append(plant.CalcJacobianTranslationalVelocity(
-                context, JacobianWrtVariable.kV, foot.frame, foot.points_F, W, W))
-            Jdv.append(plant.CalcBiasTranslationalAcceleration(
-                context, JacobianWrtVariable.kV, foot.frame, foot.points_F, W, W).ravel(order="F"))
+            R, p = kin.frame_pose(foot.frame)
+            J6, bias = kin.spatial_jacobian(foot.frame, foot.p_FS)
+            r = R @ foot.offsets_F  # 3×k, points relative to the sole centroid, world
+            h.append((r + (R @ foot.p_FS + p)[:, None]).ravel(order="F"))
+            Jw, Jv = J6[:3], J6[3:]
+            # −[r]× J_ω for all points at once: (k, 3, 3) @ (3, nv).
+            J.append((_skew_stack(-r.T) @ Jw + Jv).reshape(-1, self.robot.nv))
+            W = _skew(Jw @ kin.v)
+            # a_c + α × r + ω × (ω × r), one row a point.
+            Jdv.append((bias[3:] + r.T @ (_skew(bias[:3]) + W @ W).T).ravel())
         if self.robot.num_internal_constraints():
-            internal = self.robot.internal_constraints(context)
+            internal = self.robot.internal_constraints(kin.context)
             h.append(internal.h)
             J.append(internal.J)
             Jdv.append(internal.Jdot_v)
@@ -236,7 +256,7 @@ class ContactModel:
             return Output(self._names[domain], h[0], J[0], Jdv[0])
         return Output(self._names[domain], np.concatenate(h), np.concatenate(J), np.concatenate(Jdv))
 
-    def row_space_basis(self, context, domain: str) -> np.ndarray:
+    def row_space_basis(self, kin: RobotKinematics, domain: str) -> np.ndarray:
         """U (n_h × r) orthonormal, spanning the column space of ``domain``'s J_h (rank r).
 
         The multi-point contact rows are redundant (rank 6 of 9 for a plane foot); controllers
@@ -251,21 +271,27 @@ class ContactModel:
         for side in DOMAINS[domain]:
             U_S = self.feet[side].motion_basis
             k, r = U_S.shape[0] // 3, U_S.shape[1]
-            R_WS = self.sole_rotation(context, side)
+            R_WS = self.sole_rotation(kin, side)
             U[i:i + 3 * k, j:j + r] = (R_WS @ U_S.reshape(k, 3, r)).reshape(3 * k, r)
             i, j = i + 3 * k, j + r
         U[i:, j:] = self._eye_internal
         return U
 
-    def sole_rotation(self, context, side: str) -> np.ndarray:
-        """R_WS of the foot's sole frame at ``context``."""
+    def sole_rotation(self, kin: RobotKinematics, side: str) -> np.ndarray:
+        """R_WS of the foot's sole frame at the state of ``kin``."""
         foot = self.feet[side]
-        return foot.frame.CalcRotationMatrixInWorld(context).matrix() @ foot.R_FS
+        return kin.frame_pose(foot.frame)[0] @ foot.R_FS
 
-    def friction_constraints(self, context, side: str) -> tuple[np.ndarray, np.ndarray]:
+    def sole_center(self, kin: RobotKinematics, side: str) -> np.ndarray:
+        """p_WS: the sole centroid in world at the state of ``kin``."""
+        foot = self.feet[side]
+        R, p = kin.frame_pose(foot.frame)
+        return R @ foot.p_FS + p
+
+    def friction_constraints(self, kin: RobotKinematics, side: str) -> tuple[np.ndarray, np.ndarray]:
         """A, b with A f ≤ b on the foot's stacked point forces f expressed in world."""
         foot = self.feet[side]
-        R_WS = self.sole_rotation(context, side)
+        R_WS = self.sole_rotation(kin, side)
         rows, cols = foot.A_S.shape
         # Per point: A_S,i f_S,i = A_S,i R_SW f_W,i.
         A = (foot.A_S.reshape(rows, cols // 3, 3) @ R_WS.T).reshape(rows, cols)

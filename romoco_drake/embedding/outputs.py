@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from math import atan2, cos, pi, remainder, sin
 
 import numpy as np
-from pydrake.multibody.tree import Frame, JacobianWrtVariable, Joint
+from pydrake.multibody.tree import Frame, Joint
 
 from romoco_drake.errors import RomocoError
 from romoco_drake.robots.kinematics import RobotKinematics, check_floating_base
@@ -105,12 +105,11 @@ def find_leg_joints(robot: RobotModel, side: str) -> LegJoints:
     return LegJoints(chain[i_yaw].name(), rolls[-1] if rolls else None, float(np.sign(axes[i_yaw, 2])))
 
 
-def _motion(plant, context, frame: Frame, p_FP: np.ndarray, W: Frame):
+def _motion(kin: RobotKinematics, frame: Frame, p_FP: np.ndarray):
     """R_WF, p_WP, the spatial Jacobian [J_ω; J_v] (6×nv) of a point P fixed in F and its bias [α; a]."""
-    X = frame.CalcPoseInWorld(context).GetAsMatrix34()
-    J = plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kV, frame, p_FP, W, W)
-    bias = plant.CalcBiasSpatialAcceleration(context, JacobianWrtVariable.kV, frame, p_FP, W, W)
-    return X[:, :3], X[:, :3] @ p_FP + X[:, 3], J, bias.get_coeffs()
+    R, p = kin.frame_pose(frame)
+    J, bias = kin.spatial_jacobian(frame, p_FP)
+    return R, R @ p_FP + p, J, bias
 
 
 # The outputs below are scalar functions of a few kinematic quantities. They are computed with
@@ -212,12 +211,9 @@ class WalkingOutputs:
     def evaluate(self, kin: RobotKinematics, stance: str) -> Output:
         """Outputs with ``stance`` ('left'/'right') the stance foot, at the state of ``kin``."""
         swing = _OTHER[stance]
-        plant, W, context = self.robot.plant, self._W, kin.context
         q, v = kin.q, kin.v
-        R_st, p_st, J_st, bias_st = _motion(plant, context, self.robot.foot_frames[stance],
-                                            self._centroid[stance], W)
-        R_sw, p_sw, J_sw, bias_sw = _motion(plant, context, self.robot.foot_frames[swing],
-                                            self._centroid[swing], W)
+        R_st, p_st, J_st, bias_st = _motion(kin, self.robot.foot_frames[stance], self._centroid[stance])
+        R_sw, p_sw, J_sw, bias_sw = _motion(kin, self.robot.foot_frames[swing], self._centroid[swing])
         R_b = _base_rotation(kin)
         com, J_com, com_bias = kin.p_com, kin.J_com, kin.com_bias
         S = np.concatenate((J_st, J_sw, self._Jw, J_com[2:]))

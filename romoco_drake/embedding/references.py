@@ -221,13 +221,10 @@ class EmbeddingCore:
 
     def _standing_targets(self, kin: RobotKinematics) -> np.ndarray:
         """CoM over the middle of the soles at the nominal height; pelvis level, mean foot heading."""
-        plant, context = self.robot.plant, kin.context
-        world = plant.world_frame()
         centers, headings = [], []
         for side in ("left", "right"):
-            R_WS = self.contact.sole_rotation(context, side)
-            foot = self.contact.feet[side]
-            centers.append(plant.CalcPointsPositions(context, foot.frame, foot.p_FS, world).ravel())
+            R_WS = self.contact.sole_rotation(kin, side)
+            centers.append(self.contact.sole_center(kin, side))
             headings.append(math.atan2(R_WS[1, 0], R_WS[0, 0]))
         y_d = np.zeros(6)
         y_d[:2] = 0.5 * (centers[0][:2] + centers[1][:2])
@@ -243,9 +240,8 @@ class EmbeddingCore:
 
     def _pack(self, mode: Mode, domain: Domain, stance: str, out: Output, y_d, yd_d, ydd_d, active,
               kin: RobotKinematics) -> TaskReferences:
-        context = kin.context
-        holonomic = self.contact.constraints(context, domain)
-        blocks = [self.contact.friction_constraints(context, side) for side in domain.feet]
+        holonomic = self.contact.constraints(kin, domain)
+        blocks = [self.contact.friction_constraints(kin, side) for side in domain.feet]
         if len(blocks) == 1:
             A_f, b_f = blocks[0]
         else:

@@ -41,15 +41,14 @@ class RomStateFromRobot(LeafSystem):
         if not kin.finite:
             return np.full(6, np.nan)
         R_FS, p_FS = self._soles[side]
-        X_WF = self.robot.foot_frames[side].CalcPoseInWorld(kin.context)
-        pivot = X_WF.multiply(p_FS)
-        forward = X_WF.rotation().matrix() @ R_FS[:, 0]
-        psi = math.atan2(forward[1], forward[0])
+        R_WF, p_WF = kin.frame_pose(self.robot.foot_frames[side])
+        pivot = R_WF @ p_FS + p_WF
+        fx, fy, _ = (R_WF @ R_FS[:, 0]).tolist()
+        psi = math.atan2(fy, fx)
         c, s = math.cos(psi), math.sin(psi)
-        R_T = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-        p = R_T @ (kin.p_com - pivot)
-        L = R_T @ kin.angular_momentum_about(pivot)
-        return np.concatenate([p, L])
+        px, py, pz = (kin.p_com - pivot).tolist()
+        Lx, Ly, Lz = kin.angular_momentum_about(pivot).tolist()
+        return np.array([c * px + s * py, c * py - s * px, pz, c * Lx + s * Ly, c * Ly - s * Lx, Lz])
 
     def _calc(self, context, out) -> None:
         phase = self.gait_phase_port.Eval(context)

@@ -8,6 +8,10 @@ keeps one of these in its output port's cache, keyed on its ``state`` input, so 
 machine, the ROM state, the output embedding and the whole-body controller of one tick all
 read the same evaluation instead of re-loading the state into contexts of their own.
 
+Frame poses and point Jacobians asked for by several consumers of a tick (the stance foot's,
+above all) are read from Drake once per state too (:meth:`RobotKinematics.frame_pose`,
+:meth:`RobotKinematics.spatial_jacobian`).
+
 CoM and momentum through the floating joint: Drake's floating-joint velocities are the base's
 angular velocity ω_WB and the translational velocity v_WB, both in world, so the kinetic energy's
 gradient with respect to them, the base rows of M v, is the spatial momentum of the whole robot
@@ -44,14 +48,15 @@ class RobotKinematics:
     within one tick, do not keep it.
     """
 
-    __slots__ = ("robot", "context", "x", "q", "v", "finite", "_M", "_bias", "_tau_g", "_base_rows",
-                 "_p_com", "_p_base")
+    __slots__ = ("robot", "context", "x", "q", "v", "finite", "_M", "_bias", "_tau_g", "_C", "_base_rows",
+                 "_p_com", "_p_base", "_poses", "_motions", "_g_W")
 
     def __init__(self, robot: RobotModel, x: np.ndarray | None = None):
         self.robot = robot
         self.context = robot.plant.CreateDefaultContext()
         s = robot.base_v_start
         self._base_rows = slice(s, s + 6)
+        self._g_W = robot.plant.gravity_field().gravity_vector()
         self.update(np.concatenate([robot.nominal.q, np.zeros(robot.nv)]) if x is None else x)
 
     def update(self, x: np.ndarray) -> None:
@@ -60,13 +65,15 @@ class RobotKinematics:
         self.x = np.array(x, dtype=float)
         self.q, self.v = self.x[:r.nq], self.x[r.nq:]
         self.finite = bool(np.isfinite(self.x).all())
-        self._M = self._bias = self._tau_g = self._p_com = self._p_base = None
+        self._M = self._bias = self._tau_g = self._C = self._p_com = self._p_base = None
+        self._poses: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._motions: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
         if self.finite:
             r.plant.SetPositionsAndVelocities(self.context, self.x)
         else:
             nv = r.nv
             self._M = np.full((nv, nv), np.nan)
-            self._bias, self._tau_g = np.full(nv, np.nan), np.full(nv, np.nan)
+            self._bias, self._tau_g, self._C = np.full(nv, np.nan), np.full(nv, np.nan), np.full(nv, np.nan)
             self._p_com = self._p_base = np.full(3, np.nan)
 
     def __deepcopy__(self, memo) -> RobotKinematics:
@@ -89,15 +96,40 @@ class RobotKinematics:
 
     @property
     def tau_g(self) -> np.ndarray:
-        """Generalized gravity forces τ_g (nv); M v̇ + C v = τ_g + applied forces."""
+        """Generalized gravity forces τ_g (nv); M v̇ + C v = τ_g + applied forces.
+
+        In a uniform field τ_g = m J_CoMᵀ g = M_tᵀ g (M_t: the base's translational rows of M),
+        which is cheaper than Drake's sum over bodies once M is known.
+        """
         if self._tau_g is None:
-            self._tau_g = self.robot.plant.CalcGravityGeneralizedForces(self.context)
+            self._tau_g = self._g_W @ self.M[self._base_rows][3:]
         return self._tau_g
 
     @property
     def C(self) -> np.ndarray:
         """C v − τ_g: what the equations of motion M v̇ + C = B τ + J_hᵀ λ call C."""
-        return self.bias - self.tau_g
+        if self._C is None:
+            self._C = self.bias - self.tau_g
+        return self._C
+
+    def frame_pose(self, frame) -> tuple[np.ndarray, np.ndarray]:
+        """R_WF (3×3) and p_WF (3,) of a frame (read once per state)."""
+        key = int(frame.index())
+        if key not in self._poses:
+            X = frame.CalcPoseInWorld(self.context).GetAsMatrix34()
+            self._poses[key] = X[:, :3], X[:, 3]
+        return self._poses[key]
+
+    def spatial_jacobian(self, frame, p_FP: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """J (6×nv, rows [ω; v] in world) of the point P fixed in ``frame`` at p_FP, and its bias
+        spatial acceleration [α; a] (6,): A_WP = J v̇ + bias. Read once per state and point."""
+        key = (int(frame.index()), p_FP.tobytes())
+        if key not in self._motions:
+            plant, W = self.robot.plant, self.robot.plant.world_frame()
+            J = plant.CalcJacobianSpatialVelocity(self.context, JacobianWrtVariable.kV, frame, p_FP, W, W)
+            bias = plant.CalcBiasSpatialAcceleration(self.context, JacobianWrtVariable.kV, frame, p_FP, W, W)
+            self._motions[key] = J, bias.get_coeffs()
+        return self._motions[key]
 
     @property
     def p_com(self) -> np.ndarray:
@@ -145,6 +177,7 @@ def check_floating_base(robot: RobotModel) -> None:
     ctx = kin.context
     point = np.array([0.3, -0.2, 0.1])
     checks = (
+        (kin.tau_g, plant.CalcGravityGeneralizedForces(ctx)),
         (kin.J_com, plant.CalcJacobianCenterOfMassTranslationalVelocity(ctx, kV, W, W)),
         (kin.com_bias, plant.CalcBiasCenterOfMassTranslationalAcceleration(ctx, kV, W, W)),
         (kin.angular_momentum_about(point),
@@ -153,8 +186,8 @@ def check_floating_base(robot: RobotModel) -> None:
                                                         W).rotational()),
     )
     if not all(np.allclose(a, b, atol=1e-9) for a, b in checks):
-        raise RomocoError(f"{robot.yaml_path}: base or CoM kinematics from the floating joint do not "
-                          "match Drake's (is all mass on the floating base's tree?)")
+        raise RomocoError(f"{robot.yaml_path}: base, CoM or gravity terms from the floating joint do not "
+                          "match Drake's (is all mass on the floating base's tree, in a uniform field?)")
 
 
 class RobotKinematicsSystem(LeafSystem):
