@@ -1,5 +1,7 @@
 """The OutputEmbedding system: mode/domain selection, swing latching and replanning, fallbacks."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
@@ -141,5 +143,5 @@ def test_error_wraps_angles():
     robot, system, context, _, _, _, _ = _setup("g1", mode="standing")
     refs = system.task_references_port.Eval(context)
     i = refs.names.index("pelvis_yaw")
-    wrapped = type(refs)(**{**refs.__dict__, "y_des": refs.y_des + np.eye(len(refs.y))[i] * 2 * np.pi})
+    wrapped = dataclasses.replace(refs, y_des=refs.y_des + np.eye(len(refs.y))[i] * 2 * np.pi)
     np.testing.assert_allclose(wrapped.error, refs.error, atol=1e-12)

@@ -5,6 +5,7 @@ The ticks are recorded from closed-loop runs that pass through every contact dom
 support). G1 has plane feet; Cassie has line feet and internal loops (its achilles rods).
 """
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -93,7 +94,7 @@ def test_infeasible_qp_is_a_failure_not_an_exception():
     """A friction limit no force can meet (b_f < 0 on the normal force): both solvers report failure."""
     robot, contact, ticks = _recorded("g1_walk")
     x, refs = ticks[Domain.DOUBLE][0]
-    impossible = type(refs)(**{**refs.__dict__, "b_f": refs.b_f - 1e3})
+    impossible = dataclasses.replace(refs, b_f=refs.b_f - 1e3)
     kin = RobotKinematics(robot, x)
     for solver in ("daqp", "clarabel"):
         solution, warm = TscQp(robot, contact, solver=solver).compute(kin, impossible)

@@ -1,5 +1,7 @@
 """Whole-body control and closed-loop walking: TSC-QP on fixed inputs, the state machine, G1 walking."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
@@ -45,8 +47,7 @@ def test_tscqp_reproduces_feasible_task_accelerations(g1):
     rhs = np.concatenate([-refs.holonomic.Jdot_v - qp.k_h * Jh @ v, np.zeros(len(locked))])
     vdot = np.linalg.lstsq(fixed, rhs, rcond=None)[0] + null @ (0.2 * rng.standard_normal(null.shape[1]))
     wanted = refs.J @ vdot + refs.Jdot_v
-    refs = type(refs)(**{**refs.__dict__, "y_des": refs.y.copy(), "ydot_des": refs.J @ v,
-                         "yddot_des": wanted})
+    refs = dataclasses.replace(refs, y_des=refs.y.copy(), ydot_des=refs.J @ v, yddot_des=wanted)
     solution, _ = qp.compute(context, refs)
     assert solution.success
     achieved = refs.J @ solution.vdot + refs.Jdot_v
@@ -64,7 +65,7 @@ def test_tscqp_respects_torque_and_friction_limits(g1):
     robot, core, qp = g1
     context, refs = _standing_refs(robot, core, np.zeros(robot.nv))
     huge = np.full(len(refs.y), 500.0)
-    refs = type(refs)(**{**refs.__dict__, "yddot_des": huge})
+    refs = dataclasses.replace(refs, yddot_des=huge)
     solution, _ = qp.compute(context, refs)
     assert solution.success
     assert np.all(np.abs(solution.tau) <= robot.effort_limits * (1 + 1e-6) + 1e-6)

@@ -90,27 +90,32 @@ class TaskStack:
         n = len(self._locked_q)
         self._J_locked = np.zeros((n, robot.nv))
         self._J_locked[np.arange(n), robot.actuated_v_index[mask]] = 1.0
-        self._zeros = np.zeros(n)
         g = LOCKED_GAIN
         self._locked_gains = (np.full(n, g.kp), np.full(n, g.kd), np.full(n, g.weight))
-        self._cache: dict[tuple[tuple[str, ...], bytes], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._cache: dict[tuple[tuple[str, ...], bytes], tuple[np.ndarray, ...]] = {}
 
-    def _gains(self, names: tuple[str, ...], active: np.ndarray):
+    def _rows(self, names: tuple[str, ...], active: np.ndarray):
+        """(indices of the active outputs, kp, kd, weight of every task row), made once per output set."""
         key = (names, active.tobytes())
         if key not in self._cache:
             kp, kd, w = (np.concatenate([g[active], locked])
                          for g, locked in zip(task_gains(names, self.gains), self._locked_gains, strict=True))
-            self._cache[key] = kp, kd, w
+            self._cache[key] = np.flatnonzero(active), kp, kd, w
         return self._cache[key]
 
     def evaluate(self, refs: TaskReferences, q: np.ndarray) -> Tasks:
         """The task rows of ``refs``; the locked joints' errors are read from the configuration ``q``."""
-        a = refs.active
-        kp, kd, w = self._gains(refs.names, a)
-        z = self._zeros
-        return Tasks(np.concatenate((refs.J[a], self._J_locked)), np.concatenate([refs.Jdot_v[a], z]),
-                     np.concatenate([refs.error[a], q[self._locked_q] - self._locked_q0]),
-                     np.concatenate([refs.ydot_des[a], z]), np.concatenate([refs.yddot_des[a], z]), kp, kd, w)
+        rows, kp, kd, w = self._rows(refs.names, refs.active)
+        k = len(rows)
+        J = np.empty((k + len(self._locked_q), self._J_locked.shape[1]))
+        J[:k] = refs.J[rows]
+        J[k:] = self._J_locked
+        # Jdot_v, error, ydot_des, yddot_des of the active outputs, then the locked joints (zero
+        # but the error).
+        v = np.zeros((4, len(kp)))
+        v[:, :k] = np.stack((refs.Jdot_v, refs.error, refs.ydot_des, refs.yddot_des))[:, rows]
+        v[1, k:] = q[self._locked_q] - self._locked_q0
+        return Tasks(J, v[0], v[1], v[2], v[3], kp, kd, w)
 
 
 @dataclass(frozen=True)

@@ -76,9 +76,9 @@ class TaskReferences(SharedValue):
     A_f: np.ndarray
     b_f: np.ndarray
 
-    @property
+    @functools.cached_property
     def error(self) -> np.ndarray:
-        """y − y_d (angles wrapped to (−π, π])."""
+        """y − y_d (angles wrapped to (−π, π]); computed once per references value."""
         e = self.y - self.y_des
         return np.where(_angular(self.names), np.remainder(e + math.pi, 2 * math.pi) - math.pi, e)
 
