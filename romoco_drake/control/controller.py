@@ -63,6 +63,8 @@ def damping_command(robot: RobotModel, x: np.ndarray) -> np.ndarray:
 def command_torque(robot: RobotModel, command: np.ndarray, x: np.ndarray) -> np.ndarray:
     """τ the motor command gives at state x, clipped to the effort limits."""
     q_d, v_d, tau_ff, kp, kd = command.reshape(5, robot.nu)
+    if not (kp.any() or kd.any()):  # a torque command
+        return np.clip(tau_ff, -robot.effort_limits, robot.effort_limits)
     if not np.isfinite(x).all():
         x = np.nan_to_num(x)
     tau = kp * (q_d - x[robot.actuated_q_index]) + kd * (v_d - x[robot.nq + robot.actuated_v_index]) + tau_ff

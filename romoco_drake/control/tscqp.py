@@ -138,7 +138,7 @@ class _DaqpWorkspace:
         if flag < 0:
             return None, None
         lam = info["lam"][self.n_eq:]
-        active = np.where(lam > 0.0, _DAQP_ACTIVE_UPPER, np.where(lam < 0.0, _DAQP_ACTIVE_LOWER, 0))
+        active = _DAQP_ACTIVE_UPPER * (lam > 0.0) + _DAQP_ACTIVE_LOWER * (lam < 0.0)
         return np.asarray(x), active
 
 

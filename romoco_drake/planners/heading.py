@@ -56,10 +56,11 @@ class HeadingHold(LeafSystem):
         discrete_state.get_mutable_vector(self._psi).SetFromVector([psi + self.period * wz])
 
     def _calc(self, context, out) -> None:
-        cmd = np.array(self.command_in_port.Eval(context))
+        cmd = self.command_in_port.Eval(context).copy()
         x = self.state_port.Eval(context)
         psi_d = context.get_discrete_state(self._psi).value()[0]
-        if np.all(np.isfinite(x)):
-            error = math.remainder(psi_d - base_yaw(self.robot, x), 2.0 * math.pi)
-            cmd[2] += float(np.clip(self.gain * error, -self.max_correction, self.max_correction))
+        psi = float(base_yaw(self.robot, x))
+        if math.isfinite(psi):
+            error = math.remainder(psi_d - psi, 2.0 * math.pi)
+            cmd[2] += min(max(self.gain * error, -self.max_correction), self.max_correction)
         out.SetFromVector(cmd)
