@@ -127,6 +127,18 @@ class Ccinn:
                  **arrays)
 
 
+def load_arrays(path: Path, what: str, made_by: str) -> dict[str, np.ndarray]:
+    """Every array of an ``.npz`` file; a missing or unreadable file is a one-line RomocoError
+    naming it, ``what`` it should hold and the command (``made_by``) that writes it."""
+    try:
+        with np.load(path) as f:
+            return {k: f[k] for k in f.files}
+    except FileNotFoundError:
+        raise RomocoError(f"{path}: {what} not found (`{made_by}` writes it)") from None
+    except (OSError, ValueError) as e:
+        raise RomocoError(f"{path}: cannot read {what} ({e})") from None
+
+
 def load_ccinn_file(path: Path) -> Ccinn:
     """Loads and checks a weights file (layers W0, b0, W1, … chaining 12 → … → 6).
 
@@ -134,14 +146,7 @@ def load_ccinn_file(path: Path) -> Ccinn:
     one-line RomocoError naming the file.
     """
     path = Path(path)
-    try:
-        with np.load(path) as f:
-            data = {k: f[k] for k in f.files}
-    except FileNotFoundError:
-        raise RomocoError(f"{path}: CCINN weights not found (make them with `romoco train-inertia`)"
-                          ) from None
-    except (OSError, ValueError) as e:
-        raise RomocoError(f"{path}: cannot read CCINN weights ({e})") from None
+    data = load_arrays(path, "CCINN weights", "romoco train-inertia")
     n_layers = sum(1 for k in data if k[:1] == "W" and k[1:].isdigit())
     if n_layers < 2:
         raise RomocoError(f"{path}: CCINN weights need layers W0, W1, ... (found {n_layers})")

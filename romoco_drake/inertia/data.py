@@ -29,7 +29,7 @@ from pydrake.multibody.inverse_kinematics import InverseKinematics
 from pydrake.solvers import SnoptSolver, SolverOptions
 
 from romoco_drake.errors import RomocoError
-from romoco_drake.inertia.ccinn import entries_from_inertia, foot_features
+from romoco_drake.inertia.ccinn import entries_from_inertia, foot_features, load_arrays
 from romoco_drake.inertia.collision import SelfCollision
 from romoco_drake.robots.centroidal import centroidal_inertia
 from romoco_drake.robots.model import RobotModel, load_robot
@@ -282,13 +282,7 @@ def save_dataset(path: Path, data: dict) -> None:
 def load_dataset(path: Path) -> dict:
     """A dataset written by :func:`save_dataset`; one-line errors name the file."""
     path = Path(path)
-    try:
-        with np.load(path) as f:
-            data = {k: f[k] for k in f.files}
-    except FileNotFoundError:
-        raise RomocoError(f"{path}: inertia dataset not found (make it with `romoco inertia-data`)") from None
-    except (OSError, ValueError) as e:
-        raise RomocoError(f"{path}: cannot read inertia dataset ({e})") from None
+    data = load_arrays(path, "inertia dataset", "romoco inertia-data")
     need = {"features": 12, "inertia": 6}
     for key in ("features", "inertia", "q_legs", "motion", "knot", "meta"):
         if key not in data:

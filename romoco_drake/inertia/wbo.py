@@ -44,6 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from romoco_drake.errors import RomocoError
+from romoco_drake.inertia.ccinn import load_arrays
 from romoco_drake.robots.source import MODELS_DIR
 
 WBO_JOINTS = [f"{s}_{j}" for s in ("l", "r") for j in ("hip_ie", "hip_aa", "hip_fe", "knee_fe_jd")]
@@ -134,13 +135,7 @@ class Wbo:
 def load_wbo_file(path: Path) -> Wbo:
     """Loads and checks a WBO file; one-line errors name the file."""
     path = Path(path)
-    try:
-        with np.load(path) as f:
-            data = {k: f[k] for k in f.files}
-    except FileNotFoundError:
-        raise RomocoError(f"{path}: WBO map not found (make it with `romoco train-inertia`)") from None
-    except (OSError, ValueError) as e:
-        raise RomocoError(f"{path}: cannot read WBO map ({e})") from None
+    data = load_arrays(path, "WBO map", "romoco train-inertia")
     for key in ("joints", "q_index", "x_ref", "theta"):
         if key not in data:
             raise RomocoError(f"{path}: WBO map lacks '{key}'")
