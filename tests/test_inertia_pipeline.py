@@ -45,4 +45,4 @@ def test_training_a_missing_dataset_is_a_one_line_error(tmp_path, capsys):
     assert main(["train-inertia", "draco", "--data", str(missing), "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err == (f"romoco: error: {missing}: inertia dataset not found "
-                   "(make it with `romoco inertia-data`)\n")
+                   "(`romoco inertia-data` writes it)\n")
