@@ -44,6 +44,7 @@ def _scenario(**overrides):
         (_scenario(planner={"name": "alip_general", "gain": "lqr"}), "planner.gain", "supports gains"),
         (_scenario(estimator={"name": "ekf"}), "estimator.name", "unknown estimator 'ekf'"),
         (_scenario(controller={"name": "tscqp", "solver": "osqp"}), "controller.solver", "not one of: daqp"),
+        (_scenario(controller={"name": "id", "solver": "clarabel"}), "controller.solver", "solves no QP"),
         (_scenario(duration_s="long"), "duration_s", "expected a number"),
         (_scenario(duration_s=-1.0), "duration_s", "must be positive"),
         ({"duration_s": 1.0}, "robot", "missing required key"),
