@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import sys
 import time
 from pathlib import Path
@@ -27,6 +29,20 @@ SAP_DIVERGED = "The SAP solver failed to converge"
 # No robot's |q| or |v| (m, rad, m/s, rad/s) gets here; a blown-up simulation does within a
 # few steps, often without a solver noticing (then a controller trips on it).
 BLOWN_UP = 1e6
+
+
+@contextlib.contextmanager
+def frozen_heap():
+    """Within: every Python object alive on entry (the diagram, its systems, the models) is out
+    of the garbage collector's view (``gc.freeze``), so the collections a run triggers scan only
+    what its ticks allocate (full collections over the diagram stretched G1's tick by about
+    20 %). On exit they are collectable again, so runs in one process do not pile up."""
+    gc.collect()
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
 
 
 def run_scenario(
@@ -74,7 +90,10 @@ def run_scenario(
     last_print = wall0
     chunk = min(0.1, duration)
     t, diverged = 0.0, None
-    try:  # the log is closed however the run ends (Ctrl-C on --hardware included)
+    # The log is closed however the run ends (Ctrl-C on --hardware included).
+    with contextlib.ExitStack() as stack, frozen_heap():
+        if recorder is not None:
+            stack.callback(recorder.close)
         while t < duration - 1e-9:
             t = min(duration, t + chunk)
             try:
@@ -90,9 +109,6 @@ def run_scenario(
             if progress is not None and now - last_print > PROGRESS_WALL_S:
                 progress(f"[{scenario.name}] t = {t:.1f}/{duration:.1f} s ({100 * t / duration:.0f}%)")
                 last_print = now
-    finally:
-        if recorder is not None:
-            recorder.close()
     wall = time.perf_counter() - wall0
     if record is not None:
         meshcat.StopRecording()
@@ -164,11 +180,12 @@ def run_robot_sim(scenario: Scenario, duration: float | None = None, lcm_url: st
         raise RomocoError(f"robot-sim: no motor command within {wait_s:g} s "
                           f"({str(e).splitlines()[0][:120]})") from None
     last_print = time.perf_counter()
-    while context.get_time() < duration - 1e-9:
-        simulator.AdvanceTo(min(duration, context.get_time() + 0.1))
-        if progress is not None and time.perf_counter() - last_print > PROGRESS_WALL_S:
-            progress(f"[robot-sim {robot.name}] t = {context.get_time():.1f}/{duration:.1f} s")
-            last_print = time.perf_counter()
+    with frozen_heap():
+        while context.get_time() < duration - 1e-9:
+            simulator.AdvanceTo(min(duration, context.get_time() + 0.1))
+            if progress is not None and time.perf_counter() - last_print > PROGRESS_WALL_S:
+                progress(f"[robot-sim {robot.name}] t = {context.get_time():.1f}/{duration:.1f} s")
+                last_print = time.perf_counter()
     monitor = station.GetSubsystemByName("monitor")
     return ({"robot": robot.name, "lcm_url": lcm.get_lcm_url(), "duration_s": duration}
             | monitor.summary(monitor.GetMyContextFromRoot(context)) | robot_summary(robot_sim, context))
