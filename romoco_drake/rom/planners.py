@@ -115,21 +115,22 @@ class FootPlacementLaw(ABC):
         c, s, k = math.cosh(x), math.sinh(x), consts.k
         pre = ((c * sag_p + s / k * sag_l, k * s * sag_p + c * sag_l),
                (c * lat_p + s / k * lat_l, k * s * lat_p + c * lat_l))
-        u_x, u_y, orbit, nominal = self._place(pre, stance_side, cmd, consts)
+        u_x, u_y, orbit, nominal = self._place(pre, stance_side, cmd)
         return self._output(stance_side, cmd, t_left, (u_x, u_y, 0.0), np.array(pre), orbit, nominal, True)
 
     @abstractmethod
-    def _place(self, pre: tuple[Plane, Plane], stance_side: str, cmd: WalkCommand, consts: _Constants
+    def _place(self, pre: tuple[Plane, Plane], stance_side: str, cmd: WalkCommand
                ) -> tuple[float, float, tuple[Plane, Plane], Plane]:
         """(u_x, u_y, orbit pre-impact state (2, 2), nominal steps (2,)) from the predicted
-        end-of-SS state ((p_x, L_x/m), (p_y, L_y/m)) in LIP coordinates."""
+        end-of-SS state ((p_x, L_x/m), (p_y, L_y/m)) in LIP coordinates. This is the extension
+        point a custom law overrides (see ``examples/custom_planner.py``); the law's constants
+        for the command's (z0, T_SS) are ``self._constants(cmd.com_height, cmd.step_time)``."""
 
     def _fallback(self, stance_side: str, cmd: WalkCommand, t_left: float) -> PlannerOutput:
         """The law's own orbit step (its nominal step), flagged invalid."""
         if cmd.problem() is not None:
             cmd = WalkCommand()
-        consts = self._constants(cmd.com_height, cmd.step_time)
-        _, _, orbit, nominal = self._place(((0.0, 0.0), (0.0, 0.0)), stance_side, cmd, consts)
+        _, _, orbit, nominal = self._place(((0.0, 0.0), (0.0, 0.0)), stance_side, cmd)
         return self._output(stance_side, cmd, t_left, (*nominal, 0.0), np.full((2, 2), np.nan), orbit,
                             nominal, False)
 
@@ -187,7 +188,8 @@ class S2SLaw(FootPlacementLaw):
             report=_orbit_basis(self._report_s2s(z0, t_ss)),
         )
 
-    def _place(self, pre, stance_side, cmd, consts: _S2SMaps):
+    def _place(self, pre, stance_side, cmd):
+        consts: _S2SMaps = self._constants(cmd.com_height, cmd.step_time)
         ux, uy, uy_next = self.nominal_steps(stance_side, cmd)
         (gp, gl), (k_p1, k_own, k_next) = consts.gain, consts.orbit_gain
         (sag_p, sag_l), (lat_p, lat_l) = pre
@@ -268,7 +270,8 @@ class AlipLaw(FootPlacementLaw):
     def _build_constants(self, z0: float, t_ss: float) -> _AlipConstants:
         return _alip_constants(z0, t_ss, self.params.g)
 
-    def _place(self, pre, stance_side, cmd, consts: _AlipConstants):
+    def _place(self, pre, stance_side, cmd):
+        consts: _AlipConstants = self._constants(cmd.com_height, cmd.step_time)
         ux, uy, uy_next = self.nominal_steps(stance_side, cmd)
         p1, own, nxt = consts.orbit
         orbit_lat = (own[0] * uy + nxt[0] * uy_next, own[1] * uy + nxt[1] * uy_next)
@@ -317,7 +320,8 @@ class AlipGeneralLaw(FootPlacementLaw):
             l_cx_per_vy=alip_general.desired_momentum_x(0.0, 1.0, t_ss, m, z0, g),
         )
 
-    def _place(self, pre, stance_side, cmd, consts: _AlipGeneralConstants):
+    def _place(self, pre, stance_side, cmd):
+        consts: _AlipGeneralConstants = self._constants(cmd.com_height, cmd.step_time)
         m, t, vx, vy = self.params.mass, cmd.step_time, cmd.vx, cmd.vy
         (sag_p, sag_l), (lat_p, lat_l) = pre
         l_cy_d = consts.l_cy_per_vx * vx
