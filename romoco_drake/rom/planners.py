@@ -339,8 +339,13 @@ class AlipGeneralLaw(FootPlacementLaw):
 
 
 PLANNERS = Registry("planner")
-for _law in (AlipLaw, HlipLaw, MlipLaw, DcmLaw, AlipGeneralLaw):
-    PLANNERS.add(_law.name, _law, (_law.__doc__ or "").split("\n")[0], gains=_law.supported_gains)
+for _law, _description in (
+        (AlipLaw, "ALIP: momentum at the end of the next step on the orbit (Gong & Grizzle)"),
+        (HlipLaw, "H-LIP: S2S feedback, constant-velocity double support (Xiong & Ames)"),
+        (MlipLaw, "MLIP: S2S feedback, ZMP rolled to the new foot in double support"),
+        (DcmLaw, "DCM: S2S feedback on the divergent component only"),
+        (AlipGeneralLaw, "general-foot ALIP for large flat feet and heavy limbs (XO paper)")):
+    PLANNERS.add(_law.name, _law, _description, gains=_law.supported_gains)
 
 
 def make_planner(name: str, params: PlannerParams) -> FootPlacementLaw:
