@@ -147,10 +147,6 @@ def _heading(a: list[float], w: list[float], alpha: list[float]) -> tuple[float,
     return atan2(ay, ax), (-k * ax, -k * ay, 1.0), psidot, bias
 
 
-def _base_rotation(kin: RobotKinematics) -> np.ndarray:
-    return kin.robot.plant.EvalBodyPoseInWorld(kin.context, kin.robot.base_body).rotation().matrix()
-
-
 def base_angular_jacobian(robot: RobotModel) -> np.ndarray:
     """J_ω of the floating base (3×nv): selects ω_WB."""
     J = np.zeros((3, robot.nv))
@@ -214,7 +210,7 @@ class WalkingOutputs:
         q, v = kin.q, kin.v
         R_st, p_st, J_st, bias_st = _motion(kin, self.robot.foot_frames[stance], self._centroid[stance])
         R_sw, p_sw, J_sw, bias_sw = _motion(kin, self.robot.foot_frames[swing], self._centroid[swing])
-        R_b = _base_rotation(kin)
+        R_b = kin.R_base
         com, J_com, com_bias = kin.p_com, kin.J_com, kin.com_bias
         S = np.concatenate((J_st, J_sw, self._Jw, J_com[2:]))
         V = (S @ v).tolist()
@@ -276,7 +272,7 @@ class StandingOutputs:
     def evaluate(self, kin: RobotKinematics) -> Output:
         Jw = self._Jw
         w, alpha = (Jw @ kin.v).tolist(), [0.0, 0.0, 0.0]
-        x_b, y_b, _ = _base_rotation(kin).T.tolist()
+        x_b, y_b, _ = kin.R_base.T.tolist()
         roll, c_roll, roll_bias = _tilt(y_b, w, alpha)
         pitch, c_pitch, pitch_bias = _tilt([-x_b[0], -x_b[1], -x_b[2]], w, alpha)
         yaw, c_yaw, _, yaw_bias = _heading(x_b, w, alpha)

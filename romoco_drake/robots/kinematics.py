@@ -27,7 +27,7 @@ from collections.abc import Callable
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.multibody.tree import Frame, JacobianWrtVariable
 from pydrake.systems.framework import CacheEntry, Context, LeafSystem, ValueProducer
 
 from romoco_drake.errors import RomocoError
@@ -49,7 +49,7 @@ class RobotKinematics:
     """
 
     __slots__ = ("robot", "context", "x", "q", "v", "finite", "_M", "_bias", "_tau_g", "_C", "_base_rows",
-                 "_p_com", "_p_base", "_poses", "_motions", "_g_W")
+                 "_p_com", "_p_base", "_poses", "_motions", "_g_W", "_h", "_base_frame")
 
     def __init__(self, robot: RobotModel, x: np.ndarray | None = None):
         self.robot = robot
@@ -57,6 +57,7 @@ class RobotKinematics:
         s = robot.base_v_start
         self._base_rows = slice(s, s + 6)
         self._g_W = robot.plant.gravity_field().gravity_vector()
+        self._base_frame = robot.base_body.body_frame()
         self.update(np.concatenate([robot.nominal.q, np.zeros(robot.nv)]) if x is None else x)
 
     def update(self, x: np.ndarray) -> None:
@@ -65,9 +66,10 @@ class RobotKinematics:
         self.x = np.array(x, dtype=float)
         self.q, self.v = self.x[:r.nq], self.x[r.nq:]
         self.finite = bool(np.isfinite(self.x).all())
-        self._M = self._bias = self._tau_g = self._C = self._p_com = self._p_base = None
-        self._poses: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        self._motions: dict[tuple[int, bytes], tuple[np.ndarray, np.ndarray]] = {}
+        self._M = self._bias = self._tau_g = self._C = self._p_com = self._p_base = self._h = None
+        # Keyed on the frame objects themselves (held by the dicts, so no key is ever reused).
+        self._poses: dict[Frame, tuple[np.ndarray, np.ndarray]] = {}
+        self._motions: dict[tuple[Frame, bytes], tuple[np.ndarray, np.ndarray]] = {}
         if self.finite:
             r.plant.SetPositionsAndVelocities(self.context, self.x)
         else:
@@ -114,22 +116,23 @@ class RobotKinematics:
 
     def frame_pose(self, frame) -> tuple[np.ndarray, np.ndarray]:
         """R_WF (3×3) and p_WF (3,) of a frame (read once per state)."""
-        key = int(frame.index())
-        if key not in self._poses:
+        pose = self._poses.get(frame)
+        if pose is None:
             X = frame.CalcPoseInWorld(self.context).GetAsMatrix34()
-            self._poses[key] = X[:, :3], X[:, 3]
-        return self._poses[key]
+            pose = self._poses[frame] = X[:, :3], X[:, 3]
+        return pose
 
     def spatial_jacobian(self, frame, p_FP: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """J (6×nv, rows [ω; v] in world) of the point P fixed in ``frame`` at p_FP, and its bias
         spatial acceleration [α; a] (6,): A_WP = J v̇ + bias. Read once per state and point."""
-        key = (int(frame.index()), p_FP.tobytes())
-        if key not in self._motions:
+        key = (frame, p_FP.tobytes())
+        motion = self._motions.get(key)
+        if motion is None:
             plant, W = self.robot.plant, self.robot.plant.world_frame()
             J = plant.CalcJacobianSpatialVelocity(self.context, JacobianWrtVariable.kV, frame, p_FP, W, W)
             bias = plant.CalcBiasSpatialAcceleration(self.context, JacobianWrtVariable.kV, frame, p_FP, W, W)
-            self._motions[key] = J, bias.get_coeffs()
-        return self._motions[key]
+            motion = self._motions[key] = J, bias.get_coeffs()
+        return motion
 
     @property
     def p_com(self) -> np.ndarray:
@@ -153,16 +156,22 @@ class RobotKinematics:
         return self.J_com @ self.v
 
     @property
+    def R_base(self) -> np.ndarray:
+        """R_WB of the floating base (3×3)."""
+        return self.frame_pose(self._base_frame)[0]
+
+    @property
     def p_base(self) -> np.ndarray:
         """Base origin in world (3,)."""
         if self._p_base is None:
-            pose = self.robot.plant.EvalBodyPoseInWorld(self.context, self.robot.base_body)
-            self._p_base = pose.translation()
+            self._p_base = self.frame_pose(self._base_frame)[1]
         return self._p_base
 
     def angular_momentum_about(self, point: np.ndarray) -> np.ndarray:
         """The robot's angular momentum about a world point, in world (3,)."""
-        h = (self.M[self._base_rows] @ self.v).tolist()  # [angular about the base origin; linear]
+        if self._h is None:  # [angular about the base origin; linear]
+            self._h = (self.M[self._base_rows] @ self.v).tolist()
+        h = self._h
         rx, ry, rz = (self.p_base - point).tolist()
         return np.array([h[0] + ry * h[5] - rz * h[4], h[1] + rz * h[3] - rx * h[5],
                          h[2] + rx * h[4] - ry * h[3]])
