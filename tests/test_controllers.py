@@ -283,18 +283,25 @@ def _solver(kind):
     return IkSolver(robot, PERIOD, kind, core.contact)
 
 
-@pytest.mark.parametrize("kind", ["tscqp", "id", "velocity", "position"])
-def test_controller_system_ticks_damps_and_counts(kind):
-    """WholeBodyController over each solver: a good tick, a failed solve, damping, recovery."""
+def _controller_standing(kind, x, **kwargs):
+    """A WholeBodyController over ``kind`` with the state ``x`` and G1's standing references fixed,
+    and a simulator on it: (system, context, simulator, refs)."""
     robot, _ = _setup("g1")
-    system = WholeBodyController(robot, PERIOD, _solver(kind))
+    system = WholeBodyController(robot, PERIOD, _solver(kind), **kwargs)
     context = system.CreateDefaultContext()
-    x = np.concatenate([robot.nominal.q, np.zeros(robot.nv)])
     _, refs = _references("g1", "standing")
     system.kinematics_port.FixValue(context, RobotKinematics(robot, x))
     system.task_references_port.FixValue(context, refs)
     system.mode_port.FixValue(context, Mode.STANDING)
-    simulator = Simulator(system, context)
+    return system, context, Simulator(system, context), refs
+
+
+@pytest.mark.parametrize("kind", ["tscqp", "id", "velocity", "position"])
+def test_controller_system_ticks_damps_and_counts(kind):
+    """WholeBodyController over each solver: a good tick, a failed solve, damping, recovery."""
+    robot, _ = _setup("g1")
+    x = np.concatenate([robot.nominal.q, np.zeros(robot.nv)])
+    system, context, simulator, refs = _controller_standing(kind, x)
     simulator.AdvanceTo(3.5 * PERIOD)
     tau = system.actuation_port.Eval(context)
     np.testing.assert_array_equal(system.stats_port.Eval(context), [0, 0, 0])
@@ -345,15 +352,9 @@ def test_controller_system_ticks_damps_and_counts(kind):
 def test_controller_keeps_stale_commands_then_damps():
     """After more than ``max_stale_ticks`` failures in a row the command becomes damping."""
     robot, _ = _setup("g1")
-    system = WholeBodyController(robot, PERIOD, _solver("tscqp"), max_stale_ticks=2)
-    context = system.CreateDefaultContext()
     x = np.concatenate([robot.nominal.q, np.zeros(robot.nv)])
     x[robot.nq + robot.actuated_v_index] = 0.2
-    _, refs = _references("g1", "standing")
-    system.kinematics_port.FixValue(context, RobotKinematics(robot, x))
-    system.task_references_port.FixValue(context, refs)
-    system.mode_port.FixValue(context, Mode.STANDING)
-    simulator = Simulator(system, context)
+    system, context, simulator, refs = _controller_standing("tscqp", x, max_stale_ticks=2)
     simulator.AdvanceTo(1.5 * PERIOD)
     good = system.actuation_port.Eval(context).copy()
     bad = dataclasses.replace(refs, y_des=np.full(len(refs.y), np.nan))
