@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from romoco_drake.control.inverse_dynamics import InverseDynamics
 from romoco_drake.control.inverse_kinematics import IkSolver
+from romoco_drake.control.momentum import MomentumHqp
 from romoco_drake.control.standing import StandingController
 from romoco_drake.control.tscqp import TscQp
 from romoco_drake.registry import Registry
@@ -30,3 +31,6 @@ CONTROLLERS.add("velik", lambda robot, contact, period, config: IkSolver(robot, 
                 motor_command=True)
 CONTROLLERS.add("posik", lambda robot, contact, period, config: IkSolver(robot, period, "position", contact),
                 "position IK by Newton-Raphson, joint PD (RoMoCo §V-C)", walking=True, motor_command=True)
+CONTROLLERS.add("momentum", lambda robot, contact, period, config: MomentumHqp(robot, contact),
+                "hierarchical centroidal-momentum QPs in the contact null space (XO paper §III)",
+                walking=True, motor_command=False)

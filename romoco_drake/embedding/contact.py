@@ -20,6 +20,7 @@ foot is not level.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,6 +63,28 @@ def select_contact_points(robot: RobotModel, side: str, line: bool | None = None
         raise RomocoError(f"{robot.yaml_path}: feet.{side}.points: no non-collinear front-left, "
                           "front-right and mid-back points (a plane foot needs two front corners)")
     return ("lf", "rf", "mb"), chosen
+
+
+def contact_frame(robot: RobotModel, kin: RobotKinematics, side: str) -> tuple[np.ndarray, float]:
+    """The stance contact frame {c} of the XO paper (Fig. 1): origin p_Wc and heading ψ.
+
+    The origin is the stance sole's centre (the centroid of its sole points); z is world up and
+    x the stance foot's heading, the direction the CoM walks in this step (the embedding turns
+    each swing foot to the planned heading before it lands). No-slip keeps {c} fixed over the
+    step, so momenta about it evolve as the ALIP model says.
+    """
+    R_FS, p_FS = sole_frame(robot, side)
+    R_WF, p_WF = kin.frame_pose(robot.foot_frames[side])
+    fx, fy, _ = (R_WF @ R_FS[:, 0]).tolist()
+    return R_WF @ p_FS + p_WF, math.atan2(fy, fx)
+
+
+def contact_frame_state(kin: RobotKinematics, origin: np.ndarray, heading: float) -> np.ndarray:
+    """[p (3); L_c (3)] in {c}: CoM minus the origin, and the angular momentum about the origin."""
+    c, s = math.cos(heading), math.sin(heading)
+    px, py, pz = (kin.p_com - origin).tolist()
+    Lx, Ly, Lz = kin.angular_momentum_about(origin).tolist()
+    return np.array([c * px + s * py, c * py - s * px, pz, c * Lx + s * Ly, c * Ly - s * Lx, Lz])
 
 
 def _skew(p: np.ndarray) -> np.ndarray:

@@ -9,6 +9,10 @@ wraps it as a system. Desired values per mode:
   touchdown the feet differ by the planned yaw and the pelvis bisects them; pelvis and swing-sole
   tilt zero; the swing sole follows a Bezier trajectory from lift-off to the plan's target
   (apex ``swing_height``, zero touchdown velocity), replanned each tick from its own state.
+  The horizontal CoM reference (``com_plan``, read by the momentum controller; the other
+  controllers leave the horizontal CoM to the pendulum) is the ALIP flow about the stance
+  contact frame {c} from the CoM and contact momentum latched at the step's first tick, at the
+  plan's z0 (XO paper eq. 9-12 with L_CoM = 0: ṗ_x = L_cy/(mH), ṗ_y = −L_cx/(mH)).
   Double support keeps CoM height, pelvis tilt and the stance hip yaw.
 - standing: CoM over the middle of the two soles at the nominal CoM height, pelvis level and
   facing the mean heading of the feet. On entering standing the CoM reference is a quintic
@@ -22,16 +26,17 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from romoco_drake.embedding.bezier import BezierCurve, SwingTrajectory, plan_swing, quintic_bezier
-from romoco_drake.embedding.contact import ContactModel
+from romoco_drake.embedding.contact import ContactModel, contact_frame, contact_frame_state
 from romoco_drake.embedding.outputs import InAirOutputs, Output, StandingOutputs, WalkingOutputs
 from romoco_drake.modes import Domain, Mode
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
+from romoco_drake.rom.lip import GRAVITY
 from romoco_drake.rom.types import PlannerOutput
 from romoco_drake.values import SharedValue
 
@@ -75,6 +80,7 @@ class TaskReferences(SharedValue):
     num_contact_forces: int
     A_f: np.ndarray
     b_f: np.ndarray
+    com_plan: np.ndarray | None = None  # (3, 2): horizontal CoM p, ṗ, p̈ (world) of the ALIP plan
 
     @functools.cached_property
     def error(self) -> np.ndarray:
@@ -100,6 +106,8 @@ class SwingState(SharedValue):
     liftoff_yaw: tuple[float, float]  # stance hip yaw angle, swing sole yaw rel. stance, at the step start
     trajectory: SwingTrajectory | None  # swing sole rel. stance sole, stance yaw frame
     liftoff_com_height: float  # CoM height above the stance sole at the step start
+    # {c} origin x, y, heading, time into the step, and (p_x, p_y, L_cx, L_cy) in {c}, at the latch
+    com_start: tuple[float, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -140,15 +148,20 @@ class EmbeddingCore:
             ds[self.walking.names.index(name)] = True
         self._walking_active = {"single": ss, "double": ds}
 
-    def start_step(self, kin: RobotKinematics, stance_side: str, t: float, plan: PlannerOutput) -> SwingState:
-        """Latches lift-off: the swing sole's pose, the stance hip yaw and the swing sole's yaw."""
+    def start_step(self, kin: RobotKinematics, stance_side: str, t: float, plan: PlannerOutput,
+                   tau: float = 0.0) -> SwingState:
+        """Latches lift-off, ``tau`` s into the step that began at t: the swing sole's pose, the
+        stance hip yaw, the swing sole's yaw, and the ALIP state about the contact frame."""
         out = self.walking.evaluate(kin, stance_side)
         q = kin.q
         i = self._swing_index
         start = out.y[i:i + 3]
         trajectory = plan_swing(start, self._target(plan), plan.t_ss, self.swing_height)
         yaws = (float(q[self._hip_yaw_q[stance_side]]), float(out.y[self._swing_yaw_index]))
-        return SwingState(stance_side, t, yaws, trajectory, float(out.y[0]))
+        origin, heading = contact_frame(self.robot, kin, stance_side)
+        p_x, p_y, _, l_cx, l_cy, _ = contact_frame_state(kin, origin, heading).tolist()
+        com_start = (float(origin[0]), float(origin[1]), heading, tau, p_x, p_y, l_cx, l_cy)
+        return SwingState(stance_side, t, yaws, trajectory, float(out.y[0]), com_start)
 
     def update_swing(self, swing: SwingState, tau: float, plan: PlannerOutput) -> SwingState:
         """Replans the swing toward the plan's latest target, from the trajectory's own state at
@@ -156,8 +169,7 @@ class EmbeddingCore:
         if swing.trajectory is None or tau >= FREEZE_FRACTION * plan.t_ss:
             return swing
         trajectory = swing.trajectory.replan(tau, self._target(plan))
-        return SwingState(swing.stance_side, swing.step_start, swing.liftoff_yaw, trajectory,
-                          swing.liftoff_com_height)
+        return replace(swing, trajectory=trajectory)
 
     @staticmethod
     def _target(plan: PlannerOutput) -> np.ndarray:
@@ -208,7 +220,29 @@ class EmbeddingCore:
             y_d[i:i + 3], yd_d[i:i + 3], ydd_d[i:i + 3] = swing.trajectory.evaluate(tau)
         active = self._walking_active["single" if single else "double"]
         domain = _SINGLE_SUPPORT[stance] if single else Domain.DOUBLE
-        return self._pack(Mode.WALKING, domain, stance, out, y_d, yd_d, ydd_d, active, kin)
+        refs = self._pack(Mode.WALKING, domain, stance, out, y_d, yd_d, ydd_d, active, kin)
+        if single and swing.com_start is not None:
+            refs = replace(refs, com_plan=self._alip_com(swing.com_start, tau, plan.com_height))
+        return refs
+
+    def _alip_com(self, start: tuple[float, ...], tau: float, height: float) -> np.ndarray:
+        """The horizontal CoM (p, ṗ, p̈; world x, y) of the ALIP flow from ``start`` at time tau.
+
+        In LIP units l = ṗ (l_x = L_cy/(mH), l_y = −L_cx/(mH)) both planes obey ṗ = l,
+        l̇ = ℓ² p, so p(t) = cosh(ℓt) p₀ + sinh(ℓt) l₀/ℓ and p̈ = ℓ² p.
+        """
+        ox, oy, heading, tau0, p_x, p_y, l_cx, l_cy = start
+        mh = self.robot.total_mass * height
+        ell = math.sqrt(GRAVITY / height)
+        dt = max(tau - tau0, 0.0)
+        ch, sh = math.cosh(ell * dt), math.sinh(ell * dt)
+        p0 = np.array([p_x, p_y])
+        l0 = np.array([l_cy / mh, -l_cx / mh])
+        p = ch * p0 + sh / ell * l0
+        v = ell * sh * p0 + ch * l0
+        c, s = math.cos(heading), math.sin(heading)
+        R = np.array([[c, -s], [s, c]])
+        return np.vstack([R @ p + (ox, oy), R @ v, ell * ell * (R @ p)])
 
     def _standing(self, kin: RobotKinematics, stand: StandState | None, t: float) -> TaskReferences:
         out = self.standing.evaluate(kin)

@@ -111,7 +111,7 @@ class OutputEmbedding(LeafSystem):
             if same_step:
                 new = self.core.update_swing(swing, tau, plan)
             else:
-                new = self.core.start_step(self._kinematics(context), side, step_start, plan)
+                new = self.core.start_step(self._kinematics(context), side, step_start, plan, tau)
         state.get_mutable_abstract_state(int(self._swing)).set_value(new)
 
     def _calc_references(self, context, value) -> None:

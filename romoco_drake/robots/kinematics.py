@@ -17,6 +17,8 @@ angular velocity ω_WB and the translational velocity v_WB, both in world, so th
 gradient with respect to them, the base rows of M v, is the spatial momentum of the whole robot
 about the base origin (world frame). Its translational part is m v_CoM, hence J_CoM = M_t / m
 and J̇_CoM v = (C v)_t / m; its rotational part gives the angular momentum about any point.
+Shifted to the CoM, the base rows of M are the centroidal momentum matrix A_G and the base rows
+of C v are Ȧ_G v (:meth:`RobotKinematics.centroidal_momentum_matrix`).
 :func:`check_floating_base` verifies both against Drake's general functions once per robot.
 """
 
@@ -167,6 +169,20 @@ class RobotKinematics:
             self._p_base = self.frame_pose(self._base_frame)[1]
         return self._p_base
 
+    def centroidal_momentum_matrix(self) -> tuple[np.ndarray, np.ndarray]:
+        """A_G (6×nv) and Ȧ_G v (6,): h_G = [k_G; m v_G] = A_G v about the CoM G, in world.
+
+        The base rows of M v are the momentum about the base origin B, h_B = [k_B; m v_G]; with
+        r = p_G − p_B, k_G = k_B − r × m v_G, so A_G is those rows shifted by r. The base rows of
+        M v̇ + C v − τ_g are the external wrench about B, and with v̇ = 0, τ_g = 0 they are
+        ḣ_B + [v_B × m v_G; 0] (B moves); differentiating k_G = k_B − r × m v_G then gives
+        k̇_G = (C v)_ang − r × (C v)_lin: the same shift of the base rows of C v, so
+        ḣ_G = A_G v̇ + Ȧ_G v with Ȧ_G v = shift(C v). Tested against Drake's spatial momentum
+        and finite differences along q(t).
+        """
+        r = self.p_com - self.p_base
+        return _shift_rows(self.M[self._base_rows], r), _shift_rows(self.bias[self._base_rows], r)
+
     def angular_momentum_about(self, point: np.ndarray) -> np.ndarray:
         """The robot's angular momentum about a world point, in world (3,)."""
         if self._h is None:  # [angular about the base origin; linear]
@@ -175,6 +191,14 @@ class RobotKinematics:
         rx, ry, rz = (self.p_base - point).tolist()
         return np.array([h[0] + ry * h[5] - rz * h[4], h[1] + rz * h[3] - rx * h[5],
                          h[2] + rx * h[4] - ry * h[3]])
+
+
+def _shift_rows(h_B: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """[a − r × l; l] of stacked momentum-like rows [a (3); l (3)] (vectors or 6×n matrices)."""
+    a, lin = h_B[:3], h_B[3:]
+    cross = np.array([r[1] * lin[2] - r[2] * lin[1], r[2] * lin[0] - r[0] * lin[2],
+                      r[0] * lin[1] - r[1] * lin[0]])
+    return np.concatenate([a - cross, lin])
 
 
 @functools.cache

@@ -1,0 +1,92 @@
+"""A strict-priority hierarchy of least-squares tasks under shared linear constraints (numpy + DAQP).
+
+    level 0:  E x = e,  lower ≤ G x ≤ upper                 (hard: kept by every level)
+    level k:  min_x ‖W_k (A_k x − b_k)‖²  over the optima of levels 0 … k−1
+
+Solved by the null-space method: x = x_k + N_k w, where N_k spans the directions no higher
+level constrains. Level k solves the small QP
+
+    min_w ‖W_k (A_k N_k w − (b_k − A_k x_k))‖² + ε‖w‖²   s.t.  lower ≤ G (x_k + N_k w) ≤ upper
+
+with DAQP, then x_{k+1} = x_k + N_k w* and N_{k+1} = N_k · null(W_k A_k N_k). A level's
+objective is strictly convex in A_k x, so every optimum of the level has the same A_k x: fixing
+it by restricting the lower levels to null(A_k N_k) keeps exactly that level's set of optima
+(its inequalities stay in every later QP), which is what strict priority means. A task a higher
+level already fixes has A_k N_k = 0 there: the lower level cannot move it, and it still uses
+every direction the higher levels leave free. ε (tiny) keeps each QP strictly convex.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import daqp
+import numpy as np
+
+_INF = 1e30  # DAQP treats bounds at or beyond this as absent
+RANK_RTOL = 1e-9  # singular values below this fraction of the largest count as zero
+
+
+@dataclass(frozen=True)
+class Level:
+    """One priority level: rows A (k×n), targets b (k,), row weights w (k,; the W² diagonal)."""
+
+    name: str
+    A: np.ndarray
+    b: np.ndarray
+    w: np.ndarray
+
+
+@dataclass(frozen=True)
+class HqpResult:
+    """The solution, and which level failed (None: all solved). ``freedom[k]`` is the dimension
+    left to level k; ``residuals[k]`` its weighted residual ‖W_k (A_k x − b_k)‖ at the solution."""
+
+    x: np.ndarray
+    failed: str | None
+    freedom: tuple[int, ...]
+    residuals: tuple[float, ...]
+
+
+def null_space(A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(U_r, s_r, V_r, V_n) of the SVD of A: A = U_r diag(s_r) V_rᵀ, V_n spans null(A)."""
+    m, n = A.shape
+    if m == 0:
+        return np.zeros((0, 0)), np.zeros(0), np.zeros((n, 0)), np.eye(n)
+    U, s, Vt = np.linalg.svd(A)
+    r = int(np.count_nonzero(s > RANK_RTOL * s[0])) if len(s) and s[0] > 0.0 else 0
+    return U[:, :r], s[:r], Vt[:r].T, Vt[r:].T
+
+
+def solve_hierarchy(E: np.ndarray, e: np.ndarray, G: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                    levels: list[Level], damping: float = 1e-9, feasibility_tol: float = 1e-6) -> HqpResult:
+    """Solves the hierarchy (module docstring). A level that cannot be solved (its QP is
+    infeasible: the constraints of level 0 cannot all hold) is reported by name in ``failed``
+    and the solution is the last level's; an inconsistent E x = e fails as ``"equality"``."""
+    n = E.shape[1] if E.size else G.shape[1]
+    U_r, s_r, V_r, N = null_space(E)
+    x = V_r @ ((U_r.T @ e) / s_r) if len(s_r) else np.zeros(n)
+    scale = max(1.0, float(np.abs(e).max(initial=0.0)))
+    if len(e) and np.abs(E @ x - e).max() > feasibility_tol * scale:
+        return HqpResult(x, "equality", (), ())
+    freedom, residuals = [], []
+    lower_d, upper_d = np.maximum(lower, -_INF), np.minimum(upper, _INF)
+    sense = np.zeros(len(lower), dtype=np.int32)
+    for level in levels:
+        freedom.append(N.shape[1])
+        if N.shape[1] == 0:
+            continue
+        root = np.sqrt(level.w)
+        AN = root[:, None] * (level.A @ N)
+        r = root * (level.b - level.A @ x)
+        H = AN.T @ AN
+        H.flat[::H.shape[0] + 1] += damping * max(1.0, float(np.trace(H)) / H.shape[0])
+        GN, Gx = G @ N, G @ x
+        w, _, flag, _ = daqp.solve(H, -(AN.T @ r), GN, upper_d - Gx, lower_d - Gx, sense)
+        if flag < 0:
+            return HqpResult(x, level.name, tuple(freedom), tuple(residuals))
+        x = x + N @ w
+        N = N @ null_space(AN)[3]
+    for level in levels:
+        residuals.append(float(np.linalg.norm(np.sqrt(level.w) * (level.A @ x - level.b))))
+    return HqpResult(x, None, tuple(freedom), tuple(residuals))

@@ -1,0 +1,233 @@
+"""The XO paper's hierarchical centroidal-momentum controller (§III), for any floating-base robot.
+
+Accelerations live in the null space of the active contacts (eq. 20): with J_c the stacked 6-row
+spatial Jacobians of the feet in contact at their sole centres (plus the robot's internal loop
+rows),
+
+    v̇ = v̇₀ + Z z,    v̇₀ = J_c⁺ (−J̇_c v − k_h J_c v),    Z = null(J_c),
+
+so no level can make a stance foot slip (k_h damps the drift of a contact held only in
+acceleration). The decision variables are x = [z; λ], λ the contact wrenches [τ; f] at the sole
+centres (world frame) and the internal-loop forces. A strict hierarchy is solved level by level
+(:func:`~romoco_drake.control.hqp.solve_hierarchy`):
+
+0. dynamics consistency (the unactuated rows of M v̇ + C = B τ + J_cᵀ λ), the contact wrench
+   cone of each sole (:func:`~romoco_drake.rom.wrench_cone.rectangle_wrench_cone`: friction,
+   CoP inside the sole, unilateral force, yaw moment) and the torque limits, with
+   τ = (M v̇ + C − J_cᵀ λ)_actuated;
+1. the centroidal momentum rate ḣ_G = A_G v̇ + Ȧ_G v (eq. 21) toward eq. 22: m p̈_d +
+   K_D m (ṗ_d − ṗ) + K_P m (p_d − p) on the CoM (horizontal from the ALIP plan in walking's
+   single support, the CoM references otherwise, the CoM height from its output), and
+   −K_L L_G on the centroidal angular momentum. Level 0's wrench limits stay in force, so the
+   rate the level reaches is the paper's *constrained* desired rate: the closest the contact
+   wrench can physically give;
+2. the other task outputs: swing foot pose (which the planner's u_x, u_y place), pelvis
+   orientation, stance hip yaw, and in the air the joint targets;
+3. regularisation: the locked joints (arms, waist) at their nominal angles, every joint toward
+   its nominal angle with a weak PD, and small contact wrenches.
+
+A level that cannot be solved (its QP infeasible: the torque and wrench limits cannot hold)
+fails the tick; :class:`~romoco_drake.control.controller.WholeBodyController` counts it and
+keeps the last command, then damps. In the air (no contact) the momentum rate is gravity's
+alone, so level 1 is skipped.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from romoco_drake.control.controller import SolverResult, torque_command
+from romoco_drake.control.hqp import Level, null_space, solve_hierarchy
+from romoco_drake.control.tasks import DEFAULT_TASK_GAINS, TaskGain, TaskStack
+from romoco_drake.embedding.contact import ContactModel
+from romoco_drake.embedding.outputs import sole_frame
+from romoco_drake.embedding.references import TaskReferences
+from romoco_drake.errors import RomocoError
+from romoco_drake.robots.kinematics import RobotKinematics
+from romoco_drake.robots.model import RobotModel
+from romoco_drake.rom.wrench_cone import rectangle_wrench_cone
+
+
+@dataclass(frozen=True)
+class MomentumGains:
+    """Gains of eq. 22 and the regularisation level.
+
+    ``kp``, ``kd`` (1/s², 1/s): horizontal CoM toward the ALIP plan; ``k_angular`` (1/s): the
+    decay rate of L_G; ``angular_weight``: the angular rows' weight against the linear ones,
+    both scaled to CoM-acceleration units (linear ÷ m, angular ÷ m z0); ``posture_kp``,
+    ``posture_kd``: the weak joint PD toward the nominal pose; ``wrench_weight``: the contact
+    wrenches' weight (per N², against joint accelerations per (rad/s²)²).
+    """
+
+    kp: float = 40.0
+    kd: float = 12.0
+    k_angular: float = 10.0
+    angular_weight: float = 0.5
+    posture_kp: float = 20.0
+    posture_kd: float = 8.0
+    wrench_weight: float = 1e-6
+
+
+@dataclass(frozen=True)
+class MomentumSolution:
+    """One tick: torque, v̇, contact wrenches λ (6 a foot, then internal forces), the desired and
+    reached centroidal momentum rate [k̇; ṁv] (6,), and the failed level (None: solved)."""
+
+    tau: np.ndarray
+    vdot: np.ndarray
+    wrenches: np.ndarray
+    hdot_desired: np.ndarray
+    hdot: np.ndarray
+    failed: str | None
+
+
+class MomentumHqp:
+    """The hierarchical momentum controller for one robot (module docstring).
+
+    ``friction_margin`` shrinks μ by that fraction and ``cop_margin`` (m) the sole rectangle on
+    every side, so the controller's wrenches stay clear of the edges the simulation slips or
+    tips at.
+    """
+
+    warm_start_size = 0
+
+    def __init__(self, robot: RobotModel, contact: ContactModel, gains: MomentumGains = MomentumGains(),
+                 task_gains: tuple[TaskGain, ...] = DEFAULT_TASK_GAINS, constraint_damping: float = 20.0,
+                 friction_margin: float = 0.1, cop_margin: float = 0.01):
+        self.robot, self.contact, self.gains, self.k_h = robot, contact, gains, constraint_damping
+        B = robot.B
+        selection = np.all((B == 0.0) | (B == 1.0)) and np.all(B.sum(axis=0) == 1.0)
+        if not (selection and np.all(B.sum(axis=1) <= 1.0)):
+            raise RomocoError(f"{robot.yaml_path}: the momentum controller needs one actuator per joint")
+        self._rows_a = np.argmax(B, axis=0)
+        self._rows_u = np.flatnonzero(B.sum(axis=1) == 0.0)
+        self._tasks = TaskStack(robot, task_gains)
+        self._nominal = robot.nominal.q[robot.actuated_q_index]
+        self._J_joints = np.zeros((robot.nu, robot.nv))
+        self._J_joints[np.arange(robot.nu), robot.actuated_v_index] = 1.0
+        mu = robot.config.feet.friction * (1.0 - friction_margin)
+        self._soles, self._cones = {}, {}
+        for side in ("left", "right"):
+            R_FS, p_FS = sole_frame(robot, side)
+            xy = (R_FS.T @ (robot.feet[side].points - p_FS[:, None]))[:2]
+            half = 0.5 * (xy.max(axis=1) - xy.min(axis=1))
+            half = np.where(half > 2.0 * cop_margin, half - cop_margin, half)
+            self._soles[side] = (robot.foot_frames[side], R_FS, p_FS)
+            self._cones[side] = rectangle_wrench_cone(float(half[0]), float(half[1]), mu)
+        self._z0 = robot.config.walking.z0
+
+    def solve(self, kin: RobotKinematics, refs: TaskReferences, previous: np.ndarray,
+              warm_start: np.ndarray) -> SolverResult:
+        """The torque command of this tick (:class:`~romoco_drake.control.controller.WholeBodySolver`)."""
+        solution = self.compute(kin, refs)
+        ok = solution.failed is None and bool(np.all(np.isfinite(solution.tau)))
+        return SolverResult(torque_command(self.robot, kin, solution.tau), ok)
+
+    def compute(self, kin: RobotKinematics, refs: TaskReferences) -> MomentumSolution:
+        """The hierarchy's solution at the state of ``kin`` for the references ``refs``."""
+        r, g = self.robot, self.gains
+        nv, v, m = r.nv, kin.v, r.total_mass
+        feet = refs.domain.feet
+        # Contact rows: each foot's sole-centre spatial Jacobian, then the internal loops.
+        J_rows, bias_rows, cones = [], [], []
+        for side in feet:
+            frame, R_FS, p_FS = self._soles[side]
+            J, bias = kin.spatial_jacobian(frame, p_FS)
+            J_rows.append(J)
+            bias_rows.append(bias)
+            R_SW = (kin.frame_pose(frame)[0] @ R_FS).T
+            cones.append(self._cones[side] @ np.kron(np.eye(2), R_SW))
+        n_f = refs.num_contact_forces
+        J_rows.append(refs.holonomic.J[n_f:])
+        bias_rows.append(refs.holonomic.Jdot_v[n_f:])
+        Jc = np.vstack(J_rows)
+        U_r, s_r, V_r, Z = null_space(Jc)
+        vdot0 = V_r @ ((U_r.T @ (-np.concatenate(bias_rows) - self.k_h * (Jc @ v))) / s_r) if len(s_r) \
+            else np.zeros(nv)
+        nz, nl = Z.shape[1], Jc.shape[0]
+        n = nz + nl
+        # v̇ = vdot0 + P x;   generalized force rows F x + f0 = M v̇ + C − J_cᵀ λ.
+        P = np.zeros((nv, n))
+        P[:, :nz] = Z
+        F = np.empty((nv, n))
+        F[:, :nz] = kin.M @ Z
+        F[:, nz:] = -Jc.T
+        f0 = kin.M @ vdot0 + kin.C
+        u, a = self._rows_u, self._rows_a
+        E, e = F[u], -f0[u]
+        n_cone = sum(len(c) for c in cones)
+        G = np.zeros((r.nu + n_cone, n))
+        lower = np.full(len(G), -np.inf)
+        upper = np.zeros(len(G))
+        G[:r.nu] = F[a]
+        lower[:r.nu] = -r.effort_limits - f0[a]
+        upper[:r.nu] = r.effort_limits - f0[a]
+        row, col = r.nu, nz
+        for cone in cones:
+            G[row:row + len(cone), col:col + 6] = cone
+            row, col = row + len(cone), col + 6
+        tasks = self._tasks.evaluate(refs, kin.q)
+        a_cmd = tasks.yddot_des - tasks.kp * tasks.error - tasks.kd * (tasks.J @ v - tasks.ydot_des)
+        k_out = int(np.count_nonzero(refs.active))
+        names = [name for name, on in zip(refs.names, refs.active, strict=True) if on]
+        com = [i for i, name in enumerate(names) if name.startswith("com_")]
+        other = [i for i in range(k_out) if i not in com]
+        A_G, Adot_v = kin.centroidal_momentum_matrix()
+        hdot_des = np.full(6, np.nan)
+        levels = []
+        if feet:
+            hdot_des, rows = self._momentum_rate(kin, refs, names, com, a_cmd, A_G)
+            w = np.concatenate([np.full(3, g.angular_weight / (m * self._z0) ** 2), np.full(3, 1.0 / m**2)])
+            target = hdot_des - Adot_v - A_G @ vdot0
+            levels.append(Level("momentum", (A_G @ P)[rows], target[rows], w[rows]))
+        J_out = tasks.J[other]
+        levels.append(Level("tasks", J_out @ P, a_cmd[other] - tasks.Jdot_v[other] - J_out @ vdot0,
+                            tasks.weight[other]))
+        levels.append(self._regularization(kin, tasks, a_cmd, k_out, P, vdot0, nz, nl))
+        result = solve_hierarchy(E, e, G, lower, upper, levels)
+        x = result.x
+        vdot = vdot0 + P @ x
+        tau = F[a] @ x + f0[a]
+        return MomentumSolution(tau, vdot, x[nz:], hdot_des, A_G @ vdot + Adot_v, result.failed)
+
+    def _momentum_rate(self, kin: RobotKinematics, refs: TaskReferences, names: list[str], com: list[int],
+                       a_cmd: np.ndarray, A_G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Eq. 22: the desired ḣ_G and which of its six rows have a target.
+
+        The CoM height and, when there is no ALIP plan, the horizontal CoM take the commanded
+        acceleration ÿ_cmd of their ``com_*`` outputs (the CoM's own acceleration: the height is
+        measured from the stance sole, which does not move); the plan's horizontal CoM gets
+        eq. 22's gains.
+        """
+        g, m = self.gains, self.robot.total_mass
+        h = A_G @ kin.v
+        hdot = np.zeros(6)
+        hdot[:3] = -g.k_angular * h[:3]
+        rows = np.zeros(6, dtype=bool)
+        rows[:3] = True
+        for i in com:
+            axis = "xyz".index(names[i][-1])
+            hdot[3 + axis] = m * a_cmd[i]
+            rows[3 + axis] = True
+        if refs.com_plan is not None:
+            p_d, v_d, a_d = refs.com_plan
+            p, v = kin.p_com[:2], h[3:5] / m
+            hdot[3:5] = m * (a_d + g.kd * (v_d - v) + g.kp * (p_d - p))
+            rows[3:5] = True
+        return hdot, rows
+
+    def _regularization(self, kin: RobotKinematics, tasks, a_cmd: np.ndarray, k_out: int, P: np.ndarray,
+                        vdot0: np.ndarray, nz: int, nl: int) -> Level:
+        """Locked joints (their TaskStack rows), a weak posture PD on every joint, small wrenches."""
+        g, r = self.gains, self.robot
+        J_lock = tasks.J[k_out:]
+        posture = (g.posture_kp * (self._nominal - kin.q[r.actuated_q_index])
+                   - g.posture_kd * kin.v[r.actuated_v_index])
+        wrench_rows = np.zeros((nl, nz + nl))
+        wrench_rows[:, nz:] = np.eye(nl)
+        A = np.vstack([J_lock @ P, self._J_joints @ P, wrench_rows])
+        b = np.concatenate([a_cmd[k_out:] - J_lock @ vdot0, posture - self._J_joints @ vdot0, np.zeros(nl)])
+        w = np.concatenate([tasks.weight[k_out:], np.full(r.nu, 0.01), np.full(nl, g.wrench_weight)])
+        return Level("regularization", A, b, w)
