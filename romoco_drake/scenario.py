@@ -24,6 +24,7 @@ from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, Ve
 
 from romoco_drake.config import load_typed, load_yaml_file
 from romoco_drake.control.controller import WholeBodyController
+from romoco_drake.control.momentum_log import MomentumLog
 from romoco_drake.control.registry import CONTROLLERS
 from romoco_drake.control.tscqp import QP_SOLVERS
 from romoco_drake.embedding.references import EmbeddingCore
@@ -221,6 +222,7 @@ class WalkingLoop:
     tick_log: VectorLogSink  # controller update wall time, every tick
     error_log: VectorLogSink  # embedding tracking errors per group
     limiter: CommandLimiter
+    momentum_log: VectorLogSink | None = None  # MomentumLog records, for controllers that regulate momentum
 
 
 def parse_command(text: str) -> list[CommandPoint]:
@@ -413,4 +415,12 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
         builder.Connect(controller.actuation_port, station.GetInputPort("actuation"))
     tick_log = LogVectorOutput(controller.tick_ms_port, builder, period)
     error_log = LogVectorOutput(embedding.tracking_error_port, builder, STATE_LOG_PERIOD)
-    return WalkingLoop(machine, planner, embedding, controller, tick_log, error_log, limiter)
+    momentum_log = None
+    if CONTROLLERS[scenario.controller.name].facts.get("momentum_log"):
+        recorder = builder.AddNamedSystem("momentum_log", MomentumLog(robot, period, offset))
+        builder.Connect(kin, recorder.kinematics_port)
+        builder.Connect(embedding.task_references_port, recorder.task_references_port)
+        builder.Connect(planner.planner_output_port, recorder.planner_output_port)
+        builder.Connect(heading.command_port, recorder.command_port)
+        momentum_log = LogVectorOutput(recorder.record_port, builder, period)
+    return WalkingLoop(machine, planner, embedding, controller, tick_log, error_log, limiter, momentum_log)

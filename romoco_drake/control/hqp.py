@@ -8,7 +8,9 @@ level constrains. Level k solves the small QP
 
     min_w ‖W_k (A_k N_k w − (b_k − A_k x_k))‖² + ε‖w‖²   s.t.  lower ≤ G (x_k + N_k w) ≤ upper
 
-with DAQP, then x_{k+1} = x_k + N_k w* and N_{k+1} = N_k · null(W_k A_k N_k). A level's
+with DAQP (from the second level on, the previous solution w = 0 is feasible, so the bounds
+are relaxed by ``relax`` around it: round-off in constraints the higher levels made active
+would otherwise read as infeasibility to the active-set solver), then x_{k+1} = x_k + N_k w* and N_{k+1} = N_k · null(W_k A_k N_k). A level's
 objective is strictly convex in A_k x, so every optimum of the level has the same A_k x: fixing
 it by restricting the lower levels to null(A_k N_k) keeps exactly that level's set of optima
 (its inequalities stay in every later QP), which is what strict priority means. A task a higher
@@ -59,7 +61,8 @@ def null_space(A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nd
 
 
 def solve_hierarchy(E: np.ndarray, e: np.ndarray, G: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                    levels: list[Level], damping: float = 1e-9, feasibility_tol: float = 1e-6) -> HqpResult:
+                    levels: list[Level], damping: float = 1e-9, feasibility_tol: float = 1e-6,
+                    relax: float = 1e-7) -> HqpResult:
     """Solves the hierarchy (module docstring). A level that cannot be solved (its QP is
     infeasible: the constraints of level 0 cannot all hold) is reported by name in ``failed``
     and the solution is the last level's; an inconsistent E x = e fails as ``"equality"``."""
@@ -72,7 +75,7 @@ def solve_hierarchy(E: np.ndarray, e: np.ndarray, G: np.ndarray, lower: np.ndarr
     freedom, residuals = [], []
     lower_d, upper_d = np.maximum(lower, -_INF), np.minimum(upper, _INF)
     sense = np.zeros(len(lower), dtype=np.int32)
-    for level in levels:
+    for k, level in enumerate(levels):
         freedom.append(N.shape[1])
         if N.shape[1] == 0:
             continue
@@ -82,7 +85,10 @@ def solve_hierarchy(E: np.ndarray, e: np.ndarray, G: np.ndarray, lower: np.ndarr
         H = AN.T @ AN
         H.flat[::H.shape[0] + 1] += damping * max(1.0, float(np.trace(H)) / H.shape[0])
         GN, Gx = G @ N, G @ x
-        w, _, flag, _ = daqp.solve(H, -(AN.T @ r), GN, upper_d - Gx, lower_d - Gx, sense)
+        up, lo = upper_d - Gx, lower_d - Gx
+        if k:  # x already solves a level: w = 0 is feasible up to round-off, which is relaxed
+            up, lo = np.maximum(up, 0.0) + relax, np.minimum(lo, 0.0) - relax
+        w, _, flag, _ = daqp.solve(H, -(AN.T @ r), GN, up, lo, sense)
         if flag < 0:
             return HqpResult(x, level.name, tuple(freedom), tuple(residuals))
         x = x + N @ w

@@ -94,7 +94,7 @@ class MomentumHqp:
     warm_start_size = 0
 
     def __init__(self, robot: RobotModel, contact: ContactModel, gains: MomentumGains = MomentumGains(),
-                 task_gains: tuple[TaskGain, ...] = DEFAULT_TASK_GAINS, constraint_damping: float = 20.0,
+                 task_gains: tuple[TaskGain, ...] = DEFAULT_TASK_GAINS, constraint_damping: float = 0.0,
                  friction_margin: float = 0.1, cop_margin: float = 0.01):
         self.robot, self.contact, self.gains, self.k_h = robot, contact, gains, constraint_damping
         B = robot.B

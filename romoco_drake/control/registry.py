@@ -3,7 +3,8 @@
 Walking controllers (``walking=True``) are whole-body solvers run by
 :class:`~romoco_drake.control.controller.WholeBodyController`; their factory takes
 ``(robot, contact, period, config)`` with ``config`` the scenario's controller section and
-returns the solver. ``motor_command`` says the controller commands the motors' own position
+returns the solver. ``momentum_log`` adds the XO paper's momentum record to the run
+(:class:`~romoco_drake.control.momentum_log.MomentumLog`). ``motor_command`` says the controller commands the motors' own position
 loops (q_d, v_d, τ_ff, K_p, K_d) rather than torques. ``standing`` is the stand-only joint PD,
 a system of its own.
 """
@@ -33,4 +34,4 @@ CONTROLLERS.add("posik", lambda robot, contact, period, config: IkSolver(robot, 
                 "position IK by Newton-Raphson, joint PD (RoMoCo §V-C)", walking=True, motor_command=True)
 CONTROLLERS.add("momentum", lambda robot, contact, period, config: MomentumHqp(robot, contact),
                 "hierarchical centroidal-momentum QPs in the contact null space (XO paper §III)",
-                walking=True, motor_command=False)
+                walking=True, motor_command=False, momentum_log=True)
