@@ -1,10 +1,13 @@
-"""Momentum report of the XO paper (Fig. 5-9): metrics on synthetic momentum logs."""
+"""Momentum report of the XO paper (Fig. 5-9): metrics on synthetic momentum logs, and the figures."""
 
 from __future__ import annotations
 
 import math
 
+import matplotlib.pyplot as plt
 import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
 
 from romoco_drake.metrics import (
     MOMENTUM_LOG_SIZE,
@@ -21,10 +24,14 @@ from romoco_drake.metrics import (
     ROWS_MOMENTUM_DESIRED,
     momentum_summary,
 )
+from romoco_drake.plots import _frontal_orbits, plot_momentum_run
+from romoco_drake.rom import alip_general
+from romoco_drake.rom.lip import GRAVITY
 
 DT = 0.1
 WALK = (0.2, 0.0)
 STOP = (0.0, 0.0)
+MASS, HEIGHT, T_STEP, WIDTH = 150.0, 1.0, 0.5, 0.4
 
 
 def _column(stance=0, t_in_step=0.0, cmd=WALK, l_com=(0.0, 0.0, 0.0), l_c=(math.nan,) * 3,
@@ -110,3 +117,39 @@ def test_nothing_qualifies_gives_none():
     assert cut_off["step_end_L_error"] is None and cut_off["step_end_L_steps"] == 0
     assert cut_off["centroidal_am_ratio"] == 0.0
 
+
+def test_frontal_orbits_start_at_eq18_offset_and_follow_eq10():
+    """Each stance's orbit, started by inverting M_y(T), begins at the offset planned in the other
+    stance, ends at (p* + vy T, L_cx^d) and is the flow of eq. 10 (checked by integration)."""
+    vy, t = -0.2, np.linspace(0.0, T_STEP, 60)
+    fig, ax = plt.subplots()
+    _frontal_orbits(ax, vy, t, MASS, HEIGHT, WIDTH)
+    mh = MASS * HEIGHT
+    for line, planned_in in zip(ax.lines, ("left", "right"), strict=True):
+        p, l_cx = line.get_xydata().T
+        p_start = alip_general.lateral_offset(vy, T_STEP, WIDTH, planned_in)
+        assert p[0] == pytest.approx(p_start, abs=1e-12)
+        assert (p[-1], l_cx[-1]) == pytest.approx(
+            (p_start + vy * T_STEP, alip_general.desired_momentum_x(p_start, vy, T_STEP, MASS, HEIGHT)))
+        flow = solve_ivp(lambda _, y: [-y[1] / mh, -MASS * GRAVITY * y[0]], (0.0, T_STEP), [p[0], l_cx[0]],
+                         t_eval=t, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(flow.y, [p, l_cx], rtol=1e-7, atol=1e-9)
+    plt.close(fig)
+
+
+@pytest.mark.parametrize("step_width", [WIDTH, None])
+def test_plot_momentum_run_writes_five_figures(tmp_path, step_width):
+    rng = np.random.default_rng(0)
+    cmds = [(0.2, 0.0)] * 20 + [(0.0, 0.1)] * 20 + [STOP] * 10
+    columns = _double_support()
+    for k in range(0, 50, 5):
+        columns += _step(1 if k % 10 else -1, rng.normal(size=2), rng.normal(size=2), cmds=cmds[k:k + 5])
+    times, data = _log(columns)
+    for rows in (ROWS_COM, ROWS_COM_DESIRED, ROWS_MOMENTUM, ROWS_MOMENTUM_DESIRED, ROWS_COM_IN_CONTACT):
+        data[rows] = rng.normal(size=data[rows].shape)
+    wanted = np.column_stack([data[ROWS_COMMAND].T, np.zeros(len(times))])
+    paths = plot_momentum_run(tmp_path / "figs", "xo", times, data, MASS, HEIGHT, T_STEP, times,
+                              wanted + 0.01, wanted, step_width=step_width)
+    assert [p.name for p in paths] == ["xo_fig5_com.png", "xo_fig6_momentum.png", "xo_fig7_phase.png",
+                                       "xo_fig8_contact_momentum.png", "xo_fig9_velocity.png"]
+    assert all(p.stat().st_size > 0 for p in paths)
