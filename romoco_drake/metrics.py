@@ -124,8 +124,8 @@ def momentum_summary(times: np.ndarray, data: np.ndarray) -> dict:
     for first, last in _single_support_steps(data[ROW_STANCE], data[ROW_T_IN_STEP]):
         if last == len(times) - 1 or not walking[first:last + 1].all():
             continue
-        t_step = data[ROW_T_IN_STEP, first:last + 1]
-        past_half = t_step >= 0.5 * (t_step[-1] + period) - 1e-9
+        t_in = data[ROW_T_IN_STEP, first:last + 1]
+        past_half = t_in >= 0.5 * (t_in[-1] + period) - 1e-9  # tolerance: t_in is k times the period
         if not past_half.any():  # a one-sample step has no second half
             continue
         mid = first + int(np.argmax(past_half))
