@@ -1,4 +1,4 @@
-"""PNG figures of template walks: stride velocity against the command, and phase portraits."""
+"""PNG figures of walks: template runs, whole-body runs, and the XO paper's momentum report."""
 
 from __future__ import annotations
 
@@ -9,6 +9,24 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+from romoco_drake.metrics import (  # noqa: E402
+    ROW_STANCE,
+    ROWS_COM,
+    ROWS_COM_DESIRED,
+    ROWS_COM_IN_CONTACT,
+    ROWS_COMMAND,
+    ROWS_L_COM,
+    ROWS_L_CONTACT,
+    ROWS_L_CONTACT_PREDICTED,
+    ROWS_MOMENTUM,
+    ROWS_MOMENTUM_DESIRED,
+    SETTLE_S,
+)
+from romoco_drake.rom import alip_general  # noqa: E402
+from romoco_drake.rom.lip import GRAVITY, omega  # noqa: E402
+
+_IDEAL_ORBIT = {"lw": 6.0, "alpha": 0.3, "zorder": 1}  # wide and pale, behind the measured points
 
 
 def plot_template_run(out_dir: Path, name: str, run, segments, stride_times: np.ndarray,
@@ -80,6 +98,130 @@ def plot_walking_run(out_dir: Path, name: str, times: np.ndarray, tracking: dict
     ax.legend(fontsize=8)
     tracking_png = _save(fig, f"{name}: output tracking errors", out_dir / f"{name}_tracking.png")
     return [velocity, tracking_png]
+
+
+def plot_momentum_run(out_dir: Path, name: str, times: np.ndarray, data: np.ndarray, mass: float,
+                      com_height: float, step_time: float, tracking_times: np.ndarray,
+                      tracking_measured: np.ndarray, tracking_wanted: np.ndarray, *,
+                      step_width: float | None = None) -> list[Path]:
+    """The XO paper's Fig. 5-9 from a momentum log (layout in ``metrics.MOMENTUM_LOG_SIZE``).
+
+    Writes ``<name>_fig5_com.png``, ``_fig6_momentum.png``, ``_fig7_phase.png``,
+    ``_fig8_contact_momentum.png`` and ``_fig9_velocity.png``; returns their paths. Desired is
+    dashed red, measured blue. ``tracking_*`` are ``metrics.velocity_tracking``'s times,
+    "measured" and "wanted" (N, 3). The frontal ideal orbits of Fig. 7 need the step width W
+    (eq. 18); without it only the sagittal ones are drawn.
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = []
+
+    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 6.5))
+    for i, ax in enumerate(axes):
+        _desired_measured(ax, times, data[ROWS_COM_DESIRED][i], data[ROWS_COM][i], f"CoM {'xyz'[i]} [m]")
+    axes[-1].set_xlabel("time [s]")
+    paths.append(_save(fig, f"{name}: CoM position (Fig. 5)", out_dir / f"{name}_fig5_com.png"))
+
+    fig, axes = plt.subplots(3, 2, sharex=True, figsize=(11, 6.5))
+    for i in range(3):
+        _desired_measured(axes[i, 0], times, np.zeros_like(times), data[ROWS_L_COM][i],
+                          f"L_CoM,{'xyz'[i]} [kg·m²/s]")
+        _desired_measured(axes[i, 1], times, data[ROWS_MOMENTUM_DESIRED][i], data[ROWS_MOMENTUM][i],
+                          f"m v_CoM,{'xyz'[i]} [kg·m/s]")
+    for ax in axes[-1]:
+        ax.set_xlabel("time [s]")
+    paths.append(_save(fig, f"{name}: centroidal momentum (Fig. 6)", out_dir / f"{name}_fig6_momentum.png"))
+
+    paths.append(_phase_portraits(out_dir / f"{name}_fig7_phase.png", name, times, data, mass, com_height,
+                                  step_time, step_width))
+
+    fig, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 5))
+    for ax, i, label in ((axes[0], 1, "L_cy [kg·m²/s]"), (axes[1], 0, "L_cx [kg·m²/s]")):
+        _desired_measured(ax, times, data[ROWS_L_CONTACT_PREDICTED][i], data[ROWS_L_CONTACT][i], label,
+                          desired_label="predicted at step end")
+    axes[-1].set_xlabel("time [s]")
+    paths.append(_save(fig, f"{name}: contact angular momentum about {{c}} (Fig. 8)",
+                       out_dir / f"{name}_fig8_contact_momentum.png"))
+
+    fig, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 5))
+    for i, ax in enumerate(axes):
+        _desired_measured(ax, tracking_times, tracking_wanted[:, i], tracking_measured[:, i],
+                          f"v{'xy'[i]} [m/s]", desired_label="command",
+                          measured_label="measured, 1 s average")
+    axes[-1].set_xlabel("time [s]")
+    paths.append(_save(fig, f"{name}: CoM velocity (heading frame, Fig. 9)",
+                       out_dir / f"{name}_fig9_velocity.png"))
+    return paths
+
+
+def _desired_measured(ax, times: np.ndarray, desired: np.ndarray, measured: np.ndarray, ylabel: str,
+                      desired_label: str = "desired", measured_label: str = "measured") -> None:
+    """One axis of the momentum report: desired (dashed red) behind measured (blue)."""
+    ax.plot(times, measured, "b-", lw=1.0, label=measured_label)
+    ax.plot(times, desired, "r--", lw=1.0, label=desired_label)
+    ax.set_ylabel(ylabel, fontsize=8)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left", fontsize=7)
+
+
+def _phase_portraits(path: Path, name: str, times: np.ndarray, data: np.ndarray, mass: float, height: float,
+                     t_step: float, width: float | None) -> Path:
+    """Fig. 7: single-support ALIP states, coloured by command, over the ideal orbits (eq. 11-18).
+
+    Samples within SETTLE_S after a command change (or the log's start) are transitions and left
+    out, as in the paper; an orbit is drawn for each non-zero command the kept samples were under.
+    """
+    command = data[ROWS_COMMAND]
+    changed = np.ones(len(times), dtype=bool)
+    changed[1:] = np.any(command[:, 1:] != command[:, :-1], axis=0)
+    last_change = np.maximum.accumulate(np.where(changed, times, -np.inf))
+    kept = (data[ROW_STANCE] != 0) & (times - last_change >= SETTLE_S)
+    (p_x, p_y), (l_cx, l_cy) = data[ROWS_COM_IN_CONTACT], data[ROWS_L_CONTACT][:2]
+    t = np.linspace(0.0, t_step, 60)
+
+    fig, (sagittal, frontal) = plt.subplots(1, 2, figsize=(11, 4.8))
+    sagittal.plot([], [], **_IDEAL_ORBIT, color="0.5", label="ideal orbit (eq. 11-18)")
+    for k, (vx, vy) in enumerate(np.unique(command[:, kept].T, axis=0)):
+        color = f"C{k % 10}"
+        mask = kept & (command[0] == vx) & (command[1] == vy)
+        label = f"v = ({vx:g}, {vy:g}) m/s"
+        sagittal.plot(p_x[mask], l_cy[mask], ".", ms=2, alpha=0.5, color=color, label=label)
+        frontal.plot(p_y[mask], l_cx[mask], ".", ms=2, alpha=0.5, color=color, label=label)
+        if vx != 0.0:  # the symmetric orbit from -vT/2 with the momentum of eq. 14
+            start = (-0.5 * vx * t_step, alip_general.desired_momentum_y(vx, t_step, mass, height))
+            sagittal.plot(*_alip_flow(start, t, mass, height, 1.0), **_IDEAL_ORBIT, color=color)
+        if vy != 0.0 and width is not None:
+            _frontal_orbits(frontal, vy, t, mass, height, width, **_IDEAL_ORBIT, color=color)
+    if width is not None:
+        _frontal_orbits(frontal, 0.0, t, mass, height, width, **_IDEAL_ORBIT, color="k",
+                        label="ideal in place (vy = 0)")
+    sagittal.set_title("sagittal")
+    frontal.set_title("frontal" if width is not None else "frontal (no step width: no ideal orbits)")
+    for ax, p, ell in ((sagittal, "p_x", "L_cy"), (frontal, "p_y", "L_cx")):
+        ax.set_xlabel(f"{p}: CoM rel. contact [m]")
+        ax.set_ylabel(f"{ell} [kg·m²/s]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, markerscale=4)
+    return _save(fig, f"{name}: ALIP states in single support over the ideal orbits (Fig. 7)", path)
+
+
+def _frontal_orbits(ax, vy: float, t: np.ndarray, mass: float, height: float, width: float, **style) -> None:
+    """The lateral orbit of each stance: from the offset the other stance planned (eq. 18) to
+    p_start + vy T with L_cx^d (eq. 17) at the end, started where M_y(T)⁻¹ = M_y(−T) puts it."""
+    t_step = float(t[-1])
+    for planned_in in ("left", "right"):  # the step planned in one stance is walked in the other
+        p_start = alip_general.lateral_offset(vy, t_step, width, planned_in)
+        end = (p_start + vy * t_step, alip_general.desired_momentum_x(p_start, vy, t_step, mass, height))
+        start = _alip_flow(end, np.array([-t_step]), mass, height, -1.0)[:, 0]
+        ax.plot(*_alip_flow(start, t, mass, height, -1.0), **style)
+        style.pop("label", None)
+
+
+def _alip_flow(x0, t: np.ndarray, mass: float, height: float, sign: float) -> np.ndarray:
+    """(2, len(t)) ALIP states from x0 after t: M_x(t) x0 (eq. 11, sign +1) or M_y(t) x0 (eq. 12, −1)."""
+    ell = omega(height, GRAVITY)
+    c, s, mhl = np.cosh(ell * t), np.sinh(ell * t), mass * height * ell
+    return np.array([c * x0[0] + sign * s / mhl * x0[1], sign * mhl * s * x0[0] + c * x0[1]])
 
 
 def _save(fig, title: str, path: Path) -> Path:

@@ -1,0 +1,155 @@
+"""Momentum report of the XO paper (Fig. 5-9): metrics on synthetic momentum logs, and the figures."""
+
+from __future__ import annotations
+
+import math
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from romoco_drake.metrics import (
+    MOMENTUM_LOG_SIZE,
+    ROW_STANCE,
+    ROW_T_IN_STEP,
+    ROWS_COM,
+    ROWS_COM_DESIRED,
+    ROWS_COM_IN_CONTACT,
+    ROWS_COMMAND,
+    ROWS_L_COM,
+    ROWS_L_CONTACT,
+    ROWS_L_CONTACT_PREDICTED,
+    ROWS_MOMENTUM,
+    ROWS_MOMENTUM_DESIRED,
+    momentum_summary,
+)
+from romoco_drake.plots import _frontal_orbits, plot_momentum_run
+from romoco_drake.rom import alip_general
+from romoco_drake.rom.lip import GRAVITY
+
+DT = 0.1
+WALK = (0.2, 0.0)
+STOP = (0.0, 0.0)
+MASS, HEIGHT, T_STEP, WIDTH = 150.0, 1.0, 0.5, 0.4
+
+
+def _column(stance=0, t_in_step=0.0, cmd=WALK, l_com=(0.0, 0.0, 0.0), l_c=(math.nan,) * 3,
+            pred=(math.nan,) * 2) -> np.ndarray:
+    col = np.full(MOMENTUM_LOG_SIZE, math.nan)
+    col[ROW_STANCE], col[ROW_T_IN_STEP], col[ROWS_COMMAND] = stance, t_in_step, cmd
+    col[ROWS_L_COM], col[ROWS_L_CONTACT], col[ROWS_L_CONTACT_PREDICTED] = l_com, l_c, pred
+    return col
+
+
+def _double_support() -> list[np.ndarray]:
+    """Out of single support: huge centroidal momentum that must not leak into any number."""
+    return [_column(0, 0.0, WALK, l_com=(1e3, 1e3, 1e3))]
+
+
+def _step(stance, l_end, pred_mid, n=5, cmds=None) -> list[np.ndarray]:
+    """n samples of one step; the prediction is ``pred_mid`` only at the first sample with t ≥ nDT/2
+    (sample 3 of 5, sample 2 of 4), and 100 off everywhere else; L_c is ``l_end`` at the last sample."""
+    mid = math.ceil(n / 2)
+    cmds = cmds or [WALK] * n
+    return [_column(stance, k * DT, cmds[k], l_c=(*l_end, 7.0) if k == n - 1 else (1.0, 1.0, 0.0),
+                    pred=pred_mid if k == mid else (pred_mid[0] + 100.0, pred_mid[1] - 100.0))
+            for k in range(n)]
+
+
+def _log(columns: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    return np.arange(len(columns)) * DT, np.column_stack(columns)
+
+
+def test_layout_covers_every_row_once():
+    rows = [ROW_STANCE, ROW_T_IN_STEP]
+    for s in (ROWS_COMMAND, ROWS_COM, ROWS_COM_DESIRED, ROWS_L_COM, ROWS_MOMENTUM, ROWS_MOMENTUM_DESIRED,
+              ROWS_L_CONTACT, ROWS_COM_IN_CONTACT, ROWS_L_CONTACT_PREDICTED):
+        rows += list(range(MOMENTUM_LOG_SIZE))[s]
+    assert rows == list(range(MOMENTUM_LOG_SIZE))
+
+
+def test_centroidal_ratio_over_walking_single_support_only():
+    times, data = _log(_double_support() + [
+        _column(1, 0.0, WALK, l_com=(3.0, 4.0, 0.0), l_c=(0.0, 30.0, 40.0)),
+        _column(1, 0.1, (0.0, -0.2), l_com=(0.0, 0.0, 1.0), l_c=(10.0, 0.0, 0.0)),
+        _column(-1, 0.0, STOP, l_com=(50.0, 0.0, 0.0), l_c=(1.0, 0.0, 0.0)),  # no command
+    ])
+    # sqrt((25 + 1) / 2) / sqrt((2500 + 100) / 2)
+    assert momentum_summary(times, data)["centroidal_am_ratio"] == 0.1
+
+
+def _walk(offset=(0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+    """Two scored steps (|L_c| 10 and 20 at their ends, predictions ``offset`` off at mid-step)
+    among steps that must not count: a zero command, a command dropped for one sample, the log's end."""
+    def pred(l_end):
+        return (l_end[0] + offset[0], l_end[1] + offset[1])
+
+    return _log(_double_support()
+                + _step(1, (6.0, 8.0), pred((6.0, 8.0)))
+                + _step(1, (0.0, 20.0), pred((0.0, 20.0)), n=4)  # same stance: t_in_step goes back
+                + _double_support()
+                + _step(-1, (1.0, 1.0), (9.0, 9.0), cmds=[STOP] * 5)
+                + _step(1, (1.0, 1.0), (9.0, 9.0), cmds=[WALK] * 4 + [STOP])
+                + _step(-1, (5.0, 5.0), (5.0, 5.0))
+                + _step(1, (1.0, 1.0), (9.0, 9.0), n=3))  # cut off by the end of the log
+
+
+def test_exact_mid_step_predictions_score_zero():
+    summary = momentum_summary(*_walk())
+    assert summary["step_end_L_error"] == 0.0
+    assert summary["step_end_L_steps"] == 3
+
+
+def test_known_prediction_offset_gives_its_ratio():
+    times, data = _walk(offset=(3.0, 4.0))
+    # steps: |(3, 4)| = 5 off at |L_c| 10 and 20, exact at |(5, 5)|: (5 + 5 + 0) / (10 + 20 + √50)
+    assert momentum_summary(times, data)["step_end_L_error"] == round(10.0 / (30.0 + math.sqrt(50.0)), 4)
+
+
+def test_nothing_qualifies_gives_none():
+    standing = _log(_double_support() * 5)
+    assert momentum_summary(*standing) == {"centroidal_am_ratio": None, "step_end_L_error": None,
+                                           "step_end_L_steps": 0}
+    in_place = _log(_step(1, (6.0, 8.0), (6.0, 8.0), cmds=[STOP] * 5) + _double_support())
+    assert momentum_summary(*in_place)["centroidal_am_ratio"] is None
+    cut_off = momentum_summary(*_log(_double_support() + _step(1, (6.0, 8.0), (6.0, 8.0))))
+    assert cut_off["step_end_L_error"] is None and cut_off["step_end_L_steps"] == 0
+    assert cut_off["centroidal_am_ratio"] == 0.0
+
+
+def test_frontal_orbits_start_at_eq18_offset_and_follow_eq10():
+    """Each stance's orbit, started by inverting M_y(T), begins at the offset planned in the other
+    stance, ends at (p* + vy T, L_cx^d) and is the flow of eq. 10 (checked by integration)."""
+    vy, t = -0.2, np.linspace(0.0, T_STEP, 60)
+    fig, ax = plt.subplots()
+    _frontal_orbits(ax, vy, t, MASS, HEIGHT, WIDTH)
+    mh = MASS * HEIGHT
+    for line, planned_in in zip(ax.lines, ("left", "right"), strict=True):
+        p, l_cx = line.get_xydata().T
+        p_start = alip_general.lateral_offset(vy, T_STEP, WIDTH, planned_in)
+        assert p[0] == pytest.approx(p_start, abs=1e-12)
+        assert (p[-1], l_cx[-1]) == pytest.approx(
+            (p_start + vy * T_STEP, alip_general.desired_momentum_x(p_start, vy, T_STEP, MASS, HEIGHT)))
+        flow = solve_ivp(lambda _, y: [-y[1] / mh, -MASS * GRAVITY * y[0]], (0.0, T_STEP), [p[0], l_cx[0]],
+                         t_eval=t, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(flow.y, [p, l_cx], rtol=1e-7, atol=1e-9)
+    plt.close(fig)
+
+
+@pytest.mark.parametrize("step_width", [WIDTH, None])
+def test_plot_momentum_run_writes_five_figures(tmp_path, step_width):
+    rng = np.random.default_rng(0)
+    cmds = [(0.2, 0.0)] * 20 + [(0.0, 0.1)] * 20 + [STOP] * 10
+    columns = _double_support()
+    for k in range(0, 50, 5):
+        columns += _step(1 if k % 10 else -1, rng.normal(size=2), rng.normal(size=2), cmds=cmds[k:k + 5])
+    times, data = _log(columns)
+    for rows in (ROWS_COM, ROWS_COM_DESIRED, ROWS_MOMENTUM, ROWS_MOMENTUM_DESIRED, ROWS_COM_IN_CONTACT):
+        data[rows] = rng.normal(size=data[rows].shape)
+    wanted = np.column_stack([data[ROWS_COMMAND].T, np.zeros(len(times))])
+    paths = plot_momentum_run(tmp_path / "figs", "xo", times, data, MASS, HEIGHT, T_STEP, times,
+                              wanted + 0.01, wanted, step_width=step_width)
+    assert [p.name for p in paths] == ["xo_fig5_com.png", "xo_fig6_momentum.png", "xo_fig7_phase.png",
+                                       "xo_fig8_contact_momentum.png", "xo_fig9_velocity.png"]
+    assert all(p.stat().st_size > 0 for p in paths)
