@@ -18,7 +18,7 @@ from romoco_drake.estimation.kalman_estimator import KalmanEstimator
 from romoco_drake.interfaces.hardware import link_summary
 from romoco_drake.interfaces.lcm_log import LcmLogRecorder
 from romoco_drake.interfaces.robot_sim import make_robot_sim, robot_summary
-from romoco_drake.metrics import finite_or_none, velocity_tracking
+from romoco_drake.metrics import finite_or_none, momentum_summary, velocity_tracking
 from romoco_drake.robots.model import load_robot
 from romoco_drake.scenario import Scenario, build_diagram, initial_positions, uses_motor_command
 
@@ -269,14 +269,28 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, 
         "safe_mode_ticks": int(safe_ticks),
         "controller_tick_ms": {"median": round(float(np.median(ticks)), 3),
                                "p99": round(float(np.percentile(ticks, 99)), 3)},
-    } | _plots(built, context, scenario, plot_dir, times, tracking, until)
+    } | _momentum(built, context, scenario, plot_dir, times, tracking, until)
 
 
-def _plots(built, context, scenario: Scenario, plot_dir: Path | None, times, tracking, until) -> dict:
-    if plot_dir is None:
-        return {}
-    from romoco_drake.plots import plot_walking_run
+def _momentum(built, context, scenario: Scenario, plot_dir: Path | None, times, tracking, until) -> dict:
+    """The XO paper's summary keys and, with a plot directory, its figures (momentum runs), and the
+    walking plots."""
+    out, paths = {}, []
+    log = built.walking.momentum_log
+    if log is not None:
+        log_times, data = _samples(log.FindLog(context), until)
+        out = momentum_summary(log_times, data)
+        if plot_dir is not None:
+            from romoco_drake.plots import plot_momentum_run
 
-    error_times, errors = _samples(built.walking.error_log.FindLog(context), until)
-    paths = plot_walking_run(Path(plot_dir), scenario.name, times, tracking, error_times, errors)
-    return {"plots": [str(p) for p in paths]}
+            w = built.robot.config.walking
+            paths += plot_momentum_run(Path(plot_dir), scenario.name, log_times, data, built.robot.total_mass,
+                                       w.z0, w.t_ss, times, tracking["measured"], tracking["wanted"],
+                                       step_width=w.step_width)
+    if plot_dir is not None:
+        from romoco_drake.plots import plot_walking_run
+
+        error_times, errors = _samples(built.walking.error_log.FindLog(context), until)
+        paths = plot_walking_run(Path(plot_dir), scenario.name, times, tracking, error_times, errors) + paths
+        out["plots"] = [str(p) for p in paths]
+    return out

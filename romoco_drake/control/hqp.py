@@ -10,7 +10,8 @@ level constrains. Level k solves the small QP
 
 with DAQP (from the second level on, the previous solution w = 0 is feasible, so the bounds
 are relaxed by ``relax`` around it: round-off in constraints the higher levels made active
-would otherwise read as infeasibility to the active-set solver), then x_{k+1} = x_k + N_k w* and N_{k+1} = N_k · null(W_k A_k N_k). A level's
+would otherwise read as infeasibility to the active-set solver), then x_{k+1} = x_k + N_k w*
+and N_{k+1} = N_k · null(W_k A_k N_k). A level's
 objective is strictly convex in A_k x, so every optimum of the level has the same A_k x: fixing
 it by restricting the lower levels to null(A_k N_k) keeps exactly that level's set of optima
 (its inequalities stay in every later QP), which is what strict priority means. A task a higher

@@ -68,6 +68,8 @@ class MomentumGains:
     posture_kp: float = 20.0
     posture_kd: float = 8.0
     wrench_weight: float = 1e-6
+    angular_in_tasks: bool = True
+    angular_task_weight: float = 10.0
 
 
 @dataclass(frozen=True)
@@ -88,19 +90,22 @@ class MomentumHqp:
 
     ``friction_margin`` shrinks μ by that fraction and ``cop_margin`` (m) the sole rectangle on
     every side, so the controller's wrenches stay clear of the edges the simulation slips or
-    tips at.
+    tips at. ``effort_limits`` (N·m, actuator order) replaces the robot's, e.g. to derate motors.
     """
 
     warm_start_size = 0
 
     def __init__(self, robot: RobotModel, contact: ContactModel, gains: MomentumGains = MomentumGains(),
                  task_gains: tuple[TaskGain, ...] = DEFAULT_TASK_GAINS, constraint_damping: float = 0.0,
-                 friction_margin: float = 0.1, cop_margin: float = 0.01):
+                 friction_margin: float = 0.1, cop_margin: float = 0.01,
+                 effort_limits: np.ndarray | None = None):
         self.robot, self.contact, self.gains, self.k_h = robot, contact, gains, constraint_damping
         B = robot.B
         selection = np.all((B == 0.0) | (B == 1.0)) and np.all(B.sum(axis=0) == 1.0)
         if not (selection and np.all(B.sum(axis=1) <= 1.0)):
             raise RomocoError(f"{robot.yaml_path}: the momentum controller needs one actuator per joint")
+        effort = robot.effort_limits if effort_limits is None else effort_limits
+        self._effort = np.asarray(effort, dtype=float)
         self._rows_a = np.argmax(B, axis=0)
         self._rows_u = np.flatnonzero(B.sum(axis=1) == 0.0)
         self._tasks = TaskStack(robot, task_gains)
@@ -162,8 +167,8 @@ class MomentumHqp:
         lower = np.full(len(G), -np.inf)
         upper = np.zeros(len(G))
         G[:r.nu] = F[a]
-        lower[:r.nu] = -r.effort_limits - f0[a]
-        upper[:r.nu] = r.effort_limits - f0[a]
+        lower[:r.nu] = -self._effort - f0[a]
+        upper[:r.nu] = self._effort - f0[a]
         row, col = r.nu, nz
         for cone in cones:
             G[row:row + len(cone), col:col + 6] = cone
@@ -181,10 +186,18 @@ class MomentumHqp:
             hdot_des, rows = self._momentum_rate(kin, refs, names, com, a_cmd, A_G)
             w = np.concatenate([np.full(3, g.angular_weight / (m * self._z0) ** 2), np.full(3, 1.0 / m**2)])
             target = hdot_des - Adot_v - A_G @ vdot0
-            levels.append(Level("momentum", (A_G @ P)[rows], target[rows], w[rows]))
+            strict = rows.copy()
+            if g.angular_in_tasks:
+                strict[:3] = False
+            levels.append(Level("momentum", (A_G @ P)[strict], target[strict], w[strict]))
         J_out = tasks.J[other]
-        levels.append(Level("tasks", J_out @ P, a_cmd[other] - tasks.Jdot_v[other] - J_out @ vdot0,
-                            tasks.weight[other]))
+        task_A, task_w = J_out @ P, tasks.weight[other]
+        task_b = a_cmd[other] - tasks.Jdot_v[other] - J_out @ vdot0
+        if feet and g.angular_in_tasks:
+            task_A = np.vstack([task_A, (A_G @ P)[:3]])
+            task_b = np.concatenate([task_b, target[:3]])
+            task_w = np.concatenate([task_w, np.full(3, g.angular_task_weight / (m * self._z0) ** 2)])
+        levels.append(Level("tasks", task_A, task_b, task_w))
         levels.append(self._regularization(kin, tasks, a_cmd, k_out, P, vdot0, nz, nl))
         result = solve_hierarchy(E, e, G, lower, upper, levels)
         x = result.x

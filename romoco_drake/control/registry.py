@@ -4,9 +4,9 @@ Walking controllers (``walking=True``) are whole-body solvers run by
 :class:`~romoco_drake.control.controller.WholeBodyController`; their factory takes
 ``(robot, contact, period, config)`` with ``config`` the scenario's controller section and
 returns the solver. ``momentum_log`` adds the XO paper's momentum record to the run
-(:class:`~romoco_drake.control.momentum_log.MomentumLog`). ``motor_command`` says the controller commands the motors' own position
-loops (q_d, v_d, τ_ff, K_p, K_d) rather than torques. ``standing`` is the stand-only joint PD,
-a system of its own.
+(:class:`~romoco_drake.control.momentum_log.MomentumLog`). ``motor_command`` says the
+controller commands the motors' own position loops (q_d, v_d, τ_ff, K_p, K_d) rather than
+torques. ``standing`` is the stand-only joint PD, a system of its own.
 """
 
 from __future__ import annotations

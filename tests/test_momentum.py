@@ -1,0 +1,169 @@
+"""The momentum controller's parts: A_G and Ȧ_G v, the wrench cone, the strict hierarchy, the solver."""
+
+import functools
+
+import daqp
+import numpy as np
+import pytest
+
+from romoco_drake.control.controller import WholeBodyController
+from romoco_drake.control.hqp import Level, solve_hierarchy
+from romoco_drake.control.momentum import MomentumHqp
+from romoco_drake.embedding.references import EmbeddingCore
+from romoco_drake.modes import Mode
+from romoco_drake.robots.kinematics import RobotKinematics
+from romoco_drake.robots.model import load_robot
+from romoco_drake.rom.planners import PlannerParams, make_planner
+from romoco_drake.rom.types import WalkCommand
+from romoco_drake.rom.wrench_cone import corner_wrench, rectangle_wrench_cone
+
+
+@functools.cache
+def _robot(name):
+    robot = load_robot(name)
+    return robot, EmbeddingCore(robot)
+
+
+def _state(robot, seed):
+    rng = np.random.default_rng(seed)
+    q = robot.nominal.q.copy()
+    q[robot.actuated_q_index] += 0.2 * rng.standard_normal(robot.nu)
+    return q, rng.standard_normal(robot.nv)
+
+
+@pytest.mark.parametrize("name", ["xo", "g1"])
+def test_centroidal_momentum_matrix_matches_drake_and_finite_differences(name):
+    robot, _ = _robot(name)
+    q, v = _state(robot, 1)
+    kin = RobotKinematics(robot, np.concatenate([q, v]))
+    A_G, Adot_v = kin.centroidal_momentum_matrix()
+    h = robot.plant.CalcSpatialMomentumInWorldAboutPoint(kin.context, kin.p_com)
+    np.testing.assert_allclose(A_G @ v, np.concatenate([h.rotational(), h.translational()]), atol=1e-9)
+    # d/dt (A_G v) along q(t) = q + q̇ t (quaternion renormalised), v(t) = v + a t: A_G a + Ȧ_G v.
+    a = np.random.default_rng(2).standard_normal(robot.nv)
+    context = robot.plant.CreateDefaultContext()
+    robot.plant.SetPositions(context, q)
+    qdot = robot.plant.MapVelocityToQDot(context, v)
+    quaternion = slice(robot.base_q_start, robot.base_q_start + 4)
+
+    def momentum(t):
+        q_t = q + t * qdot
+        q_t[quaternion] /= np.linalg.norm(q_t[quaternion])
+        k = RobotKinematics(robot, np.concatenate([q_t, v + t * a]))
+        return k.centroidal_momentum_matrix()[0] @ (v + t * a)
+
+    dt = 1e-6
+    numeric = (momentum(dt) - momentum(-dt)) / (2 * dt)
+    np.testing.assert_allclose(A_G @ a + Adot_v, numeric, atol=1e-6 * (1 + np.abs(numeric).max()))
+
+
+def test_wrench_cone_is_exactly_the_corner_force_sums():
+    """Corner forces in their pyramids give wrenches inside the cone; wrenches on the cone's
+    boundary are corner-force sums and wrenches just outside are not."""
+    X, Y, mu = 0.165, 0.07, 0.72
+    A = rectangle_wrench_cone(X, Y, mu)
+    rng = np.random.default_rng(4)
+    for _ in range(2000):
+        fz = rng.uniform(0.0, 1.0, 4)
+        fxy = rng.choice([-1.0, 1.0], (4, 2)) * mu * fz[:, None] * rng.uniform(0.5, 1.0, (4, 2))
+        assert np.max(A @ corner_wrench(np.column_stack([fxy, fz]), X, Y)) <= 1e-12
+    edges = []
+    for corner in range(4):
+        for sx, sy in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+            f = np.zeros((4, 3))
+            f[corner] = (sx * mu, sy * mu, 1.0)
+            edges.append(corner_wrench(f, X, Y))
+    E = np.array(edges).T
+
+    def residual(w):  # distance from w to the cone of nonnegative edge combinations
+        x, _, flag, _ = daqp.solve(E.T @ E + 1e-12 * np.eye(16), -E.T @ w, np.eye(16), np.full(16, 1e30),
+                                   np.zeros(16), np.zeros(16, dtype=np.int32))
+        assert flag >= 0
+        return np.linalg.norm(E @ x - w)
+
+    inside = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+    for _ in range(200):
+        w = rng.standard_normal(6)
+        lo, hi = 0.0, 1.0  # the boundary along the ray from the interior wrench toward w
+        for _ in range(50):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if np.max(A @ (inside + mid * (w - inside))) <= 0.0 else (lo, mid)
+        boundary = inside + lo * (w - inside)
+        if lo < 1.0:
+            assert residual(boundary) < 3e-5  # zero but for the NNLS solve's tolerance
+            assert residual(inside + 1.05 * lo * (w - inside)) > 1e-4
+
+
+def test_a_lower_level_keeps_a_higher_optimum_and_uses_the_freedom_left():
+    """Level 1 wants x0 + x1 = 1 under x1 ≤ −0.5; level 2 wants x0 = 3, x1 = 0 (in conflict with
+    it); level 3 wants x2 = 5, which nothing above constrains."""
+    G, lower, upper = np.array([[0.0, 1.0, 0.0]]), np.array([-np.inf]), np.array([-0.5])
+    levels = [Level("sum", np.array([[1.0, 1.0, 0.0]]), np.array([1.0]), np.ones(1)),
+              Level("point", np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), np.array([3.0, 0.0]), np.ones(2)),
+              Level("free", np.array([[0.0, 0.0, 1.0]]), np.array([5.0]), np.ones(1))]
+    result = solve_hierarchy(np.zeros((0, 3)), np.zeros(0), G, lower, upper, levels)
+    assert result.failed is None
+    x = result.x
+    assert x[0] + x[1] == pytest.approx(1.0, abs=1e-8)  # the higher optimum is kept
+    # Level 2 alone would pick x1 = −1 on the line x0 = 1 − x1 (min (x0 − 3)² + x1²).
+    np.testing.assert_allclose(x, [2.0, -1.0, 5.0], atol=1e-6)
+    assert result.freedom == (3, 2, 1)
+    # Without level 1, level 2 is met exactly but for the bound on x1.
+    alone = solve_hierarchy(np.zeros((0, 3)), np.zeros(0), G, lower, upper, levels[1:])
+    np.testing.assert_allclose(alone.x[:2], [3.0, -0.5], atol=1e-6)
+
+
+def test_hierarchy_reports_an_infeasible_first_level():
+    G = np.array([[1.0, 0.0], [-1.0, 0.0]])
+    result = solve_hierarchy(np.zeros((0, 2)), np.zeros(0), G, np.full(2, -np.inf), np.array([-1.0, -1.0]),
+                             [Level("any", np.eye(2), np.zeros(2), np.ones(2))])
+    assert result.failed == "any"
+
+
+def _walking(name="xo", tau=0.1, v=None):
+    robot, core = _robot(name)
+    kin = RobotKinematics(robot, np.concatenate([robot.nominal.q, np.zeros(robot.nv) if v is None else v]))
+    walk = robot.config.walking
+    cmd = WalkCommand(vx=0.2, step_width=walk.step_width, com_height=walk.z0, step_time=walk.t_ss)
+    law = make_planner("alip_general", PlannerParams(mass=robot.total_mass))
+    plan = law.plan([0.0, -0.1, walk.z0, 0.0, 0.0, 0.0], "left", tau, cmd)
+    swing = core.start_step(kin, "left", 0.0, plan, tau)
+    return robot, core, kin, core.evaluate(kin, Mode.WALKING, tau, plan, swing)
+
+
+def test_momentum_solution_is_dynamically_consistent_and_within_its_limits():
+    robot, core, kin, refs = _walking()
+    hqp = MomentumHqp(robot, core.contact)
+    s = hqp.compute(kin, refs)
+    assert s.failed is None
+    assert refs.com_plan is not None
+    J, bias = kin.spatial_jacobian(robot.foot_frames["left"], hqp._soles["left"][2])
+    np.testing.assert_allclose(J @ s.vdot + bias, 0.0, atol=1e-8)  # the stance sole does not slip
+    lhs = kin.M @ s.vdot + kin.C
+    np.testing.assert_allclose(lhs, robot.B @ s.tau + J.T @ s.wrenches, atol=1e-6 * np.abs(lhs).max())
+    assert np.all(np.abs(s.tau) <= robot.effort_limits + 1e-6)
+    R_WS = kin.frame_pose(robot.foot_frames["left"])[0] @ hqp._soles["left"][1]
+    wrench_S = np.concatenate([R_WS.T @ s.wrenches[:3], R_WS.T @ s.wrenches[3:]])
+    assert np.max(hqp._cones["left"] @ wrench_S) <= 1e-6 * np.abs(wrench_S).max()
+    # The linear momentum rate is eq. 22's (feasible here): ṁv = m (p̈_d + K_D (ṗ_d − ṗ) + K_P (p_d − p)).
+    np.testing.assert_allclose(s.hdot[3:], s.hdot_desired[3:], atol=1e-3 * np.abs(s.hdot_desired[3:]).max())
+
+
+def test_infeasible_limits_and_nan_state_give_the_counted_safe_mode():
+    robot, core, kin, refs = _walking()
+    hqp = MomentumHqp(robot, core.contact, effort_limits=np.full(robot.nu, 1.0))  # cannot carry 150 kg
+    assert hqp.compute(kin, refs).failed is not None
+    system = WholeBodyController(robot, 0.002, hqp, max_stale_ticks=2)
+    context = system.CreateDefaultContext()
+    system.kinematics_port.FixValue(context, kin)
+    system.task_references_port.FixValue(context, refs)
+    system.mode_port.FixValue(context, Mode.WALKING)
+    for _ in range(4):
+        context.SetDiscreteState(system.EvalUniquePeriodicDiscreteUpdate(context).value())
+    failures, safe, streak = system.stats_port.Eval(context)
+    assert (failures, streak) == (4, 4)
+    np.testing.assert_array_equal(system.motor_command_port.Eval(context)[-robot.nu:], robot.kd)  # damping
+    nan = RobotKinematics(robot, np.full(robot.nq + robot.nv, np.nan))
+    system.kinematics_port.FixValue(context, nan)
+    context.SetDiscreteState(system.EvalUniquePeriodicDiscreteUpdate(context).value())
+    assert system.stats_port.Eval(context)[1] == safe + 1
