@@ -1,5 +1,6 @@
 """The momentum controller's parts: A_G and Ȧ_G v, the wrench cone, the strict hierarchy, the solver."""
 
+import dataclasses
 import functools
 
 import daqp
@@ -16,6 +17,8 @@ from romoco_drake.robots.model import load_robot
 from romoco_drake.rom.planners import PlannerParams, make_planner
 from romoco_drake.rom.types import WalkCommand
 from romoco_drake.rom.wrench_cone import corner_wrench, rectangle_wrench_cone
+from romoco_drake.runner import run_scenario
+from romoco_drake.scenario import CommandPoint, load_scenario
 
 
 @functools.cache
@@ -149,21 +152,39 @@ def test_momentum_solution_is_dynamically_consistent_and_within_its_limits():
     np.testing.assert_allclose(s.hdot[3:], s.hdot_desired[3:], atol=1e-3 * np.abs(s.hdot_desired[3:]).max())
 
 
-def test_infeasible_limits_and_nan_state_give_the_counted_safe_mode():
+def test_unsolvable_ticks_and_nan_state_give_the_counted_safe_mode():
+    """Non-finite references fail the solve (counted; the last command is held, then damping);
+    a non-finite state damps at once (a counted safe tick)."""
     robot, core, kin, refs = _walking()
-    hqp = MomentumHqp(robot, core.contact, effort_limits=np.full(robot.nu, 1.0))  # cannot carry 150 kg
-    assert hqp.compute(kin, refs).failed is not None
+    hqp = MomentumHqp(robot, core.contact)
+    refs = dataclasses.replace(refs, y_des=np.full_like(refs.y_des, np.nan))
+    assert not hqp.solve(kin, refs, np.zeros(5 * robot.nu), np.zeros(1)).ok
     system = WholeBodyController(robot, 0.002, hqp, max_stale_ticks=2)
     context = system.CreateDefaultContext()
     system.kinematics_port.FixValue(context, kin)
     system.task_references_port.FixValue(context, refs)
     system.mode_port.FixValue(context, Mode.WALKING)
     for _ in range(4):
-        context.SetDiscreteState(system.EvalUniquePeriodicDiscreteUpdate(context).value())
+        context.SetDiscreteState(system.EvalUniquePeriodicDiscreteUpdate(context))
     failures, safe, streak = system.stats_port.Eval(context)
     assert (failures, streak) == (4, 4)
     np.testing.assert_array_equal(system.motor_command_port.Eval(context)[-robot.nu:], robot.kd)  # damping
     nan = RobotKinematics(robot, np.full(robot.nq + robot.nv, np.nan))
     system.kinematics_port.FixValue(context, nan)
-    context.SetDiscreteState(system.EvalUniquePeriodicDiscreteUpdate(context).value())
+    context.SetDiscreteState(system.EvalUniquePeriodicDiscreteUpdate(context))
     assert system.stats_port.Eval(context)[1] == safe + 1
+
+
+def test_xo_walks_forward_then_sideways_like_the_alip_template():
+    """A shortened Table I: 0.225 m/s forward, then 0.225 m/s to the right, under the momentum
+    controller and the general-foot ALIP."""
+    scenario = load_scenario("xo_walk")
+    scenario = dataclasses.replace(scenario, duration_s=12.0,
+                                   command=[CommandPoint(2.0, vx=0.225), CommandPoint(7.0, vy=-0.225)])
+    out = run_scenario(scenario)
+    assert not out["fell"] and out["qp_failures"] <= 5 and out["safe_mode_ticks"] == 0
+    assert out["steps"] >= 20  # 10 s of 0.4 s steps
+    vx, vy, _ = out["velocity_rms_error"]
+    assert vx <= 0.05 and vy <= 0.05
+    assert out["centroidal_am_ratio"] <= 0.1  # L_CoM an order of magnitude below L_c (paper Fig. 6, 8)
+    assert out["step_end_L_error"] <= 0.15 and out["step_end_L_steps"] >= 15

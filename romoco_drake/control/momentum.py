@@ -69,7 +69,7 @@ class MomentumGains:
     posture_kd: float = 8.0
     wrench_weight: float = 1e-6
     angular_in_tasks: bool = True
-    angular_task_weight: float = 10.0
+    angular_task_weight: float = 100.0
 
 
 @dataclass(frozen=True)
