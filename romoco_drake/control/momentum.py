@@ -6,8 +6,11 @@ rows),
 
     v̇ = v̇₀ + Z z,    v̇₀ = J_c⁺ (−J̇_c v − k_h J_c v),    Z = null(J_c),
 
-so no level can make a stance foot slip (k_h damps the drift of a contact held only in
-acceleration). The decision variables are x = [z; λ], λ the contact wrenches [τ; f] at the sole
+so no level can make a stance foot slip. k_h (``constraint_damping``) would damp the drift of a
+contact held only in acceleration; it is 0 by default, as in eq. 20: at touchdown the landing
+foot still moves, and −k_h J_c v then asked for foot decelerations no admissible wrench gives
+(level 0 infeasible on most XO touchdowns with k_h = 20). The decision variables are
+x = [z; λ], λ the contact wrenches [τ; f] at the sole
 centres (world frame) and the internal-loop forces. A strict hierarchy is solved level by level
 (:func:`~romoco_drake.control.hqp.solve_hierarchy`):
 
@@ -25,6 +28,13 @@ centres (world frame) and the internal-loop forces. A strict hierarchy is solved
    orientation, stance hip yaw, and in the air the joint targets;
 3. regularisation: the locked joints (arms, waist) at their nominal angles, every joint toward
    its nominal angle with a weak PD, and small contact wrenches.
+
+Where the angular rows sit is a gain (``MomentumGains.angular_in_tasks``). Strictly above the
+tasks (the paper's order, ``False``), every bit of momentum the swing leg makes must be
+cancelled by the arms or the pelvis at once: on the XO-style model the arm joints then ran
+into their torque limits, the pelvis yaw ran 0.3 rad off and ``xo_walk`` fell at 9.6 s. The
+default (``True``) keeps the linear rows at level 1 and weighs the angular rows with the tasks
+at level 2 (``angular_task_weight``), which lets L_G trade against the pelvis and swing foot.
 
 A level that cannot be solved (its QP infeasible: the torque and wrench limits cannot hold)
 fails the tick; :class:`~romoco_drake.control.controller.WholeBodyController` counts it and
@@ -58,7 +68,9 @@ class MomentumGains:
     decay rate of L_G; ``angular_weight``: the angular rows' weight against the linear ones,
     both scaled to CoM-acceleration units (linear ÷ m, angular ÷ m z0); ``posture_kp``,
     ``posture_kd``: the weak joint PD toward the nominal pose; ``wrench_weight``: the contact
-    wrenches' weight (per N², against joint accelerations per (rad/s²)²).
+    wrenches' weight (per N², against joint accelerations per (rad/s²)²);
+    ``angular_in_tasks``, ``angular_task_weight``: where the angular rows sit (module docstring)
+    and, at the task level, their weight in those units.
     """
 
     kp: float = 40.0
