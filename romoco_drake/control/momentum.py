@@ -16,8 +16,10 @@ centres (world frame) and the internal-loop forces. A strict hierarchy is solved
 
 0. dynamics consistency (the unactuated rows of M v̇ + C = B τ + J_cᵀ λ), the contact wrench
    cone of each sole (:func:`~romoco_drake.rom.wrench_cone.rectangle_wrench_cone`: friction,
-   CoP inside the sole, unilateral force, yaw moment) and the torque limits, with
-   τ = (M v̇ + C − J_cᵀ λ)_actuated;
+   CoP inside the sole, unilateral force, yaw moment), the torque limits, with
+   τ = (M v̇ + C − J_cᵀ λ)_actuated, and the joint ranges as bounds on q̈ (without them the
+   arms, which absorb momentum for the levels above their own, ran into their stops on XO and
+   the stop's impulse tipped the robot);
 1. the centroidal momentum rate ḣ_G = A_G v̇ + Ȧ_G v (eq. 21) toward eq. 22: m p̈_d +
    K_D m (ṗ_d − ṗ) + K_P m (p_d − p) on the CoM (horizontal from the ALIP plan in walking's
    single support, the CoM references otherwise, the CoM height from its output), and
@@ -103,6 +105,7 @@ class MomentumHqp:
     ``friction_margin`` shrinks μ by that fraction and ``cop_margin`` (m) the sole rectangle on
     every side, so the controller's wrenches stay clear of the edges the simulation slips or
     tips at. ``effort_limits`` (N·m, actuator order) replaces the robot's, e.g. to derate motors.
+    ``limit_horizon`` (s) and ``limit_margin`` (rad) set the joint-range rows of level 0.
     """
 
     warm_start_size = 0
@@ -110,7 +113,8 @@ class MomentumHqp:
     def __init__(self, robot: RobotModel, contact: ContactModel, gains: MomentumGains = MomentumGains(),
                  task_gains: tuple[TaskGain, ...] = DEFAULT_TASK_GAINS, constraint_damping: float = 0.0,
                  friction_margin: float = 0.1, cop_margin: float = 0.01,
-                 effort_limits: np.ndarray | None = None):
+                 effort_limits: np.ndarray | None = None, limit_horizon: float = 0.1,
+                 limit_margin: float = 0.02):
         self.robot, self.contact, self.gains, self.k_h = robot, contact, gains, constraint_damping
         B = robot.B
         selection = np.all((B == 0.0) | (B == 1.0)) and np.all(B.sum(axis=0) == 1.0)
@@ -134,6 +138,12 @@ class MomentumHqp:
             self._soles[side] = (robot.foot_frames[side], R_FS, p_FS)
             self._cones[side] = rectangle_wrench_cone(float(half[0]), float(half[1]), mu)
         self._z0 = robot.config.walking.z0
+        # Joint range: every actuated joint with finite limits, kept ``limit_margin`` inside them.
+        self.limit_horizon, margin = limit_horizon, limit_margin
+        q_lo, q_hi = robot.q_lower[robot.actuated_q_index], robot.q_upper[robot.actuated_q_index]
+        limited = np.isfinite(q_lo) & np.isfinite(q_hi) & (q_hi - q_lo > 4.0 * margin)
+        self._limited_q, self._limited_v = robot.actuated_q_index[limited], robot.actuated_v_index[limited]
+        self._q_lo, self._q_hi = q_lo[limited] + margin, q_hi[limited] - margin
 
     def solve(self, kin: RobotKinematics, refs: TaskReferences, previous: np.ndarray,
               warm_start: np.ndarray) -> SolverResult:
@@ -174,8 +184,8 @@ class MomentumHqp:
         f0 = kin.M @ vdot0 + kin.C
         u, a = self._rows_u, self._rows_a
         E, e = F[u], -f0[u]
-        n_cone = sum(len(c) for c in cones)
-        G = np.zeros((r.nu + n_cone, n))
+        n_cone, n_lim = sum(len(c) for c in cones), len(self._limited_v)
+        G = np.zeros((r.nu + n_cone + n_lim, n))
         lower = np.full(len(G), -np.inf)
         upper = np.zeros(len(G))
         G[:r.nu] = F[a]
@@ -185,6 +195,9 @@ class MomentumHqp:
         for cone in cones:
             G[row:row + len(cone), col:col + 6] = cone
             row, col = row + len(cone), col + 6
+        G[row:] = P[self._limited_v]
+        lo_acc, hi_acc = self._joint_acceleration_bounds(kin)
+        lower[row:], upper[row:] = lo_acc - vdot0[self._limited_v], hi_acc - vdot0[self._limited_v]
         tasks = self._tasks.evaluate(refs, kin.q)
         a_cmd = tasks.yddot_des - tasks.kp * tasks.error - tasks.kd * (tasks.J @ v - tasks.ydot_des)
         k_out = int(np.count_nonzero(refs.active))
@@ -216,6 +229,16 @@ class MomentumHqp:
         vdot = vdot0 + P @ x
         tau = F[a] @ x + f0[a]
         return MomentumSolution(tau, vdot, x[nz:], hdot_des, A_G @ vdot + Adot_v, result.failed)
+
+    def _joint_acceleration_bounds(self, kin: RobotKinematics) -> tuple[np.ndarray, np.ndarray]:
+        """q̈ bounds that keep each limited joint inside its range (less ``limit_margin``) over the
+        next ``limit_horizon`` s: q + q̇ T + ½ q̈ T² within the range. A joint already past its
+        margin gets the acceleration that brings it back, never an empty interval."""
+        T, q, qd = self.limit_horizon, kin.q[self._limited_q], kin.v[self._limited_v]
+        coast = q + qd * T
+        lo = 2.0 * (self._q_lo - coast) / T**2
+        hi = 2.0 * (self._q_hi - coast) / T**2
+        return np.minimum(lo, hi), np.maximum(lo, hi)
 
     def _momentum_rate(self, kin: RobotKinematics, refs: TaskReferences, names: list[str], com: list[int],
                        a_cmd: np.ndarray, A_G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
