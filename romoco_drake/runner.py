@@ -257,7 +257,8 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, 
     ticks = built.walking.tick_log.FindLog(context).data()[0, 1:]  # the first sample precedes any tick
     loop = built.walking
     schedule = loop.state_machine.schedule(loop.state_machine.GetMyContextFromRoot(context))
-    failures, safe_ticks, _ = loop.controller.stats_port.Eval(loop.controller.GetMyContextFromRoot(context))
+    controller_context = loop.controller.GetMyContextFromRoot(context)
+    failures, safe_ticks, _, relaxed = loop.controller.stats_port.Eval(controller_context)
     return {
         "planner": loop.planner.law.name,
         "velocity_rms_error": finite_or_none(tracking["velocity_rms_error"]),
@@ -265,6 +266,7 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, 
         "steps": schedule.steps,
         "command_clipped_segments": sum(loop.limiter.clipped(seg.command) for seg in built.command.segments),
         "qp_failures": int(failures),
+        "relaxed_ticks": int(relaxed),
         "safe_mode_entries": schedule.safe_mode_entries,
         "safe_mode_ticks": int(safe_ticks),
         "controller_tick_ms": {"median": round(float(np.median(ticks)), 3),

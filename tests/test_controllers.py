@@ -304,7 +304,7 @@ def test_controller_system_ticks_damps_and_counts(kind):
     system, context, simulator, refs = _controller_standing(kind, x)
     simulator.AdvanceTo(3.5 * PERIOD)
     tau = system.actuation_port.Eval(context)
-    np.testing.assert_array_equal(system.stats_port.Eval(context), [0, 0, 0])
+    np.testing.assert_array_equal(system.stats_port.Eval(context), [0, 0, 0, 0])
     # Standing still at the references: about the gravity compensation, within the limits.
     gravity = contact_gravity_compensation(robot, _references("g1", "standing")[0])
     np.testing.assert_allclose(tau, gravity, atol=0.25 * np.abs(gravity).max())
@@ -320,7 +320,7 @@ def test_controller_system_ticks_damps_and_counts(kind):
     bad = dataclasses.replace(refs, y_des=np.full(len(refs.y), np.nan))
     system.task_references_port.FixValue(context, bad)
     simulator.AdvanceTo(4.5 * PERIOD)
-    np.testing.assert_array_equal(system.stats_port.Eval(context), [1, 0, 1])
+    np.testing.assert_array_equal(system.stats_port.Eval(context), [1, 0, 1, 0])
     np.testing.assert_allclose(system.actuation_port.Eval(context), tau, atol=1e-9)
 
     # Damping mode, then a NaN state: joint damping −K_d v, counted as safe ticks.

@@ -166,7 +166,7 @@ def test_unsolvable_ticks_and_nan_state_give_the_counted_safe_mode():
     system.mode_port.FixValue(context, Mode.WALKING)
     for _ in range(4):
         context.SetDiscreteState(system.EvalUniquePeriodicDiscreteUpdate(context))
-    failures, safe, streak = system.stats_port.Eval(context)
+    failures, safe, streak, _ = system.stats_port.Eval(context)
     assert (failures, streak) == (4, 4)
     np.testing.assert_array_equal(system.motor_command_port.Eval(context)[-robot.nu:], robot.kd)  # damping
     nan = RobotKinematics(robot, np.full(robot.nq + robot.nv, np.nan))

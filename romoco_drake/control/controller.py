@@ -29,12 +29,15 @@ from romoco_drake.robots.model import RobotModel
 
 @dataclass(frozen=True)
 class SolverResult:
-    """One tick's answer: the motor command (5·nu), whether it is usable, and the solver's warm
-    start for the next tick (its ``warm_start_size`` numbers; kept in the controller's state)."""
+    """One tick's answer: the motor command (5·nu), whether it is usable, the solver's warm
+    start for the next tick (its ``warm_start_size`` numbers; kept in the controller's state),
+    and whether the solver had to relax its problem to answer (a usable command that gave up a
+    limit or a low-priority objective; counted)."""
 
     command: np.ndarray
     ok: bool
     warm_start: np.ndarray | None = None
+    relaxed: bool = False
 
 
 class WholeBodySolver(Protocol):
@@ -87,7 +90,7 @@ class WholeBodyController(LeafSystem):
     | ``mode`` | in | abstract | :class:`~romoco_drake.modes.Mode` |
     | ``actuation`` | out | nu | joint torques [N·m] of the command at the tick's state, clipped, held |
     | ``motor_command`` | out | 5·nu | q_d [rad], v_d [rad/s], τ_ff [N·m], K_p, K_d blocks; held |
-    | ``stats`` | out | 3 | solver failures, safe (damping) ticks, consecutive failures |
+    | ``stats`` | out | 4 | solver failures, safe (damping) ticks, consecutive failures, relaxed ticks |
     | ``tick_ms`` | out | 1 | wall time of the last update [ms] (instrumentation, not control) |
 
     Discrete state: the command, the torque, the stats, the tick time and the solver's warm
@@ -104,7 +107,7 @@ class WholeBodyController(LeafSystem):
         self.mode_port = self.DeclareAbstractInputPort("mode", AbstractValue.Make(Mode.STANDING))
         self._command = self.DeclareDiscreteState(5 * robot.nu)  # zero: no torque until the first tick
         self._tau = self.DeclareDiscreteState(robot.nu)
-        self._stats = self.DeclareDiscreteState(3)
+        self._stats = self.DeclareDiscreteState(4)
         self._tick = self.DeclareDiscreteState(1)
         self._warm = self.DeclareDiscreteState(max(solver.warm_start_size, 1))
         self.actuation_port = self.DeclareStateOutputPort("actuation", self._tau)
@@ -116,7 +119,7 @@ class WholeBodyController(LeafSystem):
     def _update(self, context, discrete_state) -> None:
         start = time.perf_counter()
         kin: RobotKinematics = self.kinematics_port.Eval(context)
-        failures, safe, streak = context.get_discrete_state(self._stats).value()
+        failures, safe, streak, relaxed = context.get_discrete_state(self._stats).value()
         previous = context.get_discrete_state(self._command).value()
         warm = context.get_discrete_state(self._warm).value()
         mode = Mode(self.mode_port.Eval(context))
@@ -128,7 +131,7 @@ class WholeBodyController(LeafSystem):
             except np.linalg.LinAlgError:  # non-finite references: the factorisations do not converge
                 result = SolverResult(previous, False)
             if result.ok and np.all(np.isfinite(result.command)):
-                command, streak = result.command, 0.0
+                command, streak, relaxed = result.command, 0.0, relaxed + result.relaxed
                 if result.warm_start is not None:
                     discrete_state.get_mutable_vector(self._warm).SetFromVector(result.warm_start)
             else:
@@ -137,5 +140,5 @@ class WholeBodyController(LeafSystem):
                            else damping_command(self.robot, kin.x))
         discrete_state.get_mutable_vector(self._command).SetFromVector(command)
         discrete_state.get_mutable_vector(self._tau).SetFromVector(command_torque(self.robot, command, kin.x))
-        discrete_state.get_mutable_vector(self._stats).SetFromVector([failures, safe, streak])
+        discrete_state.get_mutable_vector(self._stats).SetFromVector([failures, safe, streak, relaxed])
         discrete_state.get_mutable_vector(self._tick).SetFromVector([1e3 * (time.perf_counter() - start)])

@@ -42,13 +42,21 @@ class Level:
 
 @dataclass(frozen=True)
 class HqpResult:
-    """The solution, and which level failed (None: all solved). ``freedom[k]`` is the dimension
-    left to level k; ``residuals[k]`` its weighted residual ‖W_k (A_k x − b_k)‖ at the solution."""
+    """The solution and what became of the levels.
+
+    ``failed``: the first level, if its QP has no solution (level 0's constraints cannot all
+    hold; x is then unusable). ``skipped``: a later level the solver gave up on (an active-set
+    breakdown on degenerate constraints); x is then the previous level's solution, which
+    keeps every constraint and higher level, and the levels below are not solved.
+    ``freedom[k]`` is the dimension left to level k; ``residuals[k]`` its weighted residual
+    ‖W_k (A_k x − b_k)‖ at the solution.
+    """
 
     x: np.ndarray
     failed: str | None
     freedom: tuple[int, ...]
     residuals: tuple[float, ...]
+    skipped: str | None = None
 
 
 def null_space(A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -64,9 +72,8 @@ def null_space(A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nd
 def solve_hierarchy(E: np.ndarray, e: np.ndarray, G: np.ndarray, lower: np.ndarray, upper: np.ndarray,
                     levels: list[Level], damping: float = 1e-9, feasibility_tol: float = 1e-6,
                     relax: float = 1e-7) -> HqpResult:
-    """Solves the hierarchy (module docstring). A level that cannot be solved (its QP is
-    infeasible: the constraints of level 0 cannot all hold) is reported by name in ``failed``
-    and the solution is the last level's; an inconsistent E x = e fails as ``"equality"``."""
+    """Solves the hierarchy (module docstring); see :class:`HqpResult` for failed and skipped
+    levels. An inconsistent E x = e fails as ``"equality"``."""
     n = E.shape[1] if E.size else G.shape[1]
     U_r, s_r, V_r, N = null_space(E)
     x = V_r @ ((U_r.T @ e) / s_r) if len(s_r) else np.zeros(n)
@@ -91,9 +98,14 @@ def solve_hierarchy(E: np.ndarray, e: np.ndarray, G: np.ndarray, lower: np.ndarr
             up, lo = np.maximum(up, 0.0) + relax, np.minimum(lo, 0.0) - relax
         w, _, flag, _ = daqp.solve(H, -(AN.T @ r), GN, up, lo, sense)
         if flag < 0:
-            return HqpResult(x, level.name, tuple(freedom), tuple(residuals))
+            if not k:
+                return HqpResult(x, level.name, tuple(freedom), ())
+            skipped = level.name
+            break
         x = x + N @ w
         N = N @ null_space(AN)[3]
+    else:
+        skipped = None
     for level in levels:
         residuals.append(float(np.linalg.norm(np.sqrt(level.w) * (level.A @ x - level.b))))
-    return HqpResult(x, None, tuple(freedom), tuple(residuals))
+    return HqpResult(x, None, tuple(freedom), tuple(residuals), skipped)

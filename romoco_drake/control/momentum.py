@@ -38,9 +38,12 @@ into their torque limits, the pelvis yaw ran 0.3 rad off and ``xo_walk`` fell at
 default (``True``) keeps the linear rows at level 1 and weighs the angular rows with the tasks
 at level 2 (``angular_task_weight``), which lets L_G trade against the pelvis and swing foot.
 
-A level that cannot be solved (its QP infeasible: the torque and wrench limits cannot hold)
-fails the tick; :class:`~romoco_drake.control.controller.WholeBodyController` counts it and
-keeps the last command, then damps. In the air (no contact) the momentum rate is gravity's
+When level 0's constraints cannot all hold (a joint moving fast toward its stop needs more
+torque to stop than it has), the tick is solved again without the torque limits (the motors
+clip the torque), then without the joint ranges; a lower level the active-set solver breaks
+down on is skipped (the higher levels' solution stands). Such ticks count as ``relaxed_ticks``.
+If nothing solves, the tick fails; :class:`~romoco_drake.control.controller.WholeBodyController`
+counts it and keeps the last command, then damps. In the air (no contact) the momentum rate is gravity's
 alone, so level 1 is skipped.
 """
 
@@ -89,7 +92,8 @@ class MomentumGains:
 @dataclass(frozen=True)
 class MomentumSolution:
     """One tick: torque, v̇, contact wrenches λ (6 a foot, then internal forces), the desired and
-    reached centroidal momentum rate [k̇; ṁv] (6,), and the failed level (None: solved)."""
+    reached centroidal momentum rate [k̇; ṁv] (6,), the failed level (None: solved) and what was
+    relaxed to solve it (module docstring)."""
 
     tau: np.ndarray
     vdot: np.ndarray
@@ -97,6 +101,7 @@ class MomentumSolution:
     hdot_desired: np.ndarray
     hdot: np.ndarray
     failed: str | None
+    relaxed: str | None = None  # what was given up to answer: a limit group or a skipped level
 
 
 class MomentumHqp:
@@ -150,7 +155,8 @@ class MomentumHqp:
         """The torque command of this tick (:class:`~romoco_drake.control.controller.WholeBodySolver`)."""
         solution = self.compute(kin, refs)
         ok = solution.failed is None and bool(np.all(np.isfinite(solution.tau)))
-        return SolverResult(torque_command(self.robot, kin, solution.tau), ok)
+        command = torque_command(self.robot, kin, solution.tau)
+        return SolverResult(command, ok, relaxed=solution.relaxed is not None)
 
     def compute(self, kin: RobotKinematics, refs: TaskReferences) -> MomentumSolution:
         """The hierarchy's solution at the state of ``kin`` for the references ``refs``."""
@@ -225,10 +231,19 @@ class MomentumHqp:
         levels.append(Level("tasks", task_A, task_b, task_w))
         levels.append(self._regularization(kin, tasks, a_cmd, k_out, P, vdot0, nz, nl))
         result = solve_hierarchy(E, e, G, lower, upper, levels)
+        relaxed = result.skipped
+        # Level 0 infeasible: the joint-range rows ask for a stop the torque limits cannot give.
+        # Give up the torque limits first (the motor clips the torque), then the joint ranges.
+        for name, rows in (("torque limits", slice(0, r.nu)), ("joint ranges", slice(row, None))):
+            if result.failed is None:
+                break
+            lower[rows], upper[rows] = -np.inf, np.inf
+            result = solve_hierarchy(E, e, G, lower, upper, levels)
+            relaxed = name
         x = result.x
         vdot = vdot0 + P @ x
         tau = F[a] @ x + f0[a]
-        return MomentumSolution(tau, vdot, x[nz:], hdot_des, A_G @ vdot + Adot_v, result.failed)
+        return MomentumSolution(tau, vdot, x[nz:], hdot_des, A_G @ vdot + Adot_v, result.failed, relaxed)
 
     def _joint_acceleration_bounds(self, kin: RobotKinematics) -> tuple[np.ndarray, np.ndarray]:
         """q̈ bounds that keep each limited joint inside its range (less ``limit_margin``) over the
