@@ -9,8 +9,9 @@ level constrains. Level k solves the small QP
     min_w ‖W_k (A_k N_k w − (b_k − A_k x_k))‖² + ε‖w‖²   s.t.  lower ≤ G (x_k + N_k w) ≤ upper
 
 with DAQP (from the second level on, the previous solution w = 0 is feasible, so the bounds
-are relaxed by ``relax`` around it: round-off in constraints the higher levels made active
-would otherwise read as infeasibility to the active-set solver), then x_{k+1} = x_k + N_k w*
+are relaxed around it by ``relax`` times the size of the terms in G x: round-off in
+constraints the higher levels made active would otherwise read as infeasibility to the
+active-set solver), then x_{k+1} = x_k + N_k w*
 and N_{k+1} = N_k · null(W_k A_k N_k). A level's
 objective is strictly convex in A_k x, so every optimum of the level has the same A_k x: fixing
 it by restricting the lower levels to null(A_k N_k) keeps exactly that level's set of optima
@@ -71,7 +72,7 @@ def null_space(A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nd
 
 def solve_hierarchy(E: np.ndarray, e: np.ndarray, G: np.ndarray, lower: np.ndarray, upper: np.ndarray,
                     levels: list[Level], damping: float = 1e-9, feasibility_tol: float = 1e-6,
-                    relax: float = 1e-7) -> HqpResult:
+                    relax: float = 1e-6) -> HqpResult:
     """Solves the hierarchy (module docstring); see :class:`HqpResult` for failed and skipped
     levels. An inconsistent E x = e fails as ``"equality"``."""
     n = E.shape[1] if E.size else G.shape[1]
@@ -95,7 +96,8 @@ def solve_hierarchy(E: np.ndarray, e: np.ndarray, G: np.ndarray, lower: np.ndarr
         GN, Gx = G @ N, G @ x
         up, lo = upper_d - Gx, lower_d - Gx
         if k:  # x already solves a level: w = 0 is feasible up to round-off, which is relaxed
-            up, lo = np.maximum(up, 0.0) + relax, np.minimum(lo, 0.0) - relax
+            slack = relax * (1.0 + np.abs(G) @ np.abs(x))  # the round-off scale of G x
+            up, lo = np.maximum(up, 0.0) + slack, np.minimum(lo, 0.0) - slack
         w, _, flag, _ = daqp.solve(H, -(AN.T @ r), GN, up, lo, sense)
         if flag < 0:
             if not k:

@@ -11,7 +11,8 @@ contact held only in acceleration; it is 0 by default, as in eq. 20: at touchdow
 foot still moves, and −k_h J_c v then asked for foot decelerations no admissible wrench gives
 (level 0 infeasible on most XO touchdowns with k_h = 20). The decision variables are
 x = [z; λ], λ the contact wrenches [τ; f] at the sole
-centres (world frame) and the internal-loop forces. A strict hierarchy is solved level by level
+centres (each in its sole frame; five numbers, without the roll moment, for a line contact)
+and the internal-loop forces. A strict hierarchy is solved level by level
 (:func:`~romoco_drake.control.hqp.solve_hierarchy`):
 
 0. dynamics consistency (the unactuated rows of M v̇ + C = B τ + J_cᵀ λ), the contact wrench
@@ -135,14 +136,20 @@ class MomentumHqp:
         self._J_joints = np.zeros((robot.nu, robot.nv))
         self._J_joints[np.arange(robot.nu), robot.actuated_v_index] = 1.0
         mu = robot.config.feet.friction * (1.0 - friction_margin)
+        # A line contact (a foot without an ankle roll joint, as the embedding models it) is free
+        # to roll about its toe-heel axis x_S: its row ω_x and its wrench's τ_x are dropped.
+        self._sole_rows = np.arange(1, 6) if contact.line_contact else np.arange(6)
         self._soles, self._cones = {}, {}
         for side in ("left", "right"):
             R_FS, p_FS = sole_frame(robot, side)
             xy = (R_FS.T @ (robot.feet[side].points - p_FS[:, None]))[:2]
             half = 0.5 * (xy.max(axis=1) - xy.min(axis=1))
             half = np.where(half > 2.0 * cop_margin, half - cop_margin, half)
+            if contact.line_contact:
+                half[1] = 0.0
+            cone = rectangle_wrench_cone(float(half[0]), float(half[1]), mu)[:, self._sole_rows]
             self._soles[side] = (robot.foot_frames[side], R_FS, p_FS)
-            self._cones[side] = rectangle_wrench_cone(float(half[0]), float(half[1]), mu)
+            self._cones[side] = cone[np.abs(cone).max(axis=1) > 0.0]
         self._z0 = robot.config.walking.z0
         # Joint range: every actuated joint with finite limits, kept ``limit_margin`` inside them.
         self.limit_horizon, margin = limit_horizon, limit_margin
@@ -164,15 +171,14 @@ class MomentumHqp:
         r, g = self.robot, self.gains
         nv, v, m = r.nv, kin.v, r.total_mass
         feet = refs.domain.feet
-        # Contact rows: each foot's sole-centre spatial Jacobian, then the internal loops.
+        # Contact rows: each foot's sole-centre spatial Jacobian in its sole frame S (the wrench
+        # [τ; f] is then in S, where its cone is constant), then the internal loops.
         J_rows, bias_rows, cones = [], [], []
         for side in feet:
-            frame, R_FS, p_FS = self._soles[side]
-            J, bias = kin.spatial_jacobian(frame, p_FS)
+            J, bias = self.sole_motion(kin, side)
             J_rows.append(J)
             bias_rows.append(bias)
-            R_SW = (kin.frame_pose(frame)[0] @ R_FS).T
-            cones.append(self._cones[side] @ np.kron(np.eye(2), R_SW))
+            cones.append(self._cones[side])
         n_f = refs.num_contact_forces
         J_rows.append(refs.holonomic.J[n_f:])
         bias_rows.append(refs.holonomic.Jdot_v[n_f:])
@@ -245,6 +251,16 @@ class MomentumHqp:
         vdot = vdot0 + P @ x
         tau = F[a] @ x + f0[a]
         return MomentumSolution(tau, vdot, x[nz:], hdot_des, A_G @ vdot + Adot_v, result.failed, relaxed)
+
+    def sole_motion(self, kin: RobotKinematics, side: str) -> tuple[np.ndarray, np.ndarray]:
+        """The sole centre's spatial Jacobian rows [ω; v] and bias acceleration in the sole frame
+        S (the rows the contact holds: six, or five for a line contact)."""
+        frame, R_FS, p_FS = self._soles[side]
+        J, bias = kin.spatial_jacobian(frame, p_FS)
+        R_SW = (kin.frame_pose(frame)[0] @ R_FS).T
+        J_S = np.vstack([R_SW @ J[:3], R_SW @ J[3:]])
+        bias_S = np.concatenate([R_SW @ bias[:3], R_SW @ bias[3:]])
+        return J_S[self._sole_rows], bias_S[self._sole_rows]
 
     def _joint_acceleration_bounds(self, kin: RobotKinematics) -> tuple[np.ndarray, np.ndarray]:
         """q̈ bounds that keep each limited joint inside its range (less ``limit_margin``) over the
