@@ -49,14 +49,12 @@ class HqpResult:
     hold; x is then unusable). ``skipped``: a later level the solver gave up on (an active-set
     breakdown on degenerate constraints); x is then the previous level's solution, which
     keeps every constraint and higher level, and the levels below are not solved.
-    ``freedom[k]`` is the dimension left to level k; ``residuals[k]`` its weighted residual
-    ‖W_k (A_k x − b_k)‖ at the solution.
+    ``freedom[k]`` is the dimension left to level k.
     """
 
     x: np.ndarray
     failed: str | None
     freedom: tuple[int, ...]
-    residuals: tuple[float, ...]
     skipped: str | None = None
 
 
@@ -80,8 +78,8 @@ def solve_hierarchy(E: np.ndarray, e: np.ndarray, G: np.ndarray, lower: np.ndarr
     x = V_r @ ((U_r.T @ e) / s_r) if len(s_r) else np.zeros(n)
     scale = max(1.0, float(np.abs(e).max(initial=0.0)))
     if len(e) and np.abs(E @ x - e).max() > feasibility_tol * scale:
-        return HqpResult(x, "equality", (), ())
-    freedom, residuals = [], []
+        return HqpResult(x, "equality", ())
+    freedom = []
     lower_d, upper_d = np.maximum(lower, -_INF), np.minimum(upper, _INF)
     sense = np.zeros(len(lower), dtype=np.int32)
     for k, level in enumerate(levels):
@@ -92,7 +90,8 @@ def solve_hierarchy(E: np.ndarray, e: np.ndarray, G: np.ndarray, lower: np.ndarr
         AN = root[:, None] * (level.A @ N)
         r = root * (level.b - level.A @ x)
         H = AN.T @ AN
-        H.flat[::H.shape[0] + 1] += damping * max(1.0, float(np.trace(H)) / H.shape[0])
+        diagonal = H.flat[::H.shape[0] + 1]
+        H.flat[::H.shape[0] + 1] = diagonal + damping * (1.0 + diagonal.mean())
         GN, Gx = G @ N, G @ x
         up, lo = upper_d - Gx, lower_d - Gx
         if k:  # x already solves a level: w = 0 is feasible up to round-off, which is relaxed
@@ -101,13 +100,12 @@ def solve_hierarchy(E: np.ndarray, e: np.ndarray, G: np.ndarray, lower: np.ndarr
         w, _, flag, _ = daqp.solve(H, -(AN.T @ r), GN, up, lo, sense)
         if flag < 0:
             if not k:
-                return HqpResult(x, level.name, tuple(freedom), ())
+                return HqpResult(x, level.name, tuple(freedom))
             skipped = level.name
             break
         x = x + N @ w
-        N = N @ null_space(AN)[3]
+        if k + 1 < len(levels):
+            N = N @ null_space(AN)[3]
     else:
         skipped = None
-    for level in levels:
-        residuals.append(float(np.linalg.norm(np.sqrt(level.w) * (level.A @ x - level.b))))
-    return HqpResult(x, None, tuple(freedom), tuple(residuals), skipped)
+    return HqpResult(x, None, tuple(freedom), skipped)

@@ -53,11 +53,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import daqp
 import numpy as np
 
 from romoco_drake.control.controller import SolverResult, torque_command
 from romoco_drake.control.hqp import Level, null_space, solve_hierarchy
-from romoco_drake.control.tasks import DEFAULT_TASK_GAINS, TaskGain, TaskStack
+from romoco_drake.control.tasks import DEFAULT_TASK_GAINS, GRAVITY, TaskGain, TaskStack
 from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.embedding.outputs import sole_frame
 from romoco_drake.embedding.references import TaskReferences
@@ -80,8 +81,8 @@ class MomentumGains:
     docstring) and their weight there, in those units.
     """
 
-    kp: float = 40.0
-    kd: float = 12.0
+    kp: float = 15.0
+    kd: float = 6.0
     k_angular: float = 10.0
     angular_weight: float = 0.5
     posture_kp: float = 20.0
@@ -133,8 +134,6 @@ class MomentumHqp:
         self._rows_u = np.flatnonzero(B.sum(axis=1) == 0.0)
         self._tasks = TaskStack(robot, task_gains)
         self._nominal = robot.nominal.q[robot.actuated_q_index]
-        self._J_joints = np.zeros((robot.nu, robot.nv))
-        self._J_joints[np.arange(robot.nu), robot.actuated_v_index] = 1.0
         mu = robot.config.feet.friction * (1.0 - friction_margin)
         # A line contact (a foot without an ankle roll joint, as the embedding models it) is free
         # to roll about its toe-heel axis x_S: its row ω_x and its wrench's τ_x are dropped.
@@ -151,6 +150,8 @@ class MomentumHqp:
             self._soles[side] = (robot.foot_frames[side], R_FS, p_FS)
             self._cones[side] = cone[np.abs(cone).max(axis=1) > 0.0]
         self._z0 = robot.config.walking.z0
+        self._domain_cones: dict[tuple[str, ...], tuple[np.ndarray, ...]] = {}
+        self._gravity_wrench = np.array([0.0, 0.0, 0.0, 0.0, 0.0, -GRAVITY * robot.total_mass])
         # Joint range: every actuated joint with finite limits, kept ``limit_margin`` inside them.
         self.limit_horizon, margin = limit_horizon, limit_margin
         q_lo, q_hi = robot.q_lower[robot.actuated_q_index], robot.q_upper[robot.actuated_q_index]
@@ -206,8 +207,8 @@ class MomentumHqp:
         upper[:r.nu] = self._effort - f0[a]
         row, col = r.nu, nz
         for cone in cones:
-            G[row:row + len(cone), col:col + 6] = cone
-            row, col = row + len(cone), col + 6
+            G[row:row + len(cone), col:col + cone.shape[1]] = cone
+            row, col = row + len(cone), col + cone.shape[1]
         G[row:] = P[self._limited_v]
         lo_acc, hi_acc = self._joint_acceleration_bounds(kin)
         lower[row:], upper[row:] = lo_acc - vdot0[self._limited_v], hi_acc - vdot0[self._limited_v]
@@ -223,6 +224,7 @@ class MomentumHqp:
         if feet:
             hdot_des, rows = self._momentum_rate(kin, refs, names, com, a_cmd, A_G)
             w = np.concatenate([np.full(3, g.angular_weight / (m * self._z0) ** 2), np.full(3, 1.0 / m**2)])
+            hdot_des = self._constrained_rate(kin, feet, hdot_des, rows, w)
             target = hdot_des - Adot_v - A_G @ vdot0
             soft = np.array(["xyz"[i] in g.weighted_axes for i in range(3)] + [False] * 3)
             strict = rows & ~soft
@@ -251,6 +253,53 @@ class MomentumHqp:
         vdot = vdot0 + P @ x
         tau = F[a] @ x + f0[a]
         return MomentumSolution(tau, vdot, x[nz:], hdot_des, A_G @ vdot + Adot_v, result.failed, relaxed)
+
+    def _constrained_rate(self, kin: RobotKinematics, feet: tuple[str, ...], hdot_des: np.ndarray,
+                          rows: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """The paper's constrained desired rate: the ḣ_G closest to ``hdot_des`` (weights ``w`` on
+        the ``rows`` with a target) that contact wrenches inside their cones can give.
+
+        With the feet's sole-frame wrenches λ_i, ḣ_G = Σ_i X_i λ_i + [0; m g], X_i mapping a
+        wrench at the sole centre S to one about the CoM G in world: f = R_WS f_S,
+        τ = R_WS τ_S + (p_S − p_G) × f. One small QP over λ (ε‖λ‖² keeps it unique).
+        """
+        cols = self._sole_rows
+        blocks = []
+        for side in feet:
+            frame, R_FS, p_FS = self._soles[side]
+            R_WF, p_WF = kin.frame_pose(frame)
+            R = R_WF @ R_FS
+            rx, ry, rz = (R_WF @ p_FS + p_WF - kin.p_com).tolist()
+            X = np.zeros((6, 6))
+            X[:3, :3] = X[3:, 3:] = R
+            X[:3, 3:] = np.array([[0.0, -rz, ry], [rz, 0.0, -rx], [-ry, rx, 0.0]]) @ R
+            blocks.append(X[:, cols])
+        X = blocks[0] if len(blocks) == 1 else np.hstack(blocks)
+        C, upper, lower, sense = self._domain_cone(feet)
+        root = np.sqrt(w * rows)
+        A = root[:, None] * X
+        b = root * (hdot_des - self._gravity_wrench)
+        H = A.T @ A
+        H.flat[::H.shape[0] + 1] += 1e-9 * (1.0 + H.flat[::H.shape[0] + 1].sum())
+        lam, _, flag, _ = daqp.solve(H, -(A.T @ b), C, upper, lower, sense)
+        if flag < 0:
+            return hdot_des
+        out = hdot_des.copy()
+        out[rows] = (X @ lam + self._gravity_wrench)[rows]
+        return out
+
+    def _domain_cone(self, feet: tuple[str, ...]):
+        """The block-diagonal wrench cone of the feet in contact and its DAQP bounds (made once)."""
+        if feet not in self._domain_cones:
+            cones = [self._cones[side] for side in feet]
+            C = np.zeros((sum(len(c) for c in cones), sum(c.shape[1] for c in cones)))
+            r0 = c0 = 0
+            for cone in cones:
+                C[r0:r0 + len(cone), c0:c0 + cone.shape[1]] = cone
+                r0, c0 = r0 + len(cone), c0 + cone.shape[1]
+            self._domain_cones[feet] = (C, np.zeros(len(C)), np.full(len(C), -1e30),
+                                        np.zeros(len(C), dtype=np.int32))
+        return self._domain_cones[feet]
 
     def sole_motion(self, kin: RobotKinematics, side: str) -> tuple[np.ndarray, np.ndarray]:
         """The sole centre's spatial Jacobian rows [ω; v] and bias acceleration in the sole frame
@@ -305,9 +354,12 @@ class MomentumHqp:
         J_lock = tasks.J[k_out:]
         posture = (g.posture_kp * (self._nominal - kin.q[r.actuated_q_index])
                    - g.posture_kd * kin.v[r.actuated_v_index])
-        wrench_rows = np.zeros((nl, nz + nl))
-        wrench_rows[:, nz:] = np.eye(nl)
-        A = np.vstack([J_lock @ P, self._J_joints @ P, wrench_rows])
-        b = np.concatenate([a_cmd[k_out:] - J_lock @ vdot0, posture - self._J_joints @ vdot0, np.zeros(nl)])
+        k_lock = len(J_lock)
+        A = np.zeros((k_lock + r.nu + nl, nz + nl))
+        A[:k_lock] = J_lock @ P
+        A[k_lock:k_lock + r.nu] = P[r.actuated_v_index]  # the joint rows of v̇ = v̇₀ + P x
+        A[k_lock + r.nu:, nz:] = np.eye(nl)
+        joints = vdot0[r.actuated_v_index]
+        b = np.concatenate([a_cmd[k_out:] - J_lock @ vdot0, posture - joints, np.zeros(nl)])
         w = np.concatenate([tasks.weight[k_out:], np.full(r.nu, 0.01), np.full(nl, g.wrench_weight)])
         return Level("regularization", A, b, w)

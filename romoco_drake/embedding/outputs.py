@@ -13,6 +13,7 @@ torso or swing foot does not mix pitch into roll.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from math import atan2, cos, pi, remainder, sin
 
@@ -47,8 +48,10 @@ class LegJoints:
     hip_yaw_sign: float = 1.0  # +1 if the hip yaw turns the leg about +z at the nominal pose
 
 
+@functools.cache
 def sole_frame(robot: RobotModel, side: str) -> tuple[np.ndarray, np.ndarray]:
-    """R_FS and p_FS of a foot's sole frame S in its body frame F.
+    """R_FS and p_FS of a foot's sole frame S in its body frame F (computed once per robot and
+    side; read-only arrays).
 
     Origin at the centroid of the sole points; z_S along the sole normal ``up`` and x_S along
     the forward axis (:func:`~romoco_drake.robots.nominal.foot_forward_axis`). A plane foot
@@ -63,7 +66,10 @@ def sole_frame(robot: RobotModel, side: str) -> tuple[np.ndarray, np.ndarray]:
     else:
         x = x - (x @ z) * z
         x = x / np.linalg.norm(x)
-    return np.column_stack([x, np.cross(z, x), z]), foot.points.mean(axis=1)
+    R_FS, p_FS = np.column_stack([x, np.cross(z, x), z]), foot.points.mean(axis=1)
+    R_FS.setflags(write=False)
+    p_FS.setflags(write=False)
+    return R_FS, p_FS
 
 
 def _leg_chain(robot: RobotModel, side: str) -> list[Joint]:
