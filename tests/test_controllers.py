@@ -336,14 +336,14 @@ def test_controller_system_ticks_damps_and_counts(kind):
     system.mode_port.FixValue(context, Mode.STANDING)
     simulator.AdvanceTo(6.5 * PERIOD)
     np.testing.assert_allclose(system.actuation_port.Eval(context), -0.1 * robot.kd, atol=1e-9)
-    np.testing.assert_array_equal(system.stats_port.Eval(context), [1, 2, 1])  # damping keeps the streak
+    np.testing.assert_array_equal(system.stats_port.Eval(context), [1, 2, 1, 0])  # damping keeps the streak
 
     # Back to a good state: control resumes (VEL-IK restarts its target at the measured joints).
     shifted = x.copy()
     shifted[robot.actuated_q_index] += 0.05
     system.kinematics_port.FixValue(context, RobotKinematics(robot, shifted))
     simulator.AdvanceTo(7.5 * PERIOD)
-    np.testing.assert_array_equal(system.stats_port.Eval(context), [1, 2, 0])
+    np.testing.assert_array_equal(system.stats_port.Eval(context), [1, 2, 0, 0])
     if kind == "velocity":
         q_d = system.motor_command_port.Eval(context)[:robot.nu]
         np.testing.assert_allclose(q_d, shifted[robot.actuated_q_index], atol=0.01)
@@ -364,7 +364,7 @@ def test_controller_keeps_stale_commands_then_damps():
     simulator.AdvanceTo(4.5 * PERIOD)  # the third: damping
     np.testing.assert_allclose(system.actuation_port.Eval(context),
                                np.clip(-0.2 * robot.kd, -robot.effort_limits, robot.effort_limits), atol=1e-9)
-    np.testing.assert_array_equal(system.stats_port.Eval(context), [3, 0, 3])
+    np.testing.assert_array_equal(system.stats_port.Eval(context), [3, 0, 3, 0])
 
 
 def test_mode_port_rejects_what_is_not_a_mode():

@@ -60,7 +60,7 @@ from romoco_drake.control.controller import SolverResult, torque_command
 from romoco_drake.control.hqp import Level, null_space, solve_hierarchy
 from romoco_drake.control.tasks import DEFAULT_TASK_GAINS, GRAVITY, TaskGain, TaskStack
 from romoco_drake.embedding.contact import ContactModel
-from romoco_drake.embedding.outputs import sole_frame
+from romoco_drake.embedding.outputs import _leg_chain, sole_frame
 from romoco_drake.embedding.references import TaskReferences
 from romoco_drake.errors import RomocoError
 from romoco_drake.robots.kinematics import RobotKinematics
@@ -90,6 +90,26 @@ class MomentumGains:
     wrench_weight: float = 1e-6
     weighted_axes: str = "xyz"
     angular_task_weight: float = 1000.0
+
+
+def _ankle_joints(robot: RobotModel, side: str, sole: tuple) -> list[tuple]:
+    """(child frame, axis in that frame, effort limit) of a leg's ankle joints: the actuated
+    revolute joints of the foot's chain within 0.2 m of the sole centre at the nominal pose."""
+    frame_F, R_FS, p_FS = sole
+    plant = robot.plant
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, robot.nominal.q)
+    X_WF = frame_F.CalcPoseInWorld(context)
+    p_WS = X_WF.multiply(p_FS)
+    limits = dict(zip(robot.actuator_names, robot.effort_limits, strict=True))
+    out = []
+    for joint in _leg_chain(robot, side):
+        if not hasattr(joint, "revolute_axis"):
+            continue
+        frame = joint.frame_on_child()
+        if np.linalg.norm(frame.CalcPoseInWorld(context).translation() - p_WS) < 0.2:
+            out.append((frame, np.asarray(joint.revolute_axis(), dtype=float), float(limits[joint.name()])))
+    return out
 
 
 @dataclass(frozen=True)
@@ -151,6 +171,7 @@ class MomentumHqp:
             self._cones[side] = cone[np.abs(cone).max(axis=1) > 0.0]
         self._z0 = robot.config.walking.z0
         self._domain_cones: dict[tuple[str, ...], tuple[np.ndarray, ...]] = {}
+        self._ankles = {side: _ankle_joints(robot, side, self._soles[side]) for side in ("left", "right")}
         self._gravity_wrench = np.array([0.0, 0.0, 0.0, 0.0, 0.0, -GRAVITY * robot.total_mass])
         # Joint range: every actuated joint with finite limits, kept ``limit_margin`` inside them.
         self.limit_horizon, margin = limit_horizon, limit_margin
@@ -261,7 +282,11 @@ class MomentumHqp:
 
         With the feet's sole-frame wrenches λ_i, ḣ_G = Σ_i X_i λ_i + [0; m g], X_i mapping a
         wrench at the sole centre S to one about the CoM G in world: f = R_WS f_S,
-        τ = R_WS τ_S + (p_S − p_G) × f. One small QP over λ (ε‖λ‖² keeps it unique).
+        τ = R_WS τ_S + (p_S − p_G) × f. One small QP over λ (ε‖λ‖² keeps it unique) under the
+        wrench cones and the ankle torque limits: the moment of a foot's wrench about each of its
+        ankle axes is what that joint must hold (the foot's own inertia aside). Without those
+        rows H1's 40 N·m ankles could not give the centre of pressure the sole allows, and level
+        1 made up the difference with the hips, pitching the torso forward until it fell.
         """
         cols = self._sole_rows
         blocks = []
@@ -276,6 +301,23 @@ class MomentumHqp:
             blocks.append(X[:, cols])
         X = blocks[0] if len(blocks) == 1 else np.hstack(blocks)
         C, upper, lower, sense = self._domain_cone(feet)
+        ankle_rows, ankle_limits, c0 = [], [], 0
+        for side, block in zip(feet, blocks, strict=True):
+            for frame, axis_F, limit in self._ankles[side]:
+                R_WJ, p_WJ = kin.frame_pose(frame)
+                a = R_WJ @ axis_F  # the joint axis in world; the wrench's moment about the joint
+                rx, ry, rz = (p_WJ - kin.p_com).tolist()  # X gives moments about G: shift to J
+                row = np.zeros(X.shape[1])
+                row[c0:c0 + block.shape[1]] = a @ (block[:3] - np.array(
+                    [[0.0, -rz, ry], [rz, 0.0, -rx], [-ry, rx, 0.0]]) @ block[3:])
+                ankle_rows.append(row)
+                ankle_limits.append(0.9 * limit)  # a margin for the foot's own inertia
+            c0 += block.shape[1]
+        if ankle_rows:
+            limits = np.array(ankle_limits)
+            C = np.vstack([C, np.array(ankle_rows)])
+            upper, lower = np.concatenate([upper, limits]), np.concatenate([lower, -limits])
+            sense = np.zeros(len(C), dtype=np.int32)
         root = np.sqrt(w * rows)
         A = root[:, None] * X
         b = root * (hdot_des - self._gravity_wrench)
