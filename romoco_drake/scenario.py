@@ -422,5 +422,6 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
         builder.Connect(embedding.task_references_port, recorder.task_references_port)
         builder.Connect(planner.planner_output_port, recorder.planner_output_port)
         builder.Connect(heading.command_port, recorder.command_port)
+        builder.Connect(rom_state.rom_state_port, recorder.rom_state_port)
         momentum_log = LogVectorOutput(recorder.record_port, builder, period)
     return WalkingLoop(machine, planner, embedding, controller, tick_log, error_log, limiter, momentum_log)

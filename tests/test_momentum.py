@@ -193,3 +193,25 @@ def test_xo_walks_forward_then_sideways_like_the_alip_template():
     assert vx <= 0.05 and vy <= 0.05
     assert out["centroidal_am_ratio"] <= 0.1  # L_CoM an order of magnitude below L_c (paper Fig. 6, 8)
     assert out["step_end_L_error"] <= 0.15 and out["step_end_L_steps"] >= 15
+
+
+def test_alip_com_flow_integrates_the_alip_model():
+    """The CoM plan: the flow of ṗ = L_c/(mH) (lateral sign flipped), L̇_c = m g p in {c}, mapped to world."""
+    from romoco_drake.embedding.references import alip_com_flow
+
+    m, H, g = 150.0, 1.0, 9.81
+    start = (0.3, -0.2, 0.4, 0.05, 0.02, -0.12, 20.0, 35.0)  # origin x, y, heading, τ₀, p_x, p_y, L_cx, L_cy
+    x = np.array([0.02, 35.0])  # sagittal (p_x, L_cy)
+    y = np.array([-0.12, 20.0])  # lateral (p_y, L_cx)
+    dt = 1e-5
+    for _ in range(int(round(0.3 / dt))):  # RK2 to τ = 0.35
+        fx = lambda s: np.array([s[1] / (m * H), m * g * s[0]])  # noqa: E731
+        fy = lambda s: np.array([-s[1] / (m * H), -m * g * s[0]])  # noqa: E731
+        x = x + dt * fx(x + 0.5 * dt * fx(x))
+        y = y + dt * fy(y + 0.5 * dt * fy(y))
+    c, s = np.cos(0.4), np.sin(0.4)
+    R = np.array([[c, -s], [s, c]])
+    plan = alip_com_flow(start, 0.35, H, m)
+    np.testing.assert_allclose(plan[0], R @ [x[0], y[0]] + [0.3, -0.2], atol=1e-8)
+    np.testing.assert_allclose(plan[1], R @ [x[1] / (m * H), -y[1] / (m * H)], atol=1e-7)
+    np.testing.assert_allclose(plan[2], g / H * (R @ [x[0], y[0]]), atol=1e-7)

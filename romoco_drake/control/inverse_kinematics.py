@@ -64,7 +64,7 @@ from romoco_drake.control.tasks import (
     weighted_least_squares,
 )
 from romoco_drake.embedding.contact import ContactModel
-from romoco_drake.embedding.outputs import Output, _leg_chain
+from romoco_drake.embedding.outputs import Output, leg_chain
 from romoco_drake.embedding.references import EmbeddingCore, TaskReferences
 from romoco_drake.modes import Domain, Mode
 from romoco_drake.robots.kinematics import RobotKinematics
@@ -269,6 +269,6 @@ class IkSolver:
 
 def _ankle_actuators(robot: RobotModel, side: str) -> np.ndarray:
     """Actuator indices of the leg's joints below the knee (ankle pitch/roll, Cassie's toe)."""
-    chain = [j.name() for j in _leg_chain(robot, side)]
+    chain = [j.name() for j in leg_chain(robot, side)]
     knee = next(i for i, name in enumerate(chain) if "knee" in name)
     return np.array([robot.actuator_names.index(name) for name in chain[knee + 1:]], dtype=int)

@@ -60,7 +60,7 @@ from romoco_drake.control.controller import SolverResult, torque_command
 from romoco_drake.control.hqp import Level, null_space, solve_hierarchy
 from romoco_drake.control.tasks import DEFAULT_TASK_GAINS, GRAVITY, TaskGain, TaskStack
 from romoco_drake.embedding.contact import ContactModel
-from romoco_drake.embedding.outputs import _leg_chain, sole_frame
+from romoco_drake.embedding.outputs import leg_chain, sole_frame
 from romoco_drake.embedding.references import TaskReferences
 from romoco_drake.errors import RomocoError
 from romoco_drake.robots.kinematics import RobotKinematics
@@ -103,7 +103,7 @@ def _ankle_joints(robot: RobotModel, side: str, sole: tuple) -> list[tuple]:
     p_WS = X_WF.multiply(p_FS)
     limits = dict(zip(robot.actuator_names, robot.effort_limits, strict=True))
     out = []
-    for joint in _leg_chain(robot, side):
+    for joint in leg_chain(robot, side):
         if not hasattr(joint, "revolute_axis"):
             continue
         frame = joint.frame_on_child()
@@ -249,12 +249,13 @@ class MomentumHqp:
             target = hdot_des - Adot_v - A_G @ vdot0
             soft = np.array(["xyz"[i] in g.weighted_axes for i in range(3)] + [False] * 3)
             strict = rows & ~soft
-            levels.append(Level("momentum", (A_G @ P)[strict], target[strict], w[strict]))
+            A_GP = A_G @ P
+            levels.append(Level("momentum", A_GP[strict], target[strict], w[strict]))
         J_out = tasks.J[other]
         task_A, task_w = J_out @ P, tasks.weight[other]
         task_b = a_cmd[other] - tasks.Jdot_v[other] - J_out @ vdot0
         if feet and soft.any():
-            task_A = np.vstack([task_A, (A_G @ P)[soft]])
+            task_A = np.vstack([task_A, A_GP[soft]])
             task_b = np.concatenate([task_b, target[soft]])
             w_angular = g.angular_task_weight / (m * self._z0) ** 2
             task_w = np.concatenate([task_w, np.full(int(soft.sum()), w_angular)])

@@ -13,13 +13,12 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.control.tasks import placeholder_references
-from romoco_drake.embedding.contact import contact_frame, contact_frame_state
 from romoco_drake.embedding.references import TaskReferences
 from romoco_drake.metrics import MOMENTUM_LOG_SIZE
 from romoco_drake.modes import Mode
 from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_value
 from romoco_drake.robots.model import RobotModel
-from romoco_drake.rom.types import COMMAND_SIZE, PlannerOutput
+from romoco_drake.rom.types import COMMAND_SIZE, ROM_STATE_SIZE, PlannerOutput
 
 
 class MomentumLog(LeafSystem):
@@ -31,6 +30,7 @@ class MomentumLog(LeafSystem):
     | ``task_references`` | in | abstract | :class:`~romoco_drake.embedding.references.TaskReferences` |
     | ``planner_output`` | in | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` |
     | ``command`` | in | 6 | the walking command the planner follows |
+    | ``rom_state`` | in | 6 | [p, L_c] about the stance contact frame {c} (the planner's input) |
     | ``record`` | out | 26 | the tick's row (layout in :mod:`romoco_drake.metrics`), held |
 
     One periodic discrete update every ``period`` s at ``offset``, the controller's tick.
@@ -45,12 +45,13 @@ class MomentumLog(LeafSystem):
         self.planner_output_port = self.DeclareAbstractInputPort(
             "planner_output", AbstractValue.Make(PlannerOutput.placeholder()))
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
+        self.rom_state_port = self.DeclareVectorInputPort("rom_state", ROM_STATE_SIZE)
         self._record = self.DeclareDiscreteState(np.full(MOMENTUM_LOG_SIZE, np.nan))
         self.record_port = self.DeclareStateOutputPort("record", self._record)
         self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
 
-    def record(self, kin: RobotKinematics, refs: TaskReferences, plan: PlannerOutput, command: np.ndarray
-               ) -> np.ndarray:
+    def record(self, kin: RobotKinematics, refs: TaskReferences, plan: PlannerOutput, command: np.ndarray,
+               rom_state: np.ndarray) -> np.ndarray:
         """The row for one tick (NaN where a quantity does not apply)."""
         row = np.full(MOMENTUM_LOG_SIZE, np.nan)
         row[2:4] = command[:2]
@@ -75,13 +76,13 @@ class MomentumLog(LeafSystem):
             return row
         row[0] = 1.0 if refs.stance_side == "left" else -1.0
         row[1] = plan.t_ss - plan.time_to_touchdown
-        state = contact_frame_state(kin, *contact_frame(self.robot, kin, refs.stance_side))
-        row[19:22], row[22:24] = state[3:], state[:2]
+        row[19:22], row[22:24] = rom_state[3:], rom_state[:2]
         if plan.valid and plan.stance_side == refs.stance_side:
             row[24], row[25] = -m * plan.pre_impact[1, 1], m * plan.pre_impact[0, 1]
         return row
 
     def _update(self, context, discrete_state) -> None:
         row = self.record(self.kinematics_port.Eval(context), self.task_references_port.Eval(context),
-                          self.planner_output_port.Eval(context), self.command_port.Eval(context))
+                          self.planner_output_port.Eval(context), self.command_port.Eval(context),
+                          self.rom_state_port.Eval(context))
         discrete_state.get_mutable_vector(self._record).SetFromVector(row)

@@ -72,7 +72,7 @@ def sole_frame(robot: RobotModel, side: str) -> tuple[np.ndarray, np.ndarray]:
     return R_FS, p_FS
 
 
-def _leg_chain(robot: RobotModel, side: str) -> list[Joint]:
+def leg_chain(robot: RobotModel, side: str) -> list[Joint]:
     """Actuated 1-DoF joints from the base body to the foot, base first."""
     plant = robot.plant
     parent = {plant.get_joint(i).child_body().index(): plant.get_joint(i)
@@ -98,7 +98,7 @@ def find_leg_joints(robot: RobotModel, side: str) -> LegJoints:
     plant = robot.plant
     context = plant.CreateDefaultContext()
     plant.SetPositions(context, robot.nominal.q)
-    chain = _leg_chain(robot, side)
+    chain = leg_chain(robot, side)
     axes = np.array([j.frame_on_parent().CalcRotationMatrixInWorld(context).matrix() @ j.revolute_axis()
                      for j in chain])
     i_yaw = int(np.argmax(np.abs(axes[:, 2])))

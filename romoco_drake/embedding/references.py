@@ -80,7 +80,14 @@ class TaskReferences(SharedValue):
     num_contact_forces: int
     A_f: np.ndarray
     b_f: np.ndarray
-    com_plan: np.ndarray | None = None  # (3, 2): horizontal CoM p, ṗ, p̈ (world) of the ALIP plan
+    # The ALIP flow the horizontal CoM reference comes from: (latched start, τ, z0, mass) or None.
+    com_flow: tuple | None = None
+
+    @functools.cached_property
+    def com_plan(self) -> np.ndarray | None:
+        """(3, 2): horizontal CoM p, ṗ, p̈ (world) of the ALIP plan in walking's single support,
+        else None. Evaluated on first use: only the momentum controller reads it."""
+        return None if self.com_flow is None else alip_com_flow(*self.com_flow)
 
     @functools.cached_property
     def error(self) -> np.ndarray:
@@ -220,29 +227,10 @@ class EmbeddingCore:
             y_d[i:i + 3], yd_d[i:i + 3], ydd_d[i:i + 3] = swing.trajectory.evaluate(tau)
         active = self._walking_active["single" if single else "double"]
         domain = _SINGLE_SUPPORT[stance] if single else Domain.DOUBLE
-        refs = self._pack(Mode.WALKING, domain, stance, out, y_d, yd_d, ydd_d, active, kin)
+        flow = None
         if single and swing.com_start is not None:
-            refs = replace(refs, com_plan=self._alip_com(swing.com_start, tau, plan.com_height))
-        return refs
-
-    def _alip_com(self, start: tuple[float, ...], tau: float, height: float) -> np.ndarray:
-        """The horizontal CoM (p, ṗ, p̈; world x, y) of the ALIP flow from ``start`` at time tau.
-
-        In LIP units l = ṗ (l_x = L_cy/(mH), l_y = −L_cx/(mH)) both planes obey ṗ = l,
-        l̇ = ℓ² p, so p(t) = cosh(ℓt) p₀ + sinh(ℓt) l₀/ℓ and p̈ = ℓ² p.
-        """
-        ox, oy, heading, tau0, p_x, p_y, l_cx, l_cy = start
-        mh = self.robot.total_mass * height
-        ell = math.sqrt(GRAVITY / height)
-        dt = max(tau - tau0, 0.0)
-        ch, sh = math.cosh(ell * dt), math.sinh(ell * dt)
-        p0 = np.array([p_x, p_y])
-        l0 = np.array([l_cy / mh, -l_cx / mh])
-        p = ch * p0 + sh / ell * l0
-        v = ell * sh * p0 + ch * l0
-        c, s = math.cos(heading), math.sin(heading)
-        R = np.array([[c, -s], [s, c]])
-        return np.vstack([R @ p + (ox, oy), R @ v, ell * ell * (R @ p)])
+            flow = (swing.com_start, tau, plan.com_height, self.robot.total_mass)
+        return self._pack(Mode.WALKING, domain, stance, out, y_d, yd_d, ydd_d, active, kin, flow)
 
     def _standing(self, kin: RobotKinematics, stand: StandState | None, t: float) -> TaskReferences:
         out = self.standing.evaluate(kin)
@@ -273,7 +261,7 @@ class EmbeddingCore:
                           np.zeros(k), np.ones(k, dtype=bool), kin)
 
     def _pack(self, mode: Mode, domain: Domain, stance: str, out: Output, y_d, yd_d, ydd_d, active,
-              kin: RobotKinematics) -> TaskReferences:
+              kin: RobotKinematics, com_flow: tuple | None = None) -> TaskReferences:
         holonomic = self.contact.constraints(kin, domain)
         blocks = [self.contact.friction_constraints(kin, side) for side in domain.feet]
         if len(blocks) == 1:
@@ -287,7 +275,28 @@ class EmbeddingCore:
             b_f = np.concatenate([b for _, b in blocks]) if blocks else np.zeros(0)
         n_f = A_f.shape[1]
         return TaskReferences(mode, domain, stance, out.names, out.y, out.J, out.Jdot_v, y_d, yd_d, ydd_d,
-                              active, holonomic, n_f, A_f, b_f)
+                              active, holonomic, n_f, A_f, b_f, com_flow)
+
+
+def alip_com_flow(start: tuple[float, ...], tau: float, height: float, mass: float) -> np.ndarray:
+    """The horizontal CoM (p, ṗ, p̈; world x, y) of the ALIP flow from ``start`` at time tau.
+
+    ``start`` is :attr:`SwingState.com_start`. In LIP units l = ṗ (l_x = L_cy/(mH),
+    l_y = −L_cx/(mH)) both planes obey ṗ = l, l̇ = ℓ² p, so p(t) = cosh(ℓt) p₀ + sinh(ℓt) l₀/ℓ
+    and p̈ = ℓ² p.
+    """
+    ox, oy, heading, tau0, p_x, p_y, l_cx, l_cy = start
+    mh = mass * height
+    ell = math.sqrt(GRAVITY / height)
+    dt = max(tau - tau0, 0.0)
+    ch, sh = math.cosh(ell * dt), math.sinh(ell * dt)
+    p0 = np.array([p_x, p_y])
+    l0 = np.array([l_cy / mh, -l_cx / mh])
+    p = ch * p0 + sh / ell * l0
+    v = ell * sh * p0 + ch * l0
+    c, s = math.cos(heading), math.sin(heading)
+    R = np.array([[c, -s], [s, c]])
+    return np.vstack([R @ p + (ox, oy), R @ v, ell * ell * (R @ p)])
 
 
 def _blend(start: float, goal: float, t: float, duration: float) -> tuple[float, float, float]:

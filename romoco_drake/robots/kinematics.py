@@ -51,7 +51,7 @@ class RobotKinematics:
     """
 
     __slots__ = ("robot", "context", "x", "q", "v", "finite", "_M", "_bias", "_tau_g", "_C", "_base_rows",
-                 "_p_com", "_p_base", "_poses", "_motions", "_g_W", "_h", "_base_frame")
+                 "_p_com", "_p_base", "_poses", "_motions", "_g_W", "_h", "_base_frame", "_A_G")
 
     def __init__(self, robot: RobotModel, x: np.ndarray | None = None):
         self.robot = robot
@@ -69,6 +69,7 @@ class RobotKinematics:
         self.q, self.v = self.x[:r.nq], self.x[r.nq:]
         self.finite = bool(np.isfinite(self.x).all())
         self._M = self._bias = self._tau_g = self._C = self._p_com = self._p_base = self._h = None
+        self._A_G = None
         # Keyed on the frame objects themselves (held by the dicts, so no key is ever reused).
         self._poses: dict[Frame, tuple[np.ndarray, np.ndarray]] = {}
         self._motions: dict[tuple[Frame, bytes], tuple[np.ndarray, np.ndarray]] = {}
@@ -178,10 +179,13 @@ class RobotKinematics:
         ḣ_B + [v_B × m v_G; 0] (B moves); differentiating k_G = k_B − r × m v_G then gives
         k̇_G = (C v)_ang − r × (C v)_lin: the same shift of the base rows of C v, so
         ḣ_G = A_G v̇ + Ȧ_G v with Ȧ_G v = shift(C v). Tested against Drake's spatial momentum
-        and finite differences along q(t).
+        and finite differences along q(t). Evaluated once per state (the controller and the
+        momentum log of a tick share it); read-only.
         """
-        r = self.p_com - self.p_base
-        return _shift_rows(self.M[self._base_rows], r), _shift_rows(self.bias[self._base_rows], r)
+        if self._A_G is None:
+            r = self.p_com - self.p_base
+            self._A_G = _shift_rows(self.M[self._base_rows], r), _shift_rows(self.bias[self._base_rows], r)
+        return self._A_G
 
     def angular_momentum_about(self, point: np.ndarray) -> np.ndarray:
         """The robot's angular momentum about a world point, in world (3,)."""
