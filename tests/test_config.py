@@ -71,7 +71,7 @@ def test_scenario_built_in_python_is_validated_like_yaml():
 
 def test_every_registered_component_is_listed_and_buildable():
     """romoco list, the overrides and validation read one registry per kind."""
-    assert list(CONTROLLERS) == ["standing", "tscqp", "id", "velik", "posik", "momentum"]
+    assert list(CONTROLLERS) == ["standing", "tscqp", "id", "velik", "posik", "momentum", "wbc"]
     assert list(ESTIMATORS) == ["ground_truth", "kalman"]
     for name in CONTROLLERS:
         validate_scenario(with_overrides(Scenario(robot="g1"), controller=name))

@@ -6,7 +6,8 @@ Walking controllers (``walking=True``) are whole-body solvers run by
 returns the solver. ``momentum_log`` adds the XO paper's momentum record to the run
 (:class:`~romoco_drake.control.momentum_log.MomentumLog`). ``motor_command`` says the
 controller commands the motors' own position loops (q_d, v_d, τ_ff, K_p, K_d) rather than
-torques. ``standing`` is the stand-only joint PD, a system of its own.
+torques. ``qp_solver`` says the scenario's ``controller.solver`` picks its QP solver.
+``standing`` is the stand-only joint PD, a system of its own.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from __future__ import annotations
 from romoco_drake.control.inverse_dynamics import InverseDynamics
 from romoco_drake.control.inverse_kinematics import IkSolver
 from romoco_drake.control.momentum import MomentumHqp
+from romoco_drake.control.mpc_wbc import MpcWbc
 from romoco_drake.control.standing import StandingController
 from romoco_drake.control.tscqp import TscQp
 from romoco_drake.registry import Registry
@@ -23,7 +25,8 @@ CONTROLLERS.add("standing", lambda robot, period, offset: StandingController(rob
                 "joint PD about the nominal pose plus gravity compensation (stands only)",
                 walking=False, motor_command=False)
 CONTROLLERS.add("tscqp", lambda robot, contact, period, config: TscQp(robot, contact, solver=config.solver),
-                "task-space QP over v̇ and contact forces (RoMoCo §V-A)", walking=True, motor_command=False)
+                "task-space QP over v̇ and contact forces (RoMoCo §V-A)", walking=True, motor_command=False,
+              qp_solver=True)
 CONTROLLERS.add("id", lambda robot, contact, period, config: InverseDynamics(robot, contact),
                 "inverse dynamics by orthogonal decomposition (RoMoCo §V-B)", walking=True,
                 motor_command=False)
@@ -35,3 +38,6 @@ CONTROLLERS.add("posik", lambda robot, contact, period, config: IkSolver(robot, 
 CONTROLLERS.add("momentum", lambda robot, contact, period, config: MomentumHqp(robot, contact),
                 "hierarchical centroidal-momentum QPs in the contact null space (XO paper §III)",
                 walking=True, motor_command=False, momentum_log=True)
+CONTROLLERS.add("wbc", lambda robot, contact, period, config: MpcWbc(robot, contact, solver=config.solver),
+                "TSC-QP tracking a wrench MPC's contact wrenches and CoM (VI-MPC paper §III.E)",
+                walking=True, motor_command=False, qp_solver=True)

@@ -216,23 +216,16 @@ class TscQp:
         T[:, nv:] = -Jh[:, self._rows_a].T
         c = C[self._rows_a]
         k = len(a_cmd)
-        single = refs.domain.single_support and self.w_pivot > 0.0
-        split = refs.domain == Domain.DOUBLE and self.w_split > 0.0
-        extra = 2 if single else n_f if split else 0
-        S = np.zeros((k + nu + extra, n))
-        s = np.empty(k + nu + extra)
+        S_x, s_x = self._extra_cost(kin, refs, a_cmd, n)
+        S = np.empty((k + nu + len(s_x), n))
+        s = np.empty(len(S))
         sw = np.sqrt(tasks.weight)
         S[:k, :nv] = J * sw[:, None]
+        S[:k, nv:] = 0.0
         s[:k] = sw * (a_cmd - tasks.Jdot_v)
         S[k:k + nu] = self._sqrt_eps_tau * T
         s[k:k + nu] = -self._sqrt_eps_tau * c
-        if single:
-            S[k + nu:, f] = math.sqrt(self.w_pivot) * pivot_moment_map(self.contact, kin, refs)
-            s[k + nu:] = 0.0
-        elif split:
-            root = math.sqrt(self.w_split)
-            S[k + nu:, f] = root * np.eye(n_f)
-            s[k + nu:] = root * load_split_target(r, kin, refs, a_cmd)
+        S[k + nu:], s[k + nu:] = S_x, s_x
         H = 2.0 * (S.T @ S)
         H.flat[::n + 1] += self._regularization(n)
         g = -2.0 * (S.T @ s)
@@ -261,6 +254,23 @@ class TscQp:
         lower[n_eq + nu:] = -np.inf
         upper[n_eq + nu:] = refs.b_f
         return QpData(H, g, A, lower, upper, n_eq, T, c)
+
+    def _extra_cost(self, kin: RobotKinematics, refs: TaskReferences, a_cmd: np.ndarray, n: int
+                    ) -> tuple[np.ndarray, np.ndarray]:
+        """Cost rows (S, s) on x = [v̇; λ] beyond the tasks and torques, weights folded in: the
+        pivot moment in single support, the load split in double support (class docstring)."""
+        nv, n_f = self.robot.nv, refs.num_contact_forces
+        f = slice(nv, nv + n_f)
+        if refs.domain.single_support and self.w_pivot > 0.0:
+            S = np.zeros((2, n))
+            S[:, f] = math.sqrt(self.w_pivot) * pivot_moment_map(self.contact, kin, refs)
+            return S, np.zeros(2)
+        if refs.domain == Domain.DOUBLE and self.w_split > 0.0:
+            root = math.sqrt(self.w_split)
+            S = np.zeros((n_f, n))
+            S[:, f] = root * np.eye(n_f)
+            return S, root * load_split_target(self.robot, kin, refs, a_cmd)
+        return np.zeros((0, n)), np.zeros(0)
 
     def _regularization(self, n: int) -> np.ndarray:
         """2 diag(ε) of an n-variable QP: ε_v on v̇, ε_λ on the multipliers (made once per size)."""

@@ -37,7 +37,7 @@ from romoco_drake.modes import Domain, Mode
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.lip import GRAVITY
-from romoco_drake.rom.types import PlannerOutput
+from romoco_drake.rom.types import MpcReference, PlannerOutput
 from romoco_drake.values import SharedValue
 
 # The swing target is frozen once this fraction of single support has passed: late target
@@ -82,6 +82,8 @@ class TaskReferences(SharedValue):
     b_f: np.ndarray
     # The ALIP flow the horizontal CoM reference comes from: (latched start, τ, z0, mass) or None.
     com_flow: tuple | None = None
+    # A wrench MPC's reference for this tick (walking under the VI-MPC planner), else None.
+    mpc: MpcReference | None = None
 
     @functools.cached_property
     def com_plan(self) -> np.ndarray | None:
@@ -230,7 +232,7 @@ class EmbeddingCore:
         flow = None
         if single and swing.com_start is not None:
             flow = (swing.com_start, tau, plan.com_height, self.robot.total_mass)
-        return self._pack(Mode.WALKING, domain, stance, out, y_d, yd_d, ydd_d, active, kin, flow)
+        return self._pack(Mode.WALKING, domain, stance, out, y_d, yd_d, ydd_d, active, kin, flow, plan.mpc)
 
     def _standing(self, kin: RobotKinematics, stand: StandState | None, t: float) -> TaskReferences:
         out = self.standing.evaluate(kin)
@@ -261,7 +263,8 @@ class EmbeddingCore:
                           np.zeros(k), np.ones(k, dtype=bool), kin)
 
     def _pack(self, mode: Mode, domain: Domain, stance: str, out: Output, y_d, yd_d, ydd_d, active,
-              kin: RobotKinematics, com_flow: tuple | None = None) -> TaskReferences:
+              kin: RobotKinematics, com_flow: tuple | None = None,
+              mpc: MpcReference | None = None) -> TaskReferences:
         holonomic = self.contact.constraints(kin, domain)
         blocks = [self.contact.friction_constraints(kin, side) for side in domain.feet]
         if len(blocks) == 1:
@@ -275,7 +278,7 @@ class EmbeddingCore:
             b_f = np.concatenate([b for _, b in blocks]) if blocks else np.zeros(0)
         n_f = A_f.shape[1]
         return TaskReferences(mode, domain, stance, out.names, out.y, out.J, out.Jdot_v, y_d, yd_d, ydd_d,
-                              active, holonomic, n_f, A_f, b_f, com_flow)
+                              active, holonomic, n_f, A_f, b_f, com_flow, mpc)
 
 
 def alip_com_flow(start: tuple[float, ...], tau: float, height: float, mass: float) -> np.ndarray:

@@ -65,6 +65,26 @@ class WalkCommand:
 
 
 @dataclass(frozen=True)
+class MpcReference(SharedValue):
+    """What a contact-wrench MPC (the VI-MPC planner) hands the whole-body controller.
+
+    ``wrenches`` (2×6): the left and right foot's wrench [τ; f] about its sole centre, world
+    axes (N·m, N), from the first knot of the last solve; zero on a foot the gait schedule has
+    in swing. ``com``, ``com_velocity`` (world, m, m/s) and ``orientation`` (roll, pitch, yaw,
+    rad), ``angular_velocity`` (world, rad/s): the MPC's reference at the next knot.
+    ``solved_at``: controller time of the solve (s); ``ok``: the solve succeeded.
+    """
+
+    wrenches: np.ndarray
+    com: np.ndarray
+    com_velocity: np.ndarray
+    orientation: np.ndarray
+    angular_velocity: np.ndarray
+    solved_at: float
+    ok: bool
+
+
+@dataclass(frozen=True)
 class PlannerOutput(SharedValue):
     """A foot-placement plan for the current step.
 
@@ -86,6 +106,7 @@ class PlannerOutput(SharedValue):
     orbit_pre_impact: np.ndarray  # (2, 2) the desired orbit's state at the same instant
     nominal_step: np.ndarray  # (2,) the orbit's step u* for this stance side
     valid: bool = True
+    mpc: MpcReference | None = None  # set by a wrench MPC planner (VI-MPC)
 
     @classmethod
     def placeholder(cls) -> PlannerOutput:
