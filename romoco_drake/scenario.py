@@ -177,7 +177,8 @@ def validate_scenario(scenario: Scenario, source: str | Path | None = None) -> N
     if scenario.controller.solver not in QP_SOLVERS:
         raise ConfigError(where, "controller.solver", f"'{scenario.controller.solver}' is not one of: "
                           f"{', '.join(QP_SOLVERS)}")
-    if scenario.controller.solver != "daqp" and not CONTROLLERS[scenario.controller.name].facts.get("qp_solver"):
+    solves_qp = CONTROLLERS[scenario.controller.name].facts.get("qp_solver")
+    if scenario.controller.solver != "daqp" and not solves_qp:
         raise ConfigError(where, "controller.solver", f"the QP solver is the TSC-QP's; controller "
                           f"'{scenario.controller.name}' solves no QP")
     for key, value in (("duration_s", scenario.duration_s), ("time_step", scenario.time_step),
