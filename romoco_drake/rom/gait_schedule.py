@@ -180,7 +180,9 @@ def foot_positions_over_horizon(p_feet: np.ndarray, yaw_feet: np.ndarray, footho
     horizon to the foothold plus a bump 4 H s (1 − s) in its swing phase s (H = ``swing_height``),
     yaw interpolated alike. A swinging foot's line starts under its current bump, so the path
     begins where the foot is. Only the inertia prediction reads swing feet (the MPC zeroes their
-    wrenches). Raises ValueError if the horizon reaches a foot's second lift-off.
+    wrenches). Past a foot's second lift-off (a horizon longer than a step: DRACO's 0.5 s near a
+    touchdown) the foot is held at its foothold: its next foothold is not planned yet, and the
+    inertia network then sees that foot standing where it will lift from.
     """
     p_feet, footholds = np.asarray(p_feet, float), np.asarray(footholds, float)
     yaw_feet, foothold_yaw = np.asarray(yaw_feet, float), np.asarray(foothold_yaw, float)
@@ -191,9 +193,6 @@ def foot_positions_over_horizon(p_feet: np.ndarray, yaw_feet: np.ndarray, footho
         td = float(touchdown[i])
         if not np.isfinite(td):
             continue
-        if t[-1] >= td + stance_duration(t_ss, t_ds):
-            raise ValueError(f"the MPC horizon ({knots} knots of {dt} s) reaches the {SIDES[i]} foot's "
-                             "second swing; shorten it or plan that foothold too")
         lift = td - t_ss
         start = max(lift, 0.0)
         s0 = (start - lift) / t_ss
