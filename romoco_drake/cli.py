@@ -183,9 +183,9 @@ def _cmd_plot(args) -> int:
 
 def _cmd_bench_rom(args) -> int:
     from romoco_drake.bench.rom import bench_rom
-    from romoco_drake.rom.planners import PLANNERS
+    from romoco_drake.rom.planners import foot_placement_laws
 
-    names = list(PLANNERS) if args.planner is None else [args.planner]
+    names = foot_placement_laws() if args.planner is None else [args.planner]
     results = []
     for name in names:
         summary = bench_rom(name, robot=args.robot, t_ds=args.t_ds, gain=args.gain, plot_dir=args.plot)

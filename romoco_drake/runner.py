@@ -19,6 +19,7 @@ from romoco_drake.interfaces.hardware import link_summary
 from romoco_drake.interfaces.lcm_log import LcmLogRecorder
 from romoco_drake.interfaces.robot_sim import make_robot_sim, robot_summary
 from romoco_drake.metrics import finite_or_none, momentum_summary, velocity_tracking
+from romoco_drake.planners.vimpc import VimpcPlanner
 from romoco_drake.robots.model import load_robot
 from romoco_drake.scenario import Scenario, build_diagram, initial_positions, uses_motor_command
 
@@ -259,8 +260,13 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, 
     schedule = loop.state_machine.schedule(loop.state_machine.GetMyContextFromRoot(context))
     controller_context = loop.controller.GetMyContextFromRoot(context)
     failures, safe_ticks, _, relaxed = loop.controller.stats_port.Eval(controller_context)
+    mpc = {}
+    if isinstance(loop.planner, VimpcPlanner):
+        solves, failed, fallback = loop.planner.mpc_stats_port.Eval(loop.planner.GetMyContextFromRoot(context))
+        mpc = {"mpc_solves": int(solves), "mpc_failures": int(failed), "mpc_fallback_updates": int(fallback),
+               "vimpc_inertia": scenario.vimpc.inertia}
     return {
-        "planner": loop.planner.law.name,
+        "planner": scenario.planner.name if mpc else loop.planner.law.name,
         "velocity_rms_error": finite_or_none(tracking["velocity_rms_error"]),
         "mean_velocity": finite_or_none(tracking["mean_velocity"]),
         "steps": schedule.steps,
@@ -271,7 +277,7 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, 
         "safe_mode_ticks": int(safe_ticks),
         "controller_tick_ms": {"median": round(float(np.median(ticks)), 3),
                                "p99": round(float(np.percentile(ticks, 99)), 3)},
-    } | _momentum(built, context, scenario, plot_dir, times, tracking, until)
+    } | mpc | _momentum(built, context, scenario, plot_dir, times, tracking, until)
 
 
 def _momentum(built, context, scenario: Scenario, plot_dir: Path | None, times, tracking, until) -> dict:

@@ -50,6 +50,7 @@ from romoco_drake.planners.command import CommandLimiter, CommandSegment, Comman
 from romoco_drake.planners.foot_placement import FootPlacementPlanner
 from romoco_drake.planners.heading import HeadingHold
 from romoco_drake.planners.state_machine import GaitStateMachine
+from romoco_drake.planners.vimpc import INERTIA_MODES, VimpcConfig, VimpcPlanner
 from romoco_drake.robots.kinematics import RobotKinematicsSystem
 from romoco_drake.robots.model import RobotModel, load_robot, robot_names
 from romoco_drake.robots.source import DIAGRAMS_DIR
@@ -123,6 +124,8 @@ class Scenario:
     estimator: EstimatorConfig = dataclasses.field(default_factory=EstimatorConfig)
     controller: ControllerConfig = dataclasses.field(default_factory=ControllerConfig)
     planner: PlannerConfig = dataclasses.field(default_factory=PlannerConfig)
+    # The VI-MPC's settings, read when planner.name is vimpc.
+    vimpc: VimpcConfig = dataclasses.field(default_factory=VimpcConfig)
     # Piecewise-constant velocity command; empty means stand.
     command: list[CommandPoint] = dataclasses.field(default_factory=list)
     # Extra height of the base above the nominal pose at t = 0 (m): a drop test.
@@ -171,7 +174,7 @@ def validate_scenario(scenario: Scenario, source: str | Path | None = None) -> N
         if name not in registry:
             raise ConfigError(where, key, f"unknown {registry.kind} '{name}' (known: {', '.join(registry)})")
     gains = PLANNERS[scenario.planner.name].facts["gains"]
-    if scenario.planner.gain not in gains:
+    if PLANNERS[scenario.planner.name].facts["law"] and scenario.planner.gain not in gains:
         raise ConfigError(where, "planner.gain", f"planner '{scenario.planner.name}' supports gains "
                           f"{', '.join(gains)}, not '{scenario.planner.gain}'")
     if scenario.controller.solver not in QP_SOLVERS:
@@ -181,12 +184,29 @@ def validate_scenario(scenario: Scenario, source: str | Path | None = None) -> N
     if scenario.controller.solver != "daqp" and not solves_qp:
         raise ConfigError(where, "controller.solver", f"the QP solver is the TSC-QP's; controller "
                           f"'{scenario.controller.name}' solves no QP")
+    _validate_vimpc(scenario.vimpc, where)
     for key, value in (("duration_s", scenario.duration_s), ("time_step", scenario.time_step),
                        ("controller.rate_hz", scenario.controller.rate_hz),
                        ("estimator.rate_hz", 1.0 if scenario.estimator.rate_hz is None
                         else scenario.estimator.rate_hz)):
         if not value > 0:
             raise ConfigError(where, key, f"must be positive, got {value}")
+
+
+def _validate_vimpc(c: VimpcConfig, where) -> None:
+    if c.inertia not in INERTIA_MODES:
+        raise ConfigError(where, "vimpc.inertia", f"'{c.inertia}' is not one of: {', '.join(INERTIA_MODES)}")
+    for key in ("q", "r", "q_terminal"):
+        w = getattr(c, key)
+        if len(w) != 12 or not all(math.isfinite(x) and x >= 0.0 for x in w):
+            raise ConfigError(where, f"vimpc.{key}", f"needs 12 finite non-negative weights, got {w}")
+    if not all(x > 0.0 for x in c.r):
+        raise ConfigError(where, "vimpc.r", "input weights must be positive")
+    for key in ("rate_hz", "dt", "f_max", "max_age", "max_step"):
+        if not getattr(c, key) > 0.0:
+            raise ConfigError(where, f"vimpc.{key}", f"must be positive, got {getattr(c, key)}")
+    if c.knots < 1:
+        raise ConfigError(where, "vimpc.knots", f"must be at least 1, got {c.knots}")
 
 
 def uses_motor_command(scenario: Scenario) -> bool:
@@ -217,7 +237,7 @@ class WalkingLoop:
     """Handles on the walking loop's systems and logs, for summaries and plots."""
 
     state_machine: GaitStateMachine
-    planner: FootPlacementPlanner
+    planner: FootPlacementPlanner | VimpcPlanner
     embedding: OutputEmbedding
     controller: WholeBodyController
     tick_log: VectorLogSink  # controller update wall time, every tick
@@ -373,7 +393,8 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
                       offset: float, law: FootPlacementLaw | None) -> WalkingLoop:
     """Command limiter → state machine → planner → output embedding → whole-body controller, all
     at ``period``; the last three and the ROM state read the shared ``kinematics``."""
-    if law is None:
+    mpc = law is None and not PLANNERS[scenario.planner.name].facts["law"]
+    if law is None and not mpc:
         cfg = scenario.planner
         law = make_planner(cfg.name, PlannerParams(mass=robot.total_mass, t_ds=robot.config.walking.t_ds,
                                                    gain=cfg.gain, alpha=cfg.alpha))
@@ -383,11 +404,17 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     heading = builder.AddNamedSystem("heading", HeadingHold(robot, period, offset=offset))
     builder.Connect(limiter.command_port, heading.command_in_port)
     builder.Connect(state, heading.state_port)
-    machine = builder.AddNamedSystem("state_machine",
-                                     GaitStateMachine(robot, period, law.t_ds, offset=offset))
+    t_ds = robot.config.walking.t_ds if mpc else law.t_ds
+    machine = builder.AddNamedSystem("state_machine", GaitStateMachine(robot, period, t_ds, offset=offset))
     rom_state = builder.AddNamedSystem("rom_state", RomStateFromRobot(robot))
-    planner = builder.AddNamedSystem("planner", FootPlacementPlanner(law))
     core = EmbeddingCore(robot)
+    if mpc:
+        planner = builder.AddNamedSystem("planner", VimpcPlanner(robot, core.contact, scenario.vimpc, offset))
+        builder.Connect(kinematics.kinematics_port, planner.kinematics_port)
+        builder.Connect(machine.mode_port, planner.mode_port)
+    else:
+        planner = builder.AddNamedSystem("planner", FootPlacementPlanner(law))
+        builder.Connect(rom_state.rom_state_port, planner.rom_state_port)
     embedding = builder.AddNamedSystem("embedding", OutputEmbedding(robot, period, core, offset))
     solver = CONTROLLERS[scenario.controller.name].factory(robot, core.contact, period, scenario.controller)
     controller = builder.AddNamedSystem("controller",
@@ -398,7 +425,6 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     builder.Connect(station.GetOutputPort("foot_contact"), machine.foot_contact_port)
     builder.Connect(kin, rom_state.kinematics_port)
     builder.Connect(machine.gait_phase_port, rom_state.gait_phase_port)
-    builder.Connect(rom_state.rom_state_port, planner.rom_state_port)
     builder.Connect(machine.gait_phase_port, planner.gait_phase_port)
     builder.Connect(heading.command_port, planner.command_port)
     builder.Connect(kin, embedding.kinematics_port)

@@ -14,7 +14,7 @@ from romoco_drake.rom.dcm import dcm_s2s
 from romoco_drake.rom.hlip import hlip_s2s
 from romoco_drake.rom.lip import ds_flow, omega, ss_flow
 from romoco_drake.rom.mlip import mlip_domain_flow, mlip_s2s
-from romoco_drake.rom.planners import PLANNERS, PlannerParams, make_planner
+from romoco_drake.rom.planners import PLANNERS, PlannerParams, foot_placement_laws, make_planner
 from romoco_drake.rom.s2s import converging_gain, lqr_gain
 from romoco_drake.rom.types import SIDES, PlannerOutput, WalkCommand, other_side
 
@@ -202,7 +202,7 @@ def _assert_fallback(law, plan: PlannerOutput, side: str, cmd: WalkCommand) -> N
     assert (plan.t_ss, plan.com_height) == (cmd.step_time, cmd.com_height)
 
 
-@pytest.mark.parametrize("name", list(PLANNERS))
+@pytest.mark.parametrize("name", foot_placement_laws())
 def test_bad_inputs_fall_back_to_the_nominal_step(name):
     law = make_planner(name, PlannerParams(mass=30.0, t_ds=0.1))
     cmd = WalkCommand(vx=0.3, vy=0.1)
@@ -219,10 +219,12 @@ def test_bad_inputs_fall_back_to_the_nominal_step(name):
 
 
 UNSUPPORTED_GAINS = [("alip", "lqr"), ("dcm", "lqr"), ("alip_general", "converging"),
-                     ("alip_general", "lqr"), *((name, "pid") for name in PLANNERS)]
+                     ("alip_general", "lqr"), *((name, "pid") for name in foot_placement_laws())]
 
 
-def test_make_planner_rejects_unknown_names():
+def test_make_planner_rejects_unknown_names_and_the_mpc():
+    with pytest.raises(RomocoError, match="planner 'vimpc' is a system of its own"):
+        make_planner("vimpc", PlannerParams(mass=30.0))
     with pytest.raises(RomocoError, match=r"unknown planner 'lipm' \(known: alip, hlip"):
         make_planner("lipm", PlannerParams(mass=30.0))
 
@@ -233,7 +235,7 @@ def test_make_planner_rejects_unsupported_gains(name, gain):
         make_planner(name, PlannerParams(mass=30.0, gain=gain))
 
 
-@pytest.mark.parametrize("name", list(PLANNERS))
+@pytest.mark.parametrize("name", foot_placement_laws())
 def test_make_planner_rejects_bad_params(name):
     bad = [(PlannerParams(mass=0.0), "mass"), (PlannerParams(mass=math.nan), "mass"),
            (PlannerParams(mass=30.0, t_ds=-0.1), "t_ds")]
@@ -314,7 +316,7 @@ S2S_LAWS = {
     "mlip": lambda z0, t, t_ds, g: (mlip_s2s(z0, t, t_ds, g), np.eye(2), mlip_s2s(z0, t, t_ds, g)),
     "dcm": _dcm_reference,
 }
-LAW_GAINS = [(name, gain) for name, entry in PLANNERS.items() for gain in entry.facts["gains"]]
+LAW_GAINS = [(name, gain) for name in foot_placement_laws() for gain in PLANNERS[name].facts["gains"]]
 
 
 def _battery(rng: np.random.Generator, n: int):

@@ -16,7 +16,7 @@ from romoco_drake.planners.template import GaitState, HybridLipTemplate
 from romoco_drake.rom.hlip import hlip_s2s
 from romoco_drake.rom.lip import ss_flow
 from romoco_drake.rom.mlip import mlip_s2s
-from romoco_drake.rom.planners import PLANNERS, PlannerParams, make_planner
+from romoco_drake.rom.planners import PlannerParams, foot_placement_laws, make_planner
 from romoco_drake.rom.types import PlannerOutput, WalkCommand
 
 MASS = 30.0
@@ -36,7 +36,7 @@ def _assert_same_plan(a: PlannerOutput, b: PlannerOutput) -> None:
         np.testing.assert_array_equal(getattr(a, field.name), getattr(b, field.name), err_msg=field.name)
 
 
-@pytest.mark.parametrize("name", list(PLANNERS))
+@pytest.mark.parametrize("name", foot_placement_laws())
 def test_planner_system_output_is_the_law(name):
     params = PlannerParams(mass=MASS, t_ds=T_DS)
     system = make_foot_placement_planner(name, params)
@@ -120,7 +120,7 @@ def test_template_takes_z0_from_the_command_at_the_support_switch():
     assert gait.z0 == 0.9
 
 
-@pytest.fixture(scope="module", params=list(PLANNERS))
+@pytest.fixture(scope="module", params=foot_placement_laws())
 def walk(request):
     """(name, segments, run, stride times, stride velocities) of a planner walking PROFILE."""
     planner = make_foot_placement_planner(request.param, PlannerParams(mass=MASS, t_ds=T_DS))

@@ -1,0 +1,264 @@
+"""The VI-MPC planner (Bang et al., variable-inertia MPC, §III): footholds and contact wrenches.
+
+At its own rate (the paper's 200 Hz) the planner reads the robot's state and the step clock and
+
+1. builds the single-rigid-body state x₀ = [Θ, p_c, ω, ṗ_c]: Θ, ω from the whole-body orientation
+   (WBO, Θ = rpy of R_WB R_B,WBO(q), ω = I_G⁻¹ k_G) in ``network`` mode, from the torso
+   otherwise (as in the paper's cases 1-2);
+2. predicts the contacts (:func:`~romoco_drake.rom.gait_schedule.contact_schedule`), the
+   footholds (Raibert with capture-point and centrifugal terms, eqs. 14-15 as fixed in
+   :mod:`~romoco_drake.rom.gait_schedule`), the CoM/orientation references (eqs. 16-17) and the
+   feet over the horizon;
+3. sets the centroidal inertia of every knot by ``inertia``: ``nominal`` (the nominal pose's,
+   turned with the reference yaw), ``updated`` (the current I_G, turned alike) or ``network``
+   (the CCINN's prediction from the base and feet reference poses, eq. 13);
+4. solves the convex MPC (:class:`~romoco_drake.rom.srb_mpc.SrbMpc`, eqs. 12, 18-20) and keeps
+   the first knot's wrenches with the next knot's reference as an
+   :class:`~romoco_drake.rom.types.MpcReference`.
+
+The output is a :class:`~romoco_drake.rom.types.PlannerOutput` like a foot-placement planner's
+(the swing foot's foothold relative to the stance sole, in its yaw frame, for the output
+embedding's swing trajectory) carrying that MPC reference for the ``wbc`` controller. The
+foothold is recomputed whenever the output is evaluated (the controller's rate); the MPC
+reference is the last solve's. A failed solve keeps the previous reference until it is
+``max_age`` old (zero-order hold, as on hardware); older, or never solved, the output carries
+none and the controller falls back to the TSC-QP under the Raibert footholds. Solves, failures
+and fallback updates are counted on ``mpc_stats`` for the run summary.
+
+| port | kind | size | meaning |
+|---|---|---|---|
+| ``kinematics`` | in | abstract | the tick's shared controller-plant evaluation |
+| ``gait_phase`` | in | 2 | stance (+1 left, −1 right), time in step [s] |
+| ``command`` | in | 6 | vx, vy [m/s] (heading frame), wz [rad/s], step width, CoM height [m], SS time [s] |
+| ``mode`` | in | abstract | :class:`~romoco_drake.modes.Mode` (the MPC runs while walking) |
+| ``planner_output`` | out | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` with ``mpc`` |
+| ``mpc_stats`` | out | 3 | solves, failed solves, updates without a usable reference |
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import LeafSystem
+
+from romoco_drake.embedding.contact import ContactModel
+from romoco_drake.embedding.outputs import sole_frame
+from romoco_drake.inertia.ccinn import load_ccinn, predict_inertia_horizon, rpy_from_rotations
+from romoco_drake.inertia.wbo import load_wbo
+from romoco_drake.modes import Mode
+from romoco_drake.robots.centroidal import centroidal_inertia
+from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_value
+from romoco_drake.robots.model import RobotModel
+from romoco_drake.rom import gait_schedule as gs
+from romoco_drake.rom.srb_mpc import MpcWeights, SrbMpc, yaw_rotation
+from romoco_drake.rom.types import (
+    COMMAND_SIZE,
+    GAIT_PHASE_SIZE,
+    SIDES,
+    MpcReference,
+    PlannerOutput,
+    WalkCommand,
+    side_from_sign,
+)
+
+INERTIA_MODES = ("nominal", "updated", "network")
+
+
+@dataclass
+class VimpcConfig:
+    """The VI-MPC planner's settings (scenario key ``vimpc``).
+
+    ``inertia``: the paper's cases 1-3 (module docstring). ``q``, ``r``, ``q_terminal``: the
+    diagonal weights of eq. 18 on x = [Θ, p_c, ω, ṗ_c] and u = [τ_L, f_L, τ_R, f_R].
+    ``k1``, ``k2``: eq. 14's velocity-feedback and centrifugal gains; ``max_step`` (m): the
+    foothold's largest offset from the hip; ``f_max`` (N): the normal force bound; ``max_age``
+    (s): how long a reference outlives a failed solve.
+    """
+
+    inertia: Literal["nominal", "updated", "network"] = "network"
+    rate_hz: float = 200.0
+    knots: int = 10
+    dt: float = 0.05
+    q: list[float] = field(default_factory=lambda: [
+        100.0, 100.0, 50.0, 50.0, 50.0, 500.0, 1.0, 1.0, 1.0, 10.0, 10.0, 5.0])
+    r: list[float] = field(default_factory=lambda: [1e-4] * 3 + [1e-5] * 3 + [1e-4] * 3 + [1e-5] * 3)
+    q_terminal: list[float] = field(default_factory=lambda: [
+        100.0, 100.0, 50.0, 50.0, 50.0, 500.0, 1.0, 1.0, 1.0, 10.0, 10.0, 5.0])
+    k1: float = 0.1
+    k2: float = 1.0
+    max_step: float = 0.35
+    f_max: float = 800.0
+    max_age: float = 0.02
+
+
+class VimpcPlanner(LeafSystem):
+    """Footholds every evaluation, the wrench MPC at ``config.rate_hz`` (module docstring)."""
+
+    def __init__(self, robot: RobotModel, contact: ContactModel, config: VimpcConfig, offset: float = 0.0):
+        super().__init__()
+        if config.inertia not in INERTIA_MODES:
+            raise ValueError(f"vimpc.inertia must be one of {INERTIA_MODES}, got {config.inertia!r}")
+        self.robot, self.contact, self.config = robot, contact, config
+        walk = robot.config.walking
+        self.t_ds, self.swing_height = walk.t_ds, walk.swing_height
+        half = _sole_half_extent(robot)
+        self.mpc = SrbMpc(robot.total_mass, MpcWeights(np.array(config.q), np.array(config.r),
+                                                       np.array(config.q_terminal)),
+                          config.knots, config.dt, half[0], half[1],
+                          robot.config.feet.friction, config.f_max)
+        plant = robot.plant
+        context = plant.CreateDefaultContext()
+        plant.SetPositions(context, robot.nominal.q)
+        self._base = plant.GetBodyByName(robot.config.base_body)
+        R_WB = self._base.EvalPoseInWorld(context).rotation().matrix()
+        self._nominal_inertia_B = R_WB.T @ centroidal_inertia(plant, context) @ R_WB
+        self._ccinn = load_ccinn(robot.name) if config.inertia == "network" else None
+        self._wbo = load_wbo(robot.name) if config.inertia == "network" else None
+        self.kinematics_port = self.DeclareAbstractInputPort("kinematics", kinematics_model_value(robot))
+        self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
+        self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
+        self.mode_port = self.DeclareAbstractInputPort("mode", AbstractValue.Make(Mode.STANDING))
+        self._reference = self.DeclareAbstractState(AbstractValue.Make(_NoReference()))
+        self._stats = self.DeclareDiscreteState(3)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.rate_hz, offset, self._update)
+        self.planner_output_port = self.DeclareAbstractOutputPort(
+            "planner_output", lambda: AbstractValue.Make(PlannerOutput.placeholder()), self._calc_plan)
+        self.mpc_stats_port = self.DeclareStateOutputPort("mpc_stats", self._stats)
+
+    # ------------------------------------------------------------------ the MPC tick
+    def _update(self, context, state) -> None:
+        stats = state.get_mutable_discrete_state(self._stats).get_mutable_value()
+        if self.mode_port.Eval(context) != Mode.WALKING:
+            state.get_mutable_abstract_state(self._reference).set_value(_NoReference())
+            return
+        kin = self.kinematics_port.Eval(context)
+        sign, elapsed = self.gait_phase_port.Eval(context).tolist()
+        cmd = WalkCommand.from_vector(self.command_port.Eval(context))
+        t = context.get_time()
+        reference = self.solve(kin, side_from_sign(sign), elapsed, cmd, t)
+        stats[0] += 1.0
+        previous = context.get_abstract_state(self._reference).get_value()
+        if not reference.ok:
+            stats[1] += 1.0
+            if isinstance(previous, MpcReference) and t - previous.solved_at <= self.config.max_age + 1e-9:
+                reference = previous
+        if not reference.ok:
+            stats[2] += 1.0
+        state.get_mutable_abstract_state(self._reference).set_value(reference)
+
+    def solve(self, kin: RobotKinematics, side: str, elapsed: float, cmd: WalkCommand, t: float
+              ) -> MpcReference:
+        """One MPC solve at the state of ``kin``, ``elapsed`` s into a step on stance ``side``."""
+        c = self.config
+        x0, R_WB, I_now = self._rom_state(kin)
+        feet_p = np.array([self.contact.sole_center(kin, s) for s in SIDES])
+        feet_yaw = np.array([rpy_from_rotations(self.contact.sole_rotation(kin, s))[2] for s in SIDES])
+        phi = gs.contact_schedule(True, side, elapsed, cmd.step_time, self.t_ds, c.dt, c.knots)
+        touchdown = gs.touchdown_times(True, side, elapsed, cmd.step_time, self.t_ds)
+        footholds, foothold_yaw = self._footholds(kin, touchdown, cmd, feet_p)
+        ground = float(feet_p[:, 2].min())
+        x_ref = gs.reference_trajectory(x0[3:6], x0[2], np.array([cmd.vx, cmd.vy]), cmd.wz,
+                                        ground + cmd.com_height, c.dt, c.knots)
+        p_k, yaw_k = gs.foot_positions_over_horizon(
+            feet_p, feet_yaw, footholds, foothold_yaw, touchdown, cmd.step_time, self.t_ds, c.dt, c.knots,
+            self.swing_height)
+        turn = yaw_rotation(0.5 * (x_ref[:-1, 2] + x_ref[1:, 2]) - x0[2])
+        if c.inertia == "network":
+            X_WB = np.zeros((c.knots, 4, 4))
+            X_WB[:, :3, :3] = turn @ R_WB
+            X_WB[:, :3, 3] = kin.p_base + 0.5 * (x_ref[:-1, 3:6] + x_ref[1:, 3:6]) - x0[3:6]
+            X_WB[:, 3, 3] = 1.0
+            poses = gs.foot_poses(p_k, yaw_k)
+            inertia = predict_inertia_horizon(X_WB, poses[:, 0], poses[:, 1], self._ccinn)
+        else:
+            inertia = turn @ I_now @ turn.transpose(0, 2, 1)
+        solution = self.mpc.solve(x0, x_ref, inertia, p_k, yaw_k, phi)
+        wrenches = solution.u[0].reshape(2, 6) if solution.ok else np.zeros((2, 6))
+        nxt = x_ref[1]
+        return MpcReference(wrenches, nxt[3:6].copy(), nxt[9:12].copy(), nxt[:3].copy(), nxt[6:9].copy(), t,
+                            bool(solution.ok))
+
+    def _rom_state(self, kin: RobotKinematics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """x₀ = [Θ, p_c, ω, ṗ_c], the base rotation R_WB and the inertia held over the horizon."""
+        plant, context = self.robot.plant, kin.context
+        R_WB = kin.R_base
+        I_G = centroidal_inertia(plant, context)
+        if self.config.inertia == "network":
+            R = R_WB @ self._wbo.rotation(self._wbo.coordinates(kin.q))
+            omega = np.linalg.solve(I_G, kin.centroidal_momentum_matrix()[0][:3] @ kin.v)
+        else:
+            R = R_WB
+            omega = self._base.EvalSpatialVelocityInWorld(context).rotational()
+        theta = rpy_from_rotations(R)
+        I_held = R_WB @ self._nominal_inertia_B @ R_WB.T if self.config.inertia == "nominal" else I_G
+        return np.concatenate([theta, kin.p_com, omega, kin.v_com]), R_WB, I_held
+
+    def _footholds(self, kin: RobotKinematics, touchdown: np.ndarray, cmd: WalkCommand,
+                   feet_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each foot's next landing point (2, 3) on the ground and yaw (2,), eqs. 14-15, about the
+        torso's heading (eq. 15) in every inertia mode, so the output's and the MPC's agree."""
+        c = self.config
+        yaw = float(rpy_from_rotations(kin.R_base)[2])
+        p_com, v_com = kin.p_com, kin.v_com
+        footholds, yaws = np.zeros((2, 3)), np.zeros(2)
+        t_stance = gs.stance_duration(cmd.step_time, self.t_ds)
+        for i, side in enumerate(SIDES):
+            t_rem = float(touchdown[i]) if math.isfinite(touchdown[i]) else 0.0
+            xy, yaws[i] = gs.raibert_foothold(p_com, v_com, np.array([cmd.vx, cmd.vy]), cmd.wz, yaw,
+                                              side, t_rem, t_stance, cmd.com_height, cmd.step_width, c.k1,
+                                              c.k2, c.max_step)
+            footholds[i, :2], footholds[i, 2] = xy, feet_p[:, 2].min()
+        return footholds, yaws
+
+    # ------------------------------------------------------------------ the output
+    def _calc_plan(self, context, value) -> None:
+        sign, elapsed = self.gait_phase_port.Eval(context).tolist()
+        side = side_from_sign(sign)
+        cmd = WalkCommand.from_vector(self.command_port.Eval(context))
+        kin = self.kinematics_port.Eval(context)
+        reference = context.get_abstract_state(self._reference).get_value()
+        mpc = reference if isinstance(reference, MpcReference) and reference.ok else None
+        value.set_value(self.plan(kin, side, elapsed, cmd, mpc))
+
+    def plan(self, kin: RobotKinematics, side: str, elapsed: float, cmd: WalkCommand,
+             mpc: MpcReference | None) -> PlannerOutput:
+        """The swing foot's foothold relative to the stance sole (its yaw frame), with ``mpc``."""
+        feet_p = np.array([self.contact.sole_center(kin, s) for s in SIDES])
+        touchdown = gs.touchdown_times(True, side, elapsed, cmd.step_time, self.t_ds)
+        footholds, yaws = self._footholds(kin, touchdown, cmd, feet_p)
+        stance = SIDES.index(side)
+        swing = 1 - stance
+        R_st = self.contact.sole_rotation(kin, side)
+        yaw_st = math.atan2(R_st[1, 0], R_st[0, 0])
+        c, s = math.cos(yaw_st), math.sin(yaw_st)
+        d = footholds[swing, :2] - feet_p[stance, :2]
+        target = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1], 0.0])
+        valid = bool(np.all(np.isfinite(target)))
+        if not valid:
+            target = np.array([0.0, -cmd.step_width if side == "left" else cmd.step_width, 0.0])
+        swing_yaw = math.remainder(yaws[swing] - yaw_st, math.tau) if valid else 0.0
+        nan = np.full((2, 2), np.nan)
+        return PlannerOutput("vimpc", side, target, swing_yaw, cmd.step_time, self.t_ds,
+                             max(cmd.step_time - elapsed, 0.0), cmd.com_height, nan, nan, np.zeros(2), valid,
+                             mpc)
+
+
+class _NoReference:
+    """The reference state before the first solve and outside walking."""
+
+    ok = False
+
+
+def _sole_half_extent(robot: RobotModel) -> tuple[float, float]:
+    """Half-length and half-width (m) of the sole rectangle both feet contain."""
+    halves = []
+    for side in SIDES:
+        R_FS, p_FS = sole_frame(robot, side)
+        xy = (R_FS.T @ (robot.feet[side].points - p_FS[:, None]))[:2]
+        halves.append(0.5 * (xy.max(axis=1) - xy.min(axis=1)))
+    half = np.min(halves, axis=0)
+    return float(half[0]), float(half[1])
