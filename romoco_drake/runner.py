@@ -262,7 +262,8 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, 
     failures, safe_ticks, _, relaxed = loop.controller.stats_port.Eval(controller_context)
     mpc = {}
     if isinstance(loop.planner, VimpcPlanner):
-        solves, failed, fallback = loop.planner.mpc_stats_port.Eval(loop.planner.GetMyContextFromRoot(context))
+        planner_context = loop.planner.GetMyContextFromRoot(context)
+        solves, failed, fallback = loop.planner.mpc_stats_port.Eval(planner_context)
         mpc = {"mpc_solves": int(solves), "mpc_failures": int(failed), "mpc_fallback_updates": int(fallback),
                "vimpc_inertia": scenario.vimpc.inertia}
     return {

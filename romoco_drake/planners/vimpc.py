@@ -118,6 +118,14 @@ class VimpcPlanner(LeafSystem):
         self._nominal_inertia_B = R_WB.T @ centroidal_inertia(plant, context) @ R_WB
         self._ccinn = load_ccinn(robot.name) if config.inertia == "network" else None
         self._wbo = load_wbo(robot.name) if config.inertia == "network" else None
+        # The roll and pitch the orientation state has at the nominal pose with a level torso:
+        # the MPC's reference. The WBO map is identity at its own fitting pose, not at the
+        # nominal one (DRACO's nominal WBO is pitched 0.064 rad), and a zero reference made the
+        # MPC push 100 N forward every step to pitch the body down to it.
+        self._level = np.zeros(2)
+        if self._wbo is not None:
+            R_B_WBO = self._wbo.rotation(self._wbo.coordinates(robot.nominal.q))
+            self._level = rpy_from_rotations(R_B_WBO)[:2]
         self.kinematics_port = self.DeclareAbstractInputPort("kinematics", kinematics_model_value(robot))
         self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
@@ -163,6 +171,7 @@ class VimpcPlanner(LeafSystem):
         ground = float(feet_p[:, 2].min())
         x_ref = gs.reference_trajectory(x0[3:6], x0[2], np.array([cmd.vx, cmd.vy]), cmd.wz,
                                         ground + cmd.com_height, c.dt, c.knots)
+        x_ref[:, :2] = self._level
         p_k, yaw_k = gs.foot_positions_over_horizon(
             feet_p, feet_yaw, footholds, foothold_yaw, touchdown, cmd.step_time, self.t_ds, c.dt, c.knots,
             self.swing_height)
