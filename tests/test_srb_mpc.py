@@ -31,9 +31,9 @@ R = np.array([1e-3] * 3 + [1e-4] * 3 + [1e-3] * 3 + [1e-4] * 3)  # τ_L, f_L, τ
 WEIGHTS = MpcWeights(q=Q, r=R, q_terminal=Q)
 
 
-def make_mpc(cls=SrbMpc, f_max: float = F_MAX):
+def make_mpc(cls=SrbMpc, f_max: float = F_MAX, **options):
     return cls(MASS, WEIGHTS, knots=KNOTS, dt=DT, half_length=HALF_LENGTH, half_width=HALF_WIDTH, mu=MU,
-               f_max=f_max)
+               f_max=f_max, **options)
 
 
 def standing(yaw: float = 0.0, vx: float = 0.0):
@@ -191,13 +191,16 @@ def test_fast_solver_equals_the_mathematical_program():
         assert cost(a, case[1]) <= cost(b, case[1]) * (1 + 1e-8)
 
 
-def test_warm_start_changes_nothing_but_the_work():
+def test_warm_start_changes_nothing_but_the_work_and_cold_solves_have_no_history():
     rng = np.random.default_rng(4)
-    cases = [random_walking_case(rng) for _ in range(3)]
-    warm = make_mpc()
+    cases = [random_walking_case(rng) for _ in range(4)]
+    warm, cold = make_mpc(), make_mpc(warm_start=False)
     for case in cases:
-        warm_u, cold_u = warm.solve(*case).u, make_mpc().solve(*case).u
-        np.testing.assert_allclose(warm_u, cold_u, atol=1e-6 * np.abs(cold_u).max())
+        warm_u, fresh_u = warm.solve(*case).u, make_mpc().solve(*case).u
+        np.testing.assert_allclose(warm_u, fresh_u, atol=1e-6 * np.abs(fresh_u).max())
+        cold.solve(*case)
+    for case in cases:  # the same problems again, after a different history: bit for bit
+        assert np.array_equal(cold.solve(*case).u, make_mpc(warm_start=False).solve(*case).u)
 
 
 def test_a_horizon_without_contact_is_ballistic():
