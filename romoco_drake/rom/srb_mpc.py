@@ -55,8 +55,8 @@ class MpcSolution:
 
     ``u`` (N, 12): [τ_L, f_L, τ_R, f_R] per knot, world axes, about each sole centre (N·m, N);
     zero on swing feet. ``x`` (N+1, 12): the predicted states, ``x[0]`` the measured one.
-    ``ok`` is False when the inputs were not finite or the solver failed (``u`` is then zero and
-    ``x`` the unforced prediction, or NaN for non-finite input); ``status`` says why.
+    ``ok`` is False when the inputs were not finite or the solver failed; ``u`` is then zero and
+    ``x[1:]`` no plan (the unforced prediction, or NaN); ``status`` says why.
     ``iterations``: the solver's iteration count.
     """
 
@@ -171,11 +171,17 @@ class SrbMpc:
     ``mass`` (kg); ``knots`` N; ``dt`` (s) the knot spacing; ``half_length``/``half_width`` (m)
     and ``mu`` the rectangular sole's contact wrench cone; ``f_max`` (N) the normal force bound;
     ``weights`` the diagonals of Q, R, Q_N. :meth:`solve` returns an :class:`MpcSolution`.
+
+    ``warm_start``: start DAQP from the previous solve's active set (of the same problem size).
+    It changes the solution only by round-off, but that round-off depends on the call history;
+    ``False`` makes every solve a function of its arguments alone (replayable), for a few
+    per cent more time on a walking run.
     """
 
     def __init__(self, mass: float, weights: MpcWeights, knots: int = 10, dt: float = 0.05,
-                 half_length: float = 0.08, half_width: float = 0.04, mu: float = 0.5, f_max: float = 800.0):
-        self.mass, self.knots, self.dt, self.f_max = mass, knots, dt, f_max
+                 half_length: float = 0.08, half_width: float = 0.04, mu: float = 0.5, f_max: float = 800.0,
+                 warm_start: bool = True):
+        self.mass, self.knots, self.dt, self.f_max, self.warm_start = mass, knots, dt, f_max, warm_start
         q, r, qn = (np.asarray(w, dtype=float) for w in (weights.q, weights.r, weights.q_terminal))
         for name, w in (("q", q), ("r", r), ("q_terminal", qn)):
             if w.shape != (STATE_SIZE,) or np.any(w < 0):
@@ -188,6 +194,8 @@ class SrbMpc:
         # and the other ten, with f_z ≤ f_max, become constant rows: DAQP's costly step (the
         # constraint matrix times the inverse Cholesky factor) shrinks from 16 to 11 rows a foot,
         # and the working set carried to the next solve stays valid whatever the yaw.
+        if mu <= 0.0 or half_length <= 0.0 or half_width < 0.0:
+            raise ValueError("the sole needs mu > 0, half_length > 0 and half_width >= 0")
         cone = rectangle_wrench_cone(half_length, half_width, mu)
         bound_rows = [0, 1, 2, 4, 6, 9]
         self._p_inv = np.linalg.inv(cone[bound_rows])
@@ -195,9 +203,9 @@ class SrbMpc:
         self._rows = np.vstack([np.delete(cone, bound_rows, axis=0) @ self._p_inv, fz_row])
         self._rows_upper = np.concatenate([np.zeros(10), [f_max]])
         # Stacked state weights of x_1..x_N, and the input weight of each foot's 6-vector.
-        self._q_bar = np.concatenate([np.tile(q, knots - 1), qn])
+        self._q_bar = np.vstack([np.tile(q, (knots - 1, 1)), qn])  # (N, 12)
         self._r_knots = np.tile(r.reshape(2, 6), (knots, 1))  # (2N, 6), rows [2k + foot]
-        # Index maps of the condensed sensitivity S[k−1, j, foot, row, col] (u_j → x_k).
+        # Knot maps of the condensed sensitivity ∂x_k/∂u_j, k = 1..N (rows), j = 0..N−1 (columns).
         k = np.arange(1, knots + 1)[:, None]
         j = np.arange(knots)[None, :]
         self._after = (k > j).astype(float)  # (N, N): u_j reaches x_k only for k > j
@@ -238,12 +246,14 @@ class SrbMpc:
         to_world[:, 3:6] = Rz @ self._p_inv[None, 3:6]
         S = self._sensitivity(x_ref, integral, inertia_inv, feet, active, to_world)
         # Cost ½ yᵀ H y + gᵀ y with x = free + S y: H = 2 (Sᵀ Q̄ S + Tᵀ R̄ T), g = 2 Sᵀ Q̄ (free − x_ref).
-        qS = self._q_bar[:, None] * S
-        H = S.T @ qS
+        # Per-knot products: each is below OpenBLAS's threading threshold, and a threaded GEMM on
+        # cores shared with the rest of the controller costs ten times the arithmetic.
+        qS = self._q_bar[:, :, None] * S
+        H = np.matmul(S.transpose(0, 2, 1), qS).sum(axis=0)
         r_blocks = np.einsum("aci,ac,acj->aij", to_world, self._r_knots[active], to_world)
         H.reshape(na, 6, na, 6)[np.arange(na), :, np.arange(na), :] += r_blocks
         H *= 2.0
-        g = 2.0 * (qS.T @ (free - x_ref[1:]).ravel())
+        g = 2.0 * np.einsum("kri,kr->i", qS, free - x_ref[1:])
 
         workspace = self._workspaces.get(na)
         if workspace is None:
@@ -251,10 +261,14 @@ class SrbMpc:
             upper = np.concatenate([np.zeros(6 * na), np.tile(self._rows_upper, na)])
             lower = np.full(upper.size, -_DAQP_INF)
             workspace = self._workspaces[na] = daqp.Model()
-            workspace.setup(H, g, C, upper, lower, np.zeros(upper.size, dtype=np.int32))
+            flag = workspace.setup(H, g, C, upper, lower, np.zeros(upper.size, dtype=np.int32))[0]
+        elif self.warm_start:
+            flag = workspace.update(H=H, f=g)  # without sense, DAQP keeps the previous active set
         else:
-            workspace.update(H=H, f=g)  # the previous active set is the warm start
-        y, _, flag, info = workspace.solve()
+            flag = workspace.update(H=H, f=g, sense=np.zeros((6 + len(self._rows)) * na, dtype=np.int32))
+        info = {"iterations": 0}
+        if flag >= 0:  # setup and update fail on a Hessian that is not positive definite
+            y, _, flag, info = workspace.solve()
         if flag < 0:
             # A failed solve leaves a working set that would poison the next warm start.
             del self._workspaces[na]
@@ -263,7 +277,7 @@ class SrbMpc:
         y = np.asarray(y)
         u = np.zeros((N * 2, 6))
         u[active] = np.einsum("aij,aj->ai", to_world, y.reshape(na, 6))
-        x = free + (S @ y).reshape(N, STATE_SIZE)
+        x = free + np.einsum("kri,i->kr", S, y)
         return MpcSolution(u.reshape(N, INPUT_SIZE), np.vstack([x0, x]), True, "solved",
                            int(info["iterations"]))
 
@@ -287,7 +301,7 @@ class SrbMpc:
 
     def _sensitivity(self, x_ref: np.ndarray, integral: np.ndarray, inertia_inv: np.ndarray, feet: np.ndarray,
                      active: np.ndarray, to_world: np.ndarray) -> np.ndarray:
-        """∂[x_1; …; x_N]/∂y (12N, 6na) for the active (knot, foot) pairs, w = to_world y.
+        """∂x_k/∂y (N, 12, 6na), k = 1..N, for the active (knot, foot) pairs, w = to_world y.
 
         u_j enters ω_{j+1} through W_j = Δt I_j⁻¹ [1, [r_j]×] and ṗ_{j+1} through V = Δt/m [0, 1];
         then Θ_k gains (C_k − C_{j+1}) W_j and p_k gains Δt (k−1−j) V.
@@ -304,7 +318,7 @@ class SrbMpc:
         S[:, 3:6] = (self._p_lever[:, knot, None, None] * V).transpose(0, 2, 1, 3)
         S[:, 6:9] = (after * W).transpose(0, 2, 1, 3)
         S[:, 9:12] = (after * V).transpose(0, 2, 1, 3)
-        return S.reshape(N * STATE_SIZE, 6 * active.size)
+        return S.reshape(N, STATE_SIZE, 6 * active.size)
 
     def _failure(self, x_pred: np.ndarray, x0: np.ndarray, status: str, iterations: int = 0) -> MpcSolution:
         return MpcSolution(np.zeros((self.knots, INPUT_SIZE)), np.vstack([x0, x_pred]), False, status,
