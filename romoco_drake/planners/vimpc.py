@@ -46,6 +46,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.embedding.contact import ContactModel
+from romoco_drake.errors import RomocoError
 from romoco_drake.embedding.outputs import sole_frame
 from romoco_drake.inertia.ccinn import load_ccinn, predict_inertia_horizon, rpy_from_rotations
 from romoco_drake.inertia.wbo import load_wbo
@@ -147,7 +148,10 @@ class VimpcPlanner(LeafSystem):
         sign, elapsed = self.gait_phase_port.Eval(context).tolist()
         cmd = WalkCommand.from_vector(self.command_port.Eval(context))
         t = context.get_time()
-        reference = self.solve(kin, side_from_sign(sign), elapsed, cmd, t)
+        try:
+            reference = self.solve(kin, side_from_sign(sign), elapsed, cmd, t)
+        except RomocoError:  # the WBO map outside its fitted domain: a failed solve like any other
+            reference = _NoReference()
         stats[0] += 1.0
         previous = context.get_abstract_state(self._reference).get_value()
         if not reference.ok:

@@ -1,0 +1,83 @@
+"""The VI-MPC planner system on DRACO: one tick's plan, and its fallbacks (failed and stale solves)."""
+
+import functools
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+
+from romoco_drake.embedding.contact import ContactModel
+from romoco_drake.modes import Mode
+from romoco_drake.planners.vimpc import VimpcConfig, VimpcPlanner
+from romoco_drake.robots.kinematics import RobotKinematics
+from romoco_drake.robots.model import load_robot
+from romoco_drake.rom.types import MpcReference, WalkCommand
+
+
+@functools.cache
+def _draco():
+    robot = load_robot("draco")
+    return robot, ContactModel(robot)
+
+
+def _planner(inertia="network", **config):
+    """A planner with DRACO standing at its nominal pose, 0.05 s into a left-stance step at 0.3 m/s."""
+    robot, contact = _draco()
+    system = VimpcPlanner(robot, contact, VimpcConfig(inertia=inertia, **config))
+    context = system.CreateDefaultContext()
+    x = np.concatenate([robot.nominal.q, np.zeros(robot.nv)])
+    system.kinematics_port.FixValue(context, RobotKinematics(robot, x))
+    system.gait_phase_port.FixValue(context, [1.0, 0.05])
+    w = robot.config.walking
+    system.command_port.FixValue(context, WalkCommand(0.3, 0.0, 0.0, w.step_width, w.z0, w.t_ss).to_vector())
+    system.mode_port.FixValue(context, Mode.WALKING)
+    return robot, system, context
+
+
+@pytest.mark.parametrize("inertia", ["nominal", "updated", "network"])
+def test_one_tick_plans_stance_wrenches_and_a_swing_foothold(inertia):
+    robot, system, context = _planner(inertia)
+    simulator = Simulator(system, context)
+    simulator.AdvanceTo(0.001)  # the update at t = 0
+    plan = system.planner_output_port.Eval(context)
+    assert isinstance(plan.mpc, MpcReference) and plan.mpc.ok and plan.valid
+    left, right = plan.mpc.wrenches
+    np.testing.assert_array_equal(right, 0.0)  # the right foot swings
+    weight = robot.total_mass * 9.81
+    assert 0.8 * weight < left[5] < 1.2 * weight
+    assert plan.swing_target[1] < -0.1  # the right foot lands to the right of the left
+    np.testing.assert_array_equal(system.mpc_stats_port.Eval(context), [1.0, 0.0, 0.0])
+
+
+def test_failed_solves_hold_the_last_reference_then_fall_back():
+    """A non-finite state fails the solve: the previous reference is kept while it is younger
+    than max_age (0.02 s), then the output carries none; both are counted."""
+    robot, system, context = _planner(max_age=0.02)
+    simulator = Simulator(system, context)
+    simulator.AdvanceTo(0.001)
+    good = system.planner_output_port.Eval(context).mpc
+    x = np.concatenate([robot.nominal.q, np.full(robot.nv, np.nan)])
+    system.kinematics_port.FixValue(context, RobotKinematics(robot, x))
+    simulator.AdvanceTo(0.011)  # updates at 0.005 and 0.010 fail; the reference is 0.01 s old
+    assert system.planner_output_port.Eval(context).mpc is good
+    np.testing.assert_array_equal(system.mpc_stats_port.Eval(context), [3.0, 2.0, 0.0])
+    simulator.AdvanceTo(0.031)  # 0.025 and 0.030 are past max_age
+    assert system.planner_output_port.Eval(context).mpc is None
+    solves, failures, fallbacks = system.mpc_stats_port.Eval(context)
+    assert (solves, failures) == (7.0, 6.0) and fallbacks == 2.0
+
+
+def test_an_infeasible_mpc_is_a_failure_not_an_exception():
+    """A normal-force bound below zero leaves no admissible wrench: the solve fails cleanly."""
+    _, system, context = _planner(f_max=-1.0)
+    Simulator(system, context).AdvanceTo(0.001)
+    assert system.planner_output_port.Eval(context).mpc is None
+    np.testing.assert_array_equal(system.mpc_stats_port.Eval(context), [1.0, 1.0, 1.0])
+
+
+def test_standing_runs_no_mpc():
+    _, system, context = _planner()
+    system.mode_port.FixValue(context, Mode.STANDING)
+    Simulator(system, context).AdvanceTo(0.02)
+    assert system.planner_output_port.Eval(context).mpc is None
+    np.testing.assert_array_equal(system.mpc_stats_port.Eval(context), [0.0, 0.0, 0.0])
