@@ -46,8 +46,8 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.embedding.contact import ContactModel
-from romoco_drake.errors import RomocoError
 from romoco_drake.embedding.outputs import sole_frame
+from romoco_drake.errors import RomocoError
 from romoco_drake.inertia.ccinn import load_ccinn, predict_inertia_horizon, rpy_from_rotations
 from romoco_drake.inertia.wbo import load_wbo
 from romoco_drake.modes import Mode
