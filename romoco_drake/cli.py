@@ -243,6 +243,26 @@ def _names(text: str | None, default, what: str, known) -> list[str]:
     return names
 
 
+def _cmd_bench_agility(args) -> int:
+    from romoco_drake.bench.agility import MOTIONS, PAPER, bench_agility
+    from romoco_drake.planners.vimpc import INERTIA_MODES
+    from romoco_drake.runner import stderr_progress
+
+    modes = _names(args.modes, INERTIA_MODES, "inertia mode", INERTIA_MODES)
+    motions = _names(args.motions, tuple(MOTIONS), "motion", tuple(MOTIONS))
+    if not args.rate > 0.0:
+        raise RomocoError(f"--rate must be positive, got {args.rate}")
+    rows = bench_agility(args.robot, modes, motions, args.rate, args.top, progress=stderr_progress)
+    if args.json:
+        print(json.dumps(rows))
+        return 0
+    print("motion     inertia   tracked   paper (case 3 / cases 1-2)   ended")
+    for r in rows:
+        print(f"{r['motion']:10s} {r['inertia']:9s} {r['tracked']:7.2f}   "
+              f"{PAPER[r['motion']][0]:.1f} / {PAPER[r['motion']][1]:.1f}{'':18s} {r['ended']}")
+    return 0
+
+
 def _cmd_bench_tick(args) -> int:
     from romoco_drake.bench.walking import bench_tick
     from romoco_drake.scenario import load_scenario, with_overrides
@@ -392,6 +412,15 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, default=None, help="simulated seconds per run")
     p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
     p.set_defaults(func=_cmd_bench_matrix)
+    p = bench.add_parser("agility", help="VI-MPC: largest speed tracked per inertia mode and motion "
+                         "(paper §IV-B)")
+    p.add_argument("--robot", default="draco")
+    p.add_argument("--modes", help="comma-separated inertia modes (default: nominal,updated,network)")
+    p.add_argument("--motions", help="comma-separated (default: forward,diagonal,turning,circle)")
+    p.add_argument("--rate", type=float, default=0.1, help="command ramp, (m/s or rad/s) per s")
+    p.add_argument("--top", type=float, default=None, help="ramp ceiling (default: 1.5x the paper's best)")
+    p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
+    p.set_defaults(func=_cmd_bench_agility)
     p = bench.add_parser("tick", help="per-component controller tick time on a running closed loop")
     p.add_argument("--scenario", default="g1_walk")
     p.add_argument("--planner")

@@ -57,9 +57,14 @@ def run_scenario(
     link: str = "sim",
     lcm_url: str | None = None,
     lcm_log: Path | None = None,
+    stop_after_fall: float | None = None,
+    inspect=None,
 ) -> dict:
     """Simulates ``scenario`` and returns the run summary (see ``romoco run --json``).
 
+    ``stop_after_fall`` (s): end the run that long after the fall monitor fires (sweeps that
+    only score up to a fall). ``inspect(built, context)`` is called on the finished diagram
+    before the summary is made, for callers that read its logs (the benches).
     ``law`` (a :class:`~romoco_drake.rom.planners.FootPlacementLaw`) replaces the scenario's
     planner, e.g. a custom one. ``link`` is ``"sim"``, ``"via_lcm"`` (robot and controller in
     this process over ``lcm_url``, default ``memq://``) or ``"hardware"`` (the controller only,
@@ -90,7 +95,7 @@ def run_scenario(
     simulator.Initialize()
     last_print = wall0
     chunk = min(0.1, duration)
-    t, diverged = 0.0, None
+    t, diverged, stopped = 0.0, None, None
     # The log is closed however the run ends (Ctrl-C on --hardware included).
     with contextlib.ExitStack() as stack, frozen_heap():
         if recorder is not None:
@@ -106,6 +111,11 @@ def run_scenario(
                     raise
                 diverged = (context.get_time(), reason)
                 break
+            if stop_after_fall is not None:
+                fall = built.monitor.summary(built.monitor.GetMyContextFromRoot(context))["fall_time_s"]
+                if fall is not None and t >= fall + stop_after_fall:
+                    stopped = t
+                    break
             now = time.perf_counter()
             if progress is not None and now - last_print > PROGRESS_WALL_S:
                 progress(f"[{scenario.name}] t = {t:.1f}/{duration:.1f} s ({100 * t / duration:.0f}%)")
@@ -119,6 +129,8 @@ def run_scenario(
             record.write_text(meshcat.StaticHtml())
         except OSError as e:
             raise RomocoError(f"{record}: cannot write the replay ({e.strerror})") from None
+    if inspect is not None:
+        inspect(built, context)
     monitor_context = built.monitor.GetMyContextFromRoot(context)
     summary = {
         "link": link,
@@ -131,6 +143,8 @@ def run_scenario(
         "realtime_factor": round(duration / wall, 3) if wall > 0 else None,
     }
     summary.update(built.monitor.summary(monitor_context))
+    if stopped is not None:
+        summary["stopped_s"] = stopped
     if diverged is not None:
         summary["simulation_error"] = diverged[1]
         if not summary["fell"]:
@@ -223,7 +237,7 @@ def make_lcm(url: str | None) -> DrakeLcm:
         raise RomocoError(f"cannot open LCM on {url or 'the default URL'}: {reason}") from None
 
 
-def _samples(log, until: float | None) -> tuple[np.ndarray, np.ndarray]:
+def log_samples(log, until: float | None) -> tuple[np.ndarray, np.ndarray]:
     """A log's (times, data columns), up to time ``until`` if given."""
     times, data = log.sample_times(), log.data()
     if until is None:
@@ -239,8 +253,8 @@ def _estimator_summary(built, context, until: float | None) -> dict:
     out = {"estimator_rejected_updates": built.estimator.rejected_updates(
         built.estimator.GetMyContextFromRoot(context))}
     if built.plant_station is not None:
-        truth = _samples(built.state_log.FindLog(context), until)[1]
-        estimate = _samples(built.estimate_log.FindLog(context), until)[1]
+        truth = log_samples(built.state_log.FindLog(context), until)[1]
+        estimate = log_samples(built.estimate_log.FindLog(context), until)[1]
         n = min(truth.shape[1], estimate.shape[1])
         j = built.robot.nq + built.robot.base_v_start + 3
         error = np.linalg.norm(estimate[j:j + 3, :n] - truth[j:j + 3, :n], axis=0)
@@ -253,7 +267,7 @@ def stderr_progress(message: str) -> None:
 
 
 def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, until: float | None) -> dict:
-    times, states = _samples(built.state_log.FindLog(context), until)
+    times, states = log_samples(built.state_log.FindLog(context), until)
     tracking = velocity_tracking(built.robot, built.command, times, states)
     ticks = built.walking.tick_log.FindLog(context).data()[0, 1:]  # the first sample precedes any tick
     loop = built.walking
@@ -287,7 +301,7 @@ def _momentum(built, context, scenario: Scenario, plot_dir: Path | None, times, 
     out, paths = {}, []
     log = built.walking.momentum_log
     if log is not None:
-        log_times, data = _samples(log.FindLog(context), until)
+        log_times, data = log_samples(log.FindLog(context), until)
         out = momentum_summary(log_times, data)
         if plot_dir is not None:
             from romoco_drake.plots import plot_momentum_run
@@ -299,7 +313,7 @@ def _momentum(built, context, scenario: Scenario, plot_dir: Path | None, times, 
     if plot_dir is not None:
         from romoco_drake.plots import plot_walking_run
 
-        error_times, errors = _samples(built.walking.error_log.FindLog(context), until)
+        error_times, errors = log_samples(built.walking.error_log.FindLog(context), until)
         paths = plot_walking_run(Path(plot_dir), scenario.name, times, tracking, error_times, errors) + paths
         out["plots"] = [str(p) for p in paths]
     return out

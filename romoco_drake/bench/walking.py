@@ -11,8 +11,9 @@ from romoco_drake.bench.rom import percentiles
 from romoco_drake.control.gravity import contact_gravity_compensation
 from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces.station import make_station
+from romoco_drake.planners.vimpc import VimpcPlanner
 from romoco_drake.robots.kinematics import RobotKinematics
-from romoco_drake.rom.types import WalkCommand
+from romoco_drake.rom.types import WalkCommand, side_from_sign
 from romoco_drake.runner import frozen_heap, run_scenario
 from romoco_drake.scenario import (
     Scenario,
@@ -58,6 +59,10 @@ def bench_matrix(robots, planners, controllers, duration: float | None, progress
 def bench_tick(scenario: Scenario, warmup: float = 2.0, ticks: int = 500) -> dict:
     """Per-component cost of one controller tick, measured on a running closed loop.
 
+    Under the VI-MPC planner the MPC is also timed on its own at every tick's state (it runs
+    at its own, lower rate, so it is not in ``total``): ``mpc_update`` is the whole update (state,
+    footholds, references, inertia, QP), ``mpc_solve`` the QP's build and solve alone.
+
     After ``warmup`` simulated seconds (walking under the scenario's command), each of ``ticks``
     controller periods is simulated and then every component is evaluated in pipeline order:
     estimator output, the shared controller-plant evaluation (``kinematics``), state machine
@@ -85,6 +90,19 @@ def bench_tick(scenario: Scenario, warmup: float = 2.0, ticks: int = 500) -> dic
     names = ("estimator", "kinematics", "state_machine", "planner", "embedding", "controller")
     times: dict[str, list[int]] = {n: [] for n in (*names, "plant_step")}
     machine = loop.state_machine
+    mpc = loop.planner if isinstance(loop.planner, VimpcPlanner) else None
+    qp_ns: list[int] = []
+    if mpc is not None:
+        times["mpc_update"] = []
+        solve_qp = mpc.mpc.solve
+
+        def timed_qp(*args):
+            start = time.perf_counter_ns()
+            out = solve_qp(*args)
+            qp_ns.append(time.perf_counter_ns() - start)
+            return out
+
+        mpc.mpc.solve = timed_qp  # this bench's planner only: the QP's own share of the update
     t = root.get_time()
     with frozen_heap():
         for _ in range(ticks):
@@ -109,6 +127,13 @@ def bench_tick(scenario: Scenario, warmup: float = 2.0, ticks: int = 500) -> dic
             t6 = time.perf_counter_ns()
             for name, ns in zip(names, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, t6 - t5), strict=True):
                 times[name].append(ns)
+            if mpc is not None:
+                sign, elapsed = machine.gait_phase_port.Eval(ctx["state_machine"]).tolist()
+                t7 = time.perf_counter_ns()
+                mpc.solve(kin, side_from_sign(sign), elapsed, cmd, t)
+                times["mpc_update"].append(time.perf_counter_ns() - t7)
+    if mpc is not None:
+        times["mpc_solve"] = qp_ns
     times["plant_step"] = passive_plant_steps(built.robot, scenario, ticks)
     result = {n: {k: round(v / 1e3, 4) for k, v in percentiles(ns).items()} for n, ns in times.items()}
     total = np.sum([np.array(times[n]) for n in names], axis=0)

@@ -1,0 +1,42 @@
+"""The agility bench's scoring (VI-MPC paper §IV-B): ramps, the 20 % rule, falls."""
+
+import numpy as np
+
+from romoco_drake.bench.agility import GIVE_UP_S, MOTIONS, START_S, TOLERANCE, ramp, tracked_speed
+
+
+def _run(direction, measured_of_speed, duration=12.0, rate=0.1, fall=None):
+    times = np.arange(0.0, duration, 0.01)
+    speed = np.clip(rate * (times - START_S), 0.0, None)
+    wanted = speed[:, None] * np.array(direction)
+    measured = np.array([measured_of_speed(s) for s in speed])[:, None] * np.array(direction)
+    return tracked_speed(times, measured, wanted, direction, fall), speed
+
+
+def test_ramp_is_piecewise_constant_up_to_its_top():
+    points = ramp(MOTIONS["circle"], 0.2, 1.0)
+    assert points[0].t == START_S and points[-1].vx == 1.0 and points[-1].wz == 1.0
+    assert all(p.vy == 0.0 for p in points)
+    assert np.all(np.diff([p.vx for p in points]) >= 0.0)
+
+
+def test_perfect_tracking_scores_the_whole_ramp():
+    (score, reason), speed = _run(MOTIONS["forward"], lambda s: s)
+    assert reason == "ramp ended" and score == speed.max()
+
+
+def test_saturation_scores_where_the_error_reaches_twenty_percent():
+    """The robot walks at most 0.8: the command is tracked until 0.8 / (1 − 0.2) = 1.0."""
+    (score, reason), _ = _run(MOTIONS["diagonal"], lambda s: min(s, 0.8))
+    assert reason == "lost tracking"
+    assert abs(score - 0.8 / (1.0 - TOLERANCE)) < 0.01
+
+
+def test_a_short_excursion_is_forgiven_and_a_fall_ends_the_ramp():
+    # 1 s beyond 20 % (shorter than GIVE_UP_S) at speed 0.5, then tracking again until a fall at 9 s.
+    def measured(s):
+        return 0.5 * s if 0.5 <= s < 0.5 + 0.1 * (GIVE_UP_S - 1.0) else s
+
+    (score, reason), speed = _run(MOTIONS["turning"], measured, fall=9.0)
+    assert reason == "fell"
+    assert abs(score - 0.1 * (9.0 - START_S)) < 0.011
