@@ -27,7 +27,7 @@ def test_perfect_tracking_scores_the_whole_ramp():
 
 def test_saturation_scores_where_the_error_reaches_twenty_percent():
     """The robot walks at most 0.8: the command is tracked until 0.8 / (1 − 0.2) = 1.0."""
-    (score, reason), _ = _run(MOTIONS["diagonal"], lambda s: min(s, 0.8))
+    (score, reason), _ = _run(MOTIONS["diagonal"], lambda s: min(s, 0.8), duration=15.0)
     assert reason == "lost tracking"
     assert abs(score - 0.8 / (1.0 - TOLERANCE)) < 0.01
 
