@@ -21,7 +21,7 @@ def test_list_json():
     assert listing["robots"] == ["cassie", "draco", "g1", "h1", "xo"]
     assert {f"{r}_stand" for r in listing["robots"]} <= set(listing["scenarios"])
     assert "standing" in listing["controllers"]
-    assert listing["planners"] == ["alip", "hlip", "mlip", "dcm", "alip_general"]
+    assert listing["planners"] == ["alip", "hlip", "mlip", "dcm", "alip_general", "vimpc"]
 
 
 def test_list_text():
