@@ -18,9 +18,14 @@ and the internal-loop forces. A strict hierarchy is solved level by level
 0. dynamics consistency (the unactuated rows of M v̇ + C = B τ + J_cᵀ λ), the contact wrench
    cone of each sole (:func:`~romoco_drake.rom.wrench_cone.rectangle_wrench_cone`: friction,
    CoP inside the sole, unilateral force, yaw moment), the torque limits, with
-   τ = (M v̇ + C − J_cᵀ λ)_actuated, and the joint ranges as bounds on q̈ (without them the
-   arms, which absorb momentum for the levels above their own, ran into their stops on XO and
-   the stop's impulse tipped the robot);
+   τ = (M v̇ + C − J_cᵀ λ)_actuated, and the ranges of the locked joints as bounds on q̈
+   (without them the arms, which absorb momentum for the levels above their own, ran into
+   their stops on XO and the stop's impulse tipped the robot). The other joints' motion is
+   what the task outputs ask for, so a range row on them can only overrule the tasks: H1
+   walks at z0 = 0.8 m with its ankles on their lower stop (under the TSC-QP too), and the
+   rows, kept 0.02 rad inside it, pushed the ankles back against every task at once (task
+   accelerations off by about their own size; 0.2 of the ticks at 1.5-3 s had an ankle row
+   active);
 1. the centroidal momentum rate ḣ_G = A_G v̇ + Ȧ_G v (eq. 21) toward eq. 22: m p̈_d +
    K_D m (ṗ_d − ṗ) + K_P m (p_d − p) on the CoM (horizontal from the ALIP plan in walking's
    single support, the CoM references otherwise, the CoM height from its output), and
@@ -32,13 +37,25 @@ and the internal-loop forces. A strict hierarchy is solved level by level
 3. regularisation: the locked joints (arms, waist) at their nominal angles, every joint toward
    its nominal angle with a weak PD, and small contact wrenches.
 
+A line contact (a foot without an ankle roll joint) gives no moment about its toe-heel line,
+so in its single support the lateral CoM acceleration (across that line) is the pendulum's
+plus what the body's roll angular momentum rate adds. A strict lateral row then fixed the
+roll rate, and only the arms and waist could make up the difference to what the pelvis and
+swing-foot tasks move: on H1 they swung 1-2 rad off nominal into their torque limits and
+stops, and the tasks were missed by about their own size (vy rms 0.24 m/s). So there the
+lateral row (across the stance line) joins the task level with ``lateral_task_weight``.
+
 Where the angular rows sit is a gain (``MomentumGains.weighted_axes``): the axes named there
 leave level 1 and join the task level with ``angular_task_weight``. Measured on ``xo_walk``
-(Table I, joint-range rows in place): all three strict (``""``, the paper's order) walks it
+(Table I, range rows on every joint): all three strict (``""``, the paper's order) walks it
 with ``centroidal_am_ratio`` 0.030 but vy rms 0.051 m/s; x, y strict and yaw weighted, 0.045
-and 0.052; all three weighted at 1000 (the default), 0.059 and 0.040. Strict, every bit of
-momentum the swing leg makes must be cancelled by the arms or the pelvis at once, which drives
-the arms hard; weighted, L_G trades a little against the pelvis and the swing foot.
+and 0.052; all three weighted at 1000 (the default), 0.059 and 0.040 (0.035 and 0.043 with
+range rows on the locked joints only, the default). Strict, every bit of momentum the swing
+leg makes must be cancelled by the arms or the pelvis at once, which drives the arms hard;
+weighted, L_G trades a little against the pelvis and the swing foot.
+
+With the defaults (vx, vy rms, m/s): ``xo_walk`` 0.030, 0.043; ``g1_walk`` 0.035, 0.037;
+``h1_walk`` 0.029, 0.056 (0.087, 0.24 with range rows on every joint and a strict lateral row).
 
 When level 0's constraints cannot all hold (a joint moving fast toward its stop needs more
 torque to stop than it has), the tick is solved again without the torque limits (the motors
@@ -78,7 +95,9 @@ class MomentumGains:
     ``posture_kd``: the weak joint PD toward the nominal pose; ``wrench_weight``: the contact
     wrenches' weight (per N², against joint accelerations per (rad/s²)²);
     ``weighted_axes``, ``angular_task_weight``: which angular rows sit at the task level (module
-    docstring) and their weight there, in those units.
+    docstring) and their weight there, in those units; ``lateral_task_weight``: the same for
+    the lateral CoM row of a line contact's single support (module docstring; on ``h1_walk``
+    100 gave vy rms 0.099 m/s, 1000 0.056, 3000 0.058, 10000 0.093).
     """
 
     kp: float = 15.0
@@ -90,6 +109,7 @@ class MomentumGains:
     wrench_weight: float = 1e-6
     weighted_axes: str = "xyz"
     angular_task_weight: float = 1000.0
+    lateral_task_weight: float = 1000.0
 
 
 def _ankle_joints(robot: RobotModel, side: str, sole: tuple) -> list[tuple]:
@@ -133,7 +153,7 @@ class MomentumHqp:
     ``friction_margin`` shrinks μ by that fraction and ``cop_margin`` (m) the sole rectangle on
     every side, so the controller's wrenches stay clear of the edges the simulation slips or
     tips at. ``effort_limits`` (N·m, actuator order) replaces the robot's, e.g. to derate motors.
-    ``limit_horizon`` (s) and ``limit_margin`` (rad) set the joint-range rows of level 0.
+    ``limit_horizon`` (s) and ``limit_margin`` (rad) set the locked joints' range rows of level 0.
     """
 
     warm_start_size = 0
@@ -173,10 +193,11 @@ class MomentumHqp:
         self._domain_cones: dict[tuple[str, ...], tuple[np.ndarray, ...]] = {}
         self._ankles = {side: _ankle_joints(robot, side, self._soles[side]) for side in ("left", "right")}
         self._gravity_wrench = np.array([0.0, 0.0, 0.0, 0.0, 0.0, -GRAVITY * robot.total_mass])
-        # Joint range: every actuated joint with finite limits, kept ``limit_margin`` inside them.
+        # Joint range: every locked joint with finite limits, kept ``limit_margin`` inside them.
         self.limit_horizon, margin = limit_horizon, limit_margin
         q_lo, q_hi = robot.q_lower[robot.actuated_q_index], robot.q_upper[robot.actuated_q_index]
-        limited = np.isfinite(q_lo) & np.isfinite(q_hi) & (q_hi - q_lo > 4.0 * margin)
+        limited = (robot.locked_actuator_mask & np.isfinite(q_lo) & np.isfinite(q_hi)
+                   & (q_hi - q_lo > 4.0 * margin))
         self._limited_q, self._limited_v = robot.actuated_q_index[limited], robot.actuated_v_index[limited]
         self._q_lo, self._q_hi = q_lo[limited] + margin, q_hi[limited] - margin
 
@@ -248,8 +269,13 @@ class MomentumHqp:
             hdot_des = self._constrained_rate(kin, feet, hdot_des, rows, w)
             target = hdot_des - Adot_v - A_G @ vdot0
             soft = np.array(["xyz"[i] in g.weighted_axes for i in range(3)] + [False] * 3)
-            strict = rows & ~soft
             A_GP = A_G @ P
+            if self.contact.line_contact and len(feet) == 1:
+                # Linear rows along and across the stance line (module docstring).
+                rot = self._line_frame(kin, feet[0])
+                A_GP[3:5], target[3:5] = rot @ A_GP[3:5], rot @ target[3:5]
+                soft[4] = rows[4]
+            strict = rows & ~soft
             levels.append(Level("momentum", A_GP[strict], target[strict], w[strict]))
         J_out = tasks.J[other]
         task_A, task_w = J_out @ P, tasks.weight[other]
@@ -257,8 +283,9 @@ class MomentumHqp:
         if feet and soft.any():
             task_A = np.vstack([task_A, A_GP[soft]])
             task_b = np.concatenate([task_b, target[soft]])
-            w_angular = g.angular_task_weight / (m * self._z0) ** 2
-            task_w = np.concatenate([task_w, np.full(int(soft.sum()), w_angular)])
+            w_soft = np.concatenate([np.full(3, g.angular_task_weight / (m * self._z0) ** 2),
+                                     np.full(3, g.lateral_task_weight / m**2)])
+            task_w = np.concatenate([task_w, w_soft[soft]])
         levels.append(Level("tasks", task_A, task_b, task_w))
         levels.append(self._regularization(kin, tasks, a_cmd, k_out, P, vdot0, nz, nl))
         result = solve_hierarchy(E, e, G, lower, upper, levels)
@@ -275,6 +302,13 @@ class MomentumHqp:
         vdot = vdot0 + P @ x
         tau = F[a] @ x + f0[a]
         return MomentumSolution(tau, vdot, x[nz:], hdot_des, A_G @ vdot + Adot_v, result.failed, relaxed)
+
+    def _line_frame(self, kin: RobotKinematics, side: str) -> np.ndarray:
+        """(2×2) world xy → the stance sole's heading frame: rows along and across its toe-heel line."""
+        frame, R_FS, _ = self._soles[side]
+        x_S = kin.frame_pose(frame)[0] @ R_FS[:, 0]
+        c, s = x_S[:2] / np.linalg.norm(x_S[:2])
+        return np.array([[c, s], [-s, c]])
 
     def _constrained_rate(self, kin: RobotKinematics, feet: tuple[str, ...], hdot_des: np.ndarray,
                           rows: np.ndarray, w: np.ndarray) -> np.ndarray:
