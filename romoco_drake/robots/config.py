@@ -29,11 +29,14 @@ class FootConfig:
 
     ``points`` are the lowest points of the sole (toe first, then heel, for a line foot);
     ``up`` is the sole's outward normal pointing away from the ground when standing.
+    ``sim_points``, if given, are the simulation's contact points instead of ``points`` (a
+    robot whose controller assumes a smaller patch than its physical sole plate).
     """
 
     body: str
     points: list[list[float]]
     up: list[float] = dataclasses.field(default_factory=lambda: [0.0, 0.0, 1.0])
+    sim_points: list[list[float]] | None = None
 
 
 @dataclasses.dataclass

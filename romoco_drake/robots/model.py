@@ -65,6 +65,7 @@ class Foot:
     body_name: str
     points: np.ndarray
     up: np.ndarray  # unit sole normal in the foot frame
+    sim_points: np.ndarray  # the simulation's contact points (3×M), by default ``points``
 
 
 @dataclass(frozen=True)
@@ -127,11 +128,12 @@ class RobotModel:
             if name not in known:
                 raise ConfigError(path, key, f"'{name}' is not in the model {self._prepared.path.name}")
         for side in ("left", "right"):
-            pts = getattr(cfg.feet, side).points
             need = 2 if cfg.feet.type == "line" else 3
-            if len(pts) < need or any(len(p) != 3 for p in pts):
-                raise ConfigError(path, f"feet.{side}.points",
-                                  f"a {cfg.feet.type} foot needs >= {need} points of 3 coordinates")
+            for key in ("points", "sim_points"):
+                pts = getattr(getattr(cfg.feet, side), key)
+                if pts is not None and (len(pts) < need or any(len(p) != 3 for p in pts)):
+                    raise ConfigError(path, f"feet.{side}.{key}",
+                                      f"a {cfg.feet.type} foot needs >= {need} points of 3 coordinates")
             up = getattr(cfg.feet, side).up
             if len(up) != 3 or np.linalg.norm(up) < 1e-9:
                 raise ConfigError(path, f"feet.{side}.up", "must be a nonzero 3-vector")
@@ -182,7 +184,8 @@ class RobotModel:
         self.total_mass = plant.CalcTotalMass(plant.CreateDefaultContext())
         self.feet = {
             side: Foot(side, f.body, np.array(f.points, dtype=float).T,
-                       np.array(f.up, dtype=float) / np.linalg.norm(f.up))
+                       np.array(f.up, dtype=float) / np.linalg.norm(f.up),
+                       np.array(f.points if f.sim_points is None else f.sim_points, dtype=float).T)
             for side, f in (("left", cfg.feet.left), ("right", cfg.feet.right))
         }
         self.foot_frames = {s: plant.GetBodyByName(f.body_name).body_frame() for s, f in self.feet.items()}
@@ -244,7 +247,7 @@ class RobotModel:
         )
         for side, foot in self.feet.items():
             body = plant.GetBodyByName(foot.body_name, self.model_instance)
-            for k, p in enumerate(foot.points.T):
+            for k, p in enumerate(foot.sim_points.T):
                 props = ProximityProperties()
                 props.AddProperty("material", "coulomb_friction", friction)
                 # The sphere's lowest point is the sole contact point.
