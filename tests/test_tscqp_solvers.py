@@ -91,11 +91,25 @@ def test_daqp_warm_start_changes_nothing_but_the_work():
 
 
 def test_infeasible_qp_is_a_failure_not_an_exception():
-    """A friction limit no force can meet (b_f < 0 on the normal force): both solvers report failure."""
+    """Contradictory friction rows (A f ≤ b − 1 and A f ≥ b + 1): both solvers report failure."""
     robot, contact, ticks = _recorded("g1_walk")
     x, refs = ticks[Domain.DOUBLE][0]
-    impossible = dataclasses.replace(refs, b_f=refs.b_f - 1e3)
+    impossible = dataclasses.replace(refs, A_f=np.vstack([refs.A_f, -refs.A_f]),
+                                     b_f=np.concatenate([refs.b_f - 1.0, -refs.b_f - 1.0]))
     kin = RobotKinematics(robot, x)
     for solver in ("daqp", "clarabel"):
         solution, warm = TscQp(robot, contact, solver=solver).compute(kin, impossible)
         assert not solution.success and warm is None
+
+
+def test_torque_limits_no_force_can_meet_are_relaxed():
+    """Normal forces of at least 1 kN a sole point (b_f − 1e3) need more torque than G1 has: the
+    tick is solved without the torque limits and marked relaxed."""
+    robot, contact, ticks = _recorded("g1_walk")
+    x, refs = ticks[Domain.DOUBLE][0]
+    demanding = dataclasses.replace(refs, b_f=refs.b_f - 1e3)
+    kin = RobotKinematics(robot, x)
+    for solver in ("daqp", "clarabel"):
+        solution, warm = TscQp(robot, contact, solver=solver).compute(kin, demanding)
+        assert solution.success and solution.relaxed and warm is None
+        assert np.abs(solution.tau).max() > robot.effort_limits.max()

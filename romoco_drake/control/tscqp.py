@@ -54,6 +54,7 @@ class QpSolution:
     vdot: np.ndarray
     forces: np.ndarray
     success: bool
+    relaxed: bool = False  # solved only without the torque limits (TscQp.compute)
 
 
 @dataclass(frozen=True)
@@ -294,7 +295,17 @@ class TscQp:
         n_in = len(qp.lower) - qp.n_eq
         flags = (warm_start[1:1 + n_in].astype(np.int32)
                  if warm_start is not None and len(warm_start) and warm_start[0] == tag else None)
-        x, active = self._workspace(refs.domain, qp).solve(qp, flags)
+        workspace = self._workspace(refs.domain, qp)
+        x, active = workspace.solve(qp, flags)
+        relaxed = False
+        if x is None:
+            # No v̇ and forces meet every torque limit with the contacts held (a weak joint, such as
+            # DRACO's knee, pushed past what it can hold): solve again without the limits, the
+            # motors clip the torque, and the tick counts as relaxed rather than failed.
+            rows = slice(qp.n_eq, qp.n_eq + self.robot.nu)
+            qp.lower[rows], qp.upper[rows] = -np.inf, np.inf
+            x, active = workspace.solve(qp, None)
+            relaxed, active = True, None
         nv = self.robot.nv
         if x is None:
             return QpSolution(np.zeros(self.robot.nu), np.zeros(nv), np.zeros(len(qp.g) - nv), False), None
@@ -302,10 +313,11 @@ class TscQp:
         if active is not None:
             warm = np.zeros(self.warm_start_size)
             warm[0], warm[1:1 + n_in] = tag, active
-        return QpSolution(qp.T @ x + qp.c, x[:nv], x[nv:], True), warm
+        return QpSolution(qp.T @ x + qp.c, x[:nv], x[nv:], True, relaxed), warm
 
     def solve(self, kin: RobotKinematics, refs: TaskReferences, previous: np.ndarray,
               warm_start: np.ndarray) -> SolverResult:
         """The torque command of this tick (:class:`~romoco_drake.control.controller.WholeBodySolver`)."""
         solution, warm = self.compute(kin, refs, warm_start)
-        return SolverResult(torque_command(self.robot, kin, solution.tau), solution.success, warm)
+        return SolverResult(torque_command(self.robot, kin, solution.tau), solution.success, warm,
+                            relaxed=solution.relaxed)

@@ -170,6 +170,10 @@ class VimpcPlanner(LeafSystem):
         feet_p = np.array([self.contact.sole_center(kin, s) for s in SIDES])
         feet_yaw = np.array([rpy_from_rotations(self.contact.sole_rotation(kin, s))[2] for s in SIDES])
         phi = gs.contact_schedule(True, side, elapsed, cmd.step_time, self.t_ds, c.dt, c.knots)
+        # Knot 0's wrench is the one the controller applies now, on the feet in contact now; the
+        # mid-interval sample would hand a landing foot's share to a foot still in the air (and
+        # ask the stance foot for less) in the last dt/2 of every single support.
+        phi[0] = [True, True] if elapsed >= cmd.step_time else [side == "left", side == "right"]
         touchdown = gs.touchdown_times(True, side, elapsed, cmd.step_time, self.t_ds)
         footholds, foothold_yaw = self._footholds(kin, touchdown, cmd, feet_p)
         ground = float(feet_p[:, 2].min())
