@@ -1,5 +1,6 @@
 """The VI-MPC planner system on DRACO: one tick's plan, and its fallbacks (failed and stale solves)."""
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -12,6 +13,8 @@ from romoco_drake.planners.vimpc import VimpcConfig, VimpcPlanner
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import load_robot
 from romoco_drake.rom.types import MpcReference, WalkCommand
+from romoco_drake.runner import run_scenario
+from romoco_drake.scenario import CommandPoint, load_scenario
 
 
 @functools.cache
@@ -81,3 +84,16 @@ def test_standing_runs_no_mpc():
     Simulator(system, context).AdvanceTo(0.02)
     assert system.planner_output_port.Eval(context).mpc is None
     np.testing.assert_array_equal(system.mpc_stats_port.Eval(context), [0.0, 0.0, 0.0])
+
+
+def test_draco_walks_forward_under_the_vimpc_and_the_wbc():
+    """Closed loop, network inertia: 4 s of walking at 0.1 then 0.2 m/s, upright and on command."""
+    scenario = dataclasses.replace(load_scenario("draco_walk"), duration_s=5.0,
+                                   command=[CommandPoint(1.0, vx=0.1), CommandPoint(2.5, vx=0.2)])
+    assert scenario.vimpc.inertia == "network" and scenario.controller.name == "wbc"
+    out = run_scenario(scenario)
+    assert not out["fell"], out["fall_reason"]
+    assert out["steps"] >= 8 and out["mpc_solves"] > 0.9 * 4.0 * scenario.vimpc.rate_hz
+    assert out["mpc_failures"] == 0 and out["qp_failures"] == 0
+    assert max(out["velocity_rms_error"][:2]) <= 0.1, out["velocity_rms_error"]
+    assert out["mean_velocity"][0] > 0.5 * (1.5 * 0.1 + 2.5 * 0.2) / 5.0  # half the commanded mean
