@@ -116,9 +116,15 @@ def _check_value(value: Any, allowed: Range, depth: int, where: str | Path, key:
             _check_value(v, allowed, depth - 1, where, _join(key, i))
         return
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ConfigError(where, key, f"expected a number, got {value!r}")
+        raise ConfigError(where, key, f"expected a number, got {_brief(value)}")
     if not allowed.contains(value):
         raise ConfigError(where, key, f"must be {allowed.describe()}, got {_show(value)}")
+
+
+def _brief(value: Any) -> str:
+    """``repr(value)`` cut to fit an error line (a mistyped value may be a whole mapping)."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def _show(value: float) -> str:
@@ -189,7 +195,7 @@ def _convert(value: Any, tp: Any, path: Path, key: str) -> Any:
         return {str(k): _convert(v, args[1], path, _join(key, k)) for k, v in value.items()}
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(path, key, f"expected a number, got {value!r}")
+            raise ConfigError(path, key, f"expected a number, got {_brief(value)}")
         try:
             number = float(value)
         except OverflowError:  # an integer literal past float range
@@ -199,15 +205,15 @@ def _convert(value: Any, tp: Any, path: Path, key: str) -> Any:
         return number
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(path, key, f"expected an integer, got {value!r}")
+            raise ConfigError(path, key, f"expected an integer, got {_brief(value)}")
         return value
     if tp is bool:
         if not isinstance(value, bool):
-            raise ConfigError(path, key, f"expected true or false, got {value!r}")
+            raise ConfigError(path, key, f"expected true or false, got {_brief(value)}")
         return value
     if tp is str:
         if not isinstance(value, str):
-            raise ConfigError(path, key, f"expected a string, got {value!r}")
+            raise ConfigError(path, key, f"expected a string, got {_brief(value)}")
         return value
     raise TypeError(f"unsupported schema type {_type_name(tp)} at {key}")
 
