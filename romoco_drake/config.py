@@ -49,7 +49,7 @@ class Range:
         return bool(above and below)
 
     def describe(self) -> str:
-        """The range as a user reads it, e.g. ``in [1e-05, 0.05] s`` or ``positive, at most 3 ``."""
+        """The range as a user reads it, e.g. ``in [1e-05, 0.05] s`` or ``positive, at most 3``."""
         unit = f" {self.unit}" if self.unit else ""
         if self.lo == 0.0 and self.lo_open and not self.hi_open:
             return f"positive{'' if math.isinf(self.hi) else f', at most {self.hi:g}'}{unit}"

@@ -50,10 +50,12 @@ def _scenario_data(name: str) -> dict:
         data.setdefault(key, dataclasses.asdict(config))
     data.setdefault("initial_height_offset", 0.0)
     data.setdefault("estimator", {}).setdefault("rate_hz", 500.0)
+    if "command" in data:  # walk from the start: a short run reaches the planner's solves
+        data["command"] = [{"t": 0.0, "vx": 0.2}, *data["command"]]
     return data
 
 
-BASES = {"g1_stand": _scenario_data("g1_stand"), "g1_walk": _scenario_data("g1_walk")}
+BASES = {name: _scenario_data(name) for name in ("g1_stand", "g1_walk", "draco_walk")}
 ROBOTS = {name: yaml.safe_load((ROBOTS_DIR / f"{name}.yaml").read_text()) for name in ("g1", "cassie")}
 
 
