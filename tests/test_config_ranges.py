@@ -66,6 +66,10 @@ def test_ranges_read_as_intervals():
     ({"sensors.gyro_bias": [0.0, 0.0]}, "sensors.gyro_bias", ["needs 3 values, got 2"]),
     ({"vimpc.q": [1.0] * 11}, "vimpc.q", ["needs 12 values"]),
     ({"vimpc.knots": 10**400}, "vimpc.knots", ["a 401-digit integer"]),
+    ({"vimpc.knots": 50}, "vimpc.knots", ["in [1, 30]"]),
+    ({"sensors.contact_threshold_fraction": 1.0}, "sensors.contact_threshold_fraction", ["in (0, 1)"]),
+    ({"link.timeout_s": 0.0}, "link.timeout_s", ["positive, at most 1 s"]),
+    ({"estimator.rate_hz": float("nan")}, "estimator.rate_hz", ["expected a finite number"]),
     ({"time_step": 10**400}, "time_step", ["expected a finite number"]),
 ])
 def test_scenario_values_out_of_range(tmp_path, edits, key, words):
@@ -162,3 +166,21 @@ def test_robot_model_needs_no_drake_error_for_loaded_values(tmp_path):
     from pydrake.systems.framework import DiagramBuilder
 
     RobotModel(load_robot_config_file(path), path).add_to_builder(DiagramBuilder(), 0.001)
+
+
+def test_metrics_of_empty_logs_are_unmeasured():
+    """A run that ends before any sample reports None (JSON null), never raises or warns."""
+    import numpy as np
+
+    from romoco_drake.metrics import MOMENTUM_LOG_SIZE, finite_or_none, momentum_summary, velocity_tracking
+    from romoco_drake.planners.command import CommandSegment, CommandSource
+    from romoco_drake.robots.model import load_robot
+    from romoco_drake.rom.types import WalkCommand
+
+    with np.errstate(all="raise"):
+        assert momentum_summary(np.zeros(0), np.zeros((MOMENTUM_LOG_SIZE, 0)))["centroidal_am_ratio"] is None
+        robot = load_robot("g1")
+        command = CommandSource([CommandSegment(0.0, WalkCommand(0.2, 0.0, 0.0, 0.2, 0.65, 0.3))])
+        tracking = velocity_tracking(robot, command, np.zeros(0), np.zeros((robot.nq + robot.nv, 0)))
+    assert finite_or_none(tracking["mean_velocity"]) == [None, None, None]
+    assert finite_or_none(tracking["velocity_rms_error"]) == [None, None, None]
