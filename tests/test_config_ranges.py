@@ -1,8 +1,10 @@
 """Physical ranges of config values: every case a user can easily write fails at load in one line
 naming the file, the key and the allowed range; a run that diverges or ends early is summarised."""
 
+import dataclasses
 import subprocess
 import sys
+import typing
 
 import pytest
 import yaml
@@ -184,3 +186,30 @@ def test_metrics_of_empty_logs_are_unmeasured():
         tracking = velocity_tracking(robot, command, np.zeros(0), np.zeros((robot.nq + robot.nv, 0)))
     assert finite_or_none(tracking["mean_velocity"]) == [None, None, None]
     assert finite_or_none(tracking["velocity_rms_error"]) == [None, None, None]
+
+
+def _types_in(tp):
+    """``tp`` and every type inside it (list[list[float]] | None: the list types, float, None)."""
+    yield tp
+    for arg in typing.get_args(tp):
+        yield from _types_in(arg)
+
+
+def _dataclasses_in(schema, seen: set) -> set:
+    seen.add(schema)
+    for tp in typing.get_type_hints(schema).values():
+        for inner in _types_in(tp):
+            if dataclasses.is_dataclass(inner) and inner not in seen:
+                _dataclasses_in(inner, seen)
+    return seen
+
+
+def test_every_numeric_yaml_field_has_a_range():
+    """A numeric field added to a scenario or robot section without a declared range fails here."""
+    from romoco_drake.robots.config import RobotConfig
+
+    schemas = _dataclasses_in(Scenario, set()) | _dataclasses_in(RobotConfig, set())
+    missing = [f"{cls.__name__}.{f.name}" for cls in schemas for f in dataclasses.fields(cls)
+               if {float, int} & set(_types_in(typing.get_type_hints(cls)[f.name]))
+               and f.name not in RANGES.get(cls, {})]
+    assert missing == []
