@@ -42,9 +42,9 @@ class FootConfig:
     sim_points: list[list[float]] | None = None
 
 
-# Sole points lie on the foot, within a metre of its frame; ``up`` is a direction (normalised
-# by RobotModel, which also rejects a zero one).
-declare_ranges(FootConfig, points=Range(-1.0, 1.0, "m", size=3), up=Range(-1.0, 1.0, size=3),
+# Sole points lie on the foot, within a metre of its frame; ``up`` is a direction of any length
+# (RobotModel normalises it and rejects a zero one).
+declare_ranges(FootConfig, points=Range(-1.0, 1.0, "m", size=3), up=Range(-1e3, 1e3, size=3),
                sim_points=Range(-1.0, 1.0, "m", size=3))
 
 
@@ -102,7 +102,7 @@ class JointGains:
 
 
 # Zero is a joint left passive (kp) or undamped (kd); negative gains push joints away from
-# their targets. 1e5 N·m/rad is 60× the stiffest shipped gain (XO, 1500).
+# their targets. 1e5 N·m/rad is about 70× the stiffest shipped gain (1500).
 declare_ranges(JointGains, kp=Range(0.0, 1e5, "N·m/rad"), kd=Range(0.0, 1e4, "N·m·s/rad"))
 
 
