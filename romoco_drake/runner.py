@@ -300,8 +300,8 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, 
 
 
 def _tick_stats(ticks: np.ndarray) -> dict:
-    """Median and 99th percentile of the controller tick times (ms); None for a run that ended
-    (diverged, or was that short) before the controller's first tick."""
+    """Median and 99th percentile of the controller tick times (ms); None when the tick log holds
+    no tick (a run that diverged or ended within one controller period)."""
     if len(ticks) == 0:
         return {"median": None, "p99": None}
     return {"median": round(float(np.median(ticks)), 3), "p99": round(float(np.percentile(ticks, 99)), 3)}
