@@ -5,6 +5,12 @@ cannot tell a missing required key from a default, so configs load through this 
 checker instead: every dataclass field without a default is required, unknown keys are
 rejected, and values are type-checked against the annotations (str, bool, int, float,
 list[...], dict[str, ...], Optional[...], Literal[...], nested dataclasses).
+
+Numeric fields also have physical ranges: each config dataclass declares a table of
+:class:`Range` (``declare_ranges``) next to its definition, and :func:`check_ranges` checks a
+loaded (or Python-built) config against the tables of every dataclass in it, so an absurd value
+(a 1e300 s time step, a negative gain, a 2-vector where a point goes) fails at load in one line
+with the allowed range instead of hanging, crashing or running a meaningless simulation.
 """
 
 from __future__ import annotations
@@ -23,12 +29,120 @@ from romoco_drake.errors import ConfigError
 T = TypeVar("T")
 
 
+@dataclasses.dataclass(frozen=True)
+class Range:
+    """The values a numeric field may take: ``lo``..``hi`` in ``unit``, each end included unless
+    ``lo_open``/``hi_open``. For a list (or dict) field it bounds every entry, and ``size``, if
+    given, is the length of the field's vectors (of the list, or of each inner list)."""
+
+    lo: float = -math.inf
+    hi: float = math.inf
+    unit: str = ""
+    lo_open: bool = False
+    hi_open: bool = False
+    size: int | None = None
+
+    def contains(self, x: float) -> bool:
+        """Whether ``x`` is in the range (never a NaN)."""
+        above = x > self.lo if self.lo_open else x >= self.lo
+        below = x < self.hi if self.hi_open else x <= self.hi
+        return bool(above and below)
+
+    def describe(self) -> str:
+        """The range as a user reads it, e.g. ``in [1e-05, 0.05] s`` or ``positive, at most 3``."""
+        unit = f" {self.unit}" if self.unit else ""
+        if self.lo == 0.0 and self.lo_open and not self.hi_open:
+            return f"positive{'' if math.isinf(self.hi) else f', at most {self.hi:g}'}{unit}"
+        left = "(" if self.lo_open else "["
+        right = ")" if self.hi_open else "]"
+        return f"in {left}{self.lo:g}, {self.hi:g}{right}{unit}"
+
+
+def positive(hi: float = math.inf, unit: str = "") -> Range:
+    """(0, hi]: a quantity that must be strictly positive."""
+    return Range(0.0, hi, unit, lo_open=True)
+
+
+RANGES: dict[type, dict[str, Range]] = {}
+
+
+def declare_ranges(schema: type, **ranges: Range) -> None:
+    """Declares the ranges of ``schema``'s numeric fields (checked by :func:`check_ranges`)."""
+    names = {f.name for f in dataclasses.fields(schema)}
+    unknown = set(ranges) - names
+    if unknown:
+        raise TypeError(f"{schema.__name__} has no field {', '.join(sorted(unknown))}")
+    RANGES[schema] = ranges
+
+
+def check_ranges(config: Any, where: str | Path, key: str = "") -> None:
+    """Checks ``config`` (a dataclass instance) and every dataclass in it against their declared
+    ranges; the first value out of range raises ConfigError naming ``where`` and its key."""
+    if dataclasses.is_dataclass(config):
+        table = RANGES.get(type(config), {})
+        hints = typing.get_type_hints(type(config)) if table else {}
+        for field in dataclasses.fields(config):
+            value = getattr(config, field.name)
+            name = _join(key, field.name)
+            if field.name in table and value is not None:
+                _check_value(value, table[field.name], _list_depth(hints[field.name]), where, name)
+            check_ranges(value, where, name)
+    elif isinstance(config, list):
+        for i, item in enumerate(config):
+            check_ranges(item, where, _join(key, i))
+    elif isinstance(config, dict):
+        for k, item in config.items():
+            check_ranges(item, where, _join(key, k))
+
+
+def _list_depth(tp: Any) -> int:
+    """How many list levels the annotation ``tp`` has (list[list[float]] | None: 2)."""
+    if typing.get_origin(tp) in (Union, types.UnionType):
+        return max(_list_depth(a) for a in typing.get_args(tp))
+    if typing.get_origin(tp) is list:
+        return 1 + _list_depth(typing.get_args(tp)[0])
+    return 0
+
+
+def _check_value(value: Any, allowed: Range, depth: int, where: str | Path, key: str) -> None:
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _check_value(v, allowed, depth, where, _join(key, k))
+        return
+    if isinstance(value, list):
+        if depth == 1 and allowed.size is not None and len(value) != allowed.size:
+            raise ConfigError(where, key, f"needs {allowed.size} values, got {len(value)}")
+        for i, v in enumerate(value):
+            _check_value(v, allowed, depth - 1, where, _join(key, i))
+        return
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ConfigError(where, key, f"expected a number, got {_brief(value)}")
+    if not allowed.contains(value):
+        raise ConfigError(where, key, f"must be {allowed.describe()}, got {_show(value)}")
+
+
+def _brief(value: Any) -> str:
+    """``repr(value)`` cut to fit an error line (a mistyped value may be a whole mapping)."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _show(value: float) -> str:
+    """A number for an error line: short, whatever its size (an int may exceed float range)."""
+    if isinstance(value, int) and abs(value) >= 10**15:
+        return f"a {len(str(abs(value)))}-digit integer"
+    return f"{value:g}"
+
+
 def load_yaml_file(path: Path) -> Any:
-    """Reads a YAML file, turning I/O and syntax errors into ConfigError."""
+    """Reads a YAML file, turning I/O, encoding and syntax errors into ConfigError."""
     try:
-        text = Path(path).read_text()
+        text = Path(path).read_text(encoding="utf-8")
     except OSError as e:
-        raise ConfigError(path, "", f"cannot read file ({e.strerror})") from None
+        raise ConfigError(path, "", f"cannot read file ({e.strerror or e})") from None
+    except UnicodeDecodeError as e:
+        byte = f"byte 0x{e.object[e.start]:02x} at offset {e.start}"
+        raise ConfigError(path, "", f"not UTF-8 text ({byte}); save the file as UTF-8") from None
     try:
         return yaml.safe_load(text)
     except yaml.YAMLError as e:
@@ -38,10 +152,12 @@ def load_yaml_file(path: Path) -> Any:
 
 
 def load_typed(path: Path, schema: type[T], data: Any = None) -> T:
-    """Loads ``path`` (or already-parsed ``data``) into the dataclass ``schema``."""
+    """Loads ``path`` (or already-parsed ``data``) into the dataclass ``schema``, ranges checked."""
     if data is None:
         data = load_yaml_file(path)
-    return _convert(data, schema, path, "")
+    config = _convert(data, schema, path, "")
+    check_ranges(config, path)
+    return config
 
 
 def _type_name(tp: Any) -> str:
@@ -79,21 +195,25 @@ def _convert(value: Any, tp: Any, path: Path, key: str) -> Any:
         return {str(k): _convert(v, args[1], path, _join(key, k)) for k, v in value.items()}
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(path, key, f"expected a number, got {value!r}")
-        if not math.isfinite(value):
-            raise ConfigError(path, key, f"expected a finite number, got {value!r}")
-        return float(value)
+            raise ConfigError(path, key, f"expected a number, got {_brief(value)}")
+        try:
+            number = float(value)
+        except OverflowError:  # an integer literal past float range
+            number = math.inf
+        if not math.isfinite(number):
+            raise ConfigError(path, key, f"expected a finite number, got {_show(value)}")
+        return number
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(path, key, f"expected an integer, got {value!r}")
+            raise ConfigError(path, key, f"expected an integer, got {_brief(value)}")
         return value
     if tp is bool:
         if not isinstance(value, bool):
-            raise ConfigError(path, key, f"expected true or false, got {value!r}")
+            raise ConfigError(path, key, f"expected true or false, got {_brief(value)}")
         return value
     if tp is str:
         if not isinstance(value, str):
-            raise ConfigError(path, key, f"expected a string, got {value!r}")
+            raise ConfigError(path, key, f"expected a string, got {_brief(value)}")
         return value
     raise TypeError(f"unsupported schema type {_type_name(tp)} at {key}")
 

@@ -84,10 +84,15 @@ def velocity_tracking(robot: RobotModel, command: CommandSource, times: np.ndarr
     rms = np.sqrt(np.mean(err**2, axis=0)) if len(err) else np.full(3, math.nan)
     return {
         "velocity_rms_error": [round(float(e), 4) for e in rms],
-        "mean_velocity": [round(float(v), 4) for v in heading_velocity(robot, times, states).mean(axis=0)],
+        "mean_velocity": [round(float(v), 4) for v in _mean(heading_velocity(robot, times, states))],
         "measured": measured,
         "wanted": wanted,
     }
+
+
+def _mean(values: np.ndarray) -> np.ndarray:
+    """Column means of (N, k) ``values``; NaN (reported as None) for a run with no samples."""
+    return values.mean(axis=0) if len(values) else np.full(values.shape[1], math.nan)
 
 
 def finite_or_none(values: list[float]) -> list[float | None]:

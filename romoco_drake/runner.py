@@ -21,7 +21,13 @@ from romoco_drake.interfaces.robot_sim import make_robot_sim, robot_summary
 from romoco_drake.metrics import finite_or_none, momentum_summary, velocity_tracking
 from romoco_drake.planners.vimpc import VimpcPlanner
 from romoco_drake.robots.model import load_robot
-from romoco_drake.scenario import Scenario, build_diagram, initial_positions, uses_motor_command
+from romoco_drake.scenario import (
+    Scenario,
+    build_diagram,
+    check_duration,
+    initial_positions,
+    uses_motor_command,
+)
 
 PROGRESS_WALL_S = 2.0  # print progress lines at most this often
 # Drake's report that the plant's discrete contact solver gave up on a step (v1.51,
@@ -72,8 +78,7 @@ def run_scenario(
     ``lcm_log`` records the LCM traffic of the run.
     """
     duration = scenario.duration_s if duration is None else duration
-    if duration <= 0:
-        raise RomocoError(f"--duration must be positive, got {duration}")
+    check_duration(duration)
     if lcm_log is not None and link == "sim":
         raise RomocoError("--lcm-log records LCM traffic: use it with --via-lcm or --hardware")
     if record is not None and meshcat is None:
@@ -174,8 +179,7 @@ def run_robot_sim(scenario: Scenario, duration: float | None = None, lcm_url: st
     wall time), so the robot does not collapse in damping before a controller is up.
     """
     duration = scenario.duration_s if duration is None else duration
-    if duration <= 0:
-        raise RomocoError(f"--duration must be positive, got {duration}")
+    check_duration(duration)
     lcm = make_lcm(lcm_url)
     robot = load_robot(scenario.robot)
     motor_pd = uses_motor_command(scenario)
@@ -258,7 +262,8 @@ def _estimator_summary(built, context, until: float | None) -> dict:
         n = min(truth.shape[1], estimate.shape[1])
         j = built.robot.nq + built.robot.base_v_start + 3
         error = np.linalg.norm(estimate[j:j + 3, :n] - truth[j:j + 3, :n], axis=0)
-        out["velocity_estimate_rms_error"] = finite_or_none([round(float(np.sqrt(np.mean(error**2))), 4)])[0]
+        rms = float(np.sqrt(np.mean(error**2))) if n else np.nan  # no samples: nothing measured
+        out["velocity_estimate_rms_error"] = finite_or_none([round(rms, 4)])[0]
     return out
 
 
@@ -290,9 +295,16 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, 
         "relaxed_ticks": int(relaxed),
         "safe_mode_entries": schedule.safe_mode_entries,
         "safe_mode_ticks": int(safe_ticks),
-        "controller_tick_ms": {"median": round(float(np.median(ticks)), 3),
-                               "p99": round(float(np.percentile(ticks, 99)), 3)},
+        "controller_tick_ms": _tick_stats(ticks),
     } | mpc | _momentum(built, context, scenario, plot_dir, times, tracking, until)
+
+
+def _tick_stats(ticks: np.ndarray) -> dict:
+    """Median and 99th percentile of the controller tick times (ms); None when the tick log holds
+    no tick (a run that diverged or ended within one controller period)."""
+    if len(ticks) == 0:
+        return {"median": None, "p99": None}
+    return {"median": round(float(np.median(ticks)), 3), "p99": round(float(np.percentile(ticks, 99)), 3)}
 
 
 def _momentum(built, context, scenario: Scenario, plot_dir: Path | None, times, tracking, until) -> dict:

@@ -22,7 +22,15 @@ from pydrake.lcm import DrakeLcmInterface
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
-from romoco_drake.config import load_typed, load_yaml_file
+from romoco_drake.config import (
+    RANGES,
+    Range,
+    check_ranges,
+    declare_ranges,
+    load_typed,
+    load_yaml_file,
+    positive,
+)
 from romoco_drake.control.controller import WholeBodyController
 from romoco_drake.control.momentum_log import MomentumLog
 from romoco_drake.control.registry import CONTROLLERS
@@ -68,6 +76,12 @@ STATUS_PERIOD = 0.01  # s, controller status messages on LCM links (for logs)
 # round-off (final base height to 1e-13 m); with the direct loop a step behind they differed
 # by up to 0.013 m/s in the averaged velocity.
 LINK_TICK_OFFSET = 1e-4  # s, less than any plant step
+# Controller, estimator and sensor clocks: 1 Hz is the slowest loop that still closes anything;
+# 10 kHz the fastest motor loop hardware runs. A clock need not divide the plant step: G1
+# walking on a 2 ms step tracks alike at 300, 500 and 2000 Hz (measured), a faster controller
+# just sees the same state again.
+RATE_HZ = Range(1.0, 10000.0, "Hz")
+MAX_DURATION_S = 3600.0  # one hour of simulated time: longer is a typo, not a study
 
 
 @dataclass
@@ -85,6 +99,9 @@ class ControllerConfig:
     solver: Literal["daqp", "clarabel"] = "daqp"
 
 
+declare_ranges(ControllerConfig, rate_hz=RATE_HZ)
+
+
 @dataclass
 class PlannerConfig:
     """A foot-placement planner (see ``romoco list``) and its feedback gain."""
@@ -92,6 +109,10 @@ class PlannerConfig:
     name: str = "hlip"
     gain: Literal["deadbeat", "converging", "lqr"] = "deadbeat"
     alpha: float = 0.5
+
+
+# The converging gain's contraction factor per step (0: deadbeat; 1 would never converge).
+declare_ranges(PlannerConfig, alpha=Range(0.0, 1.0, hi_open=True))
 
 
 @dataclass
@@ -104,6 +125,12 @@ class CommandPoint:
     wz: float = 0.0
 
 
+# Command velocities beyond these are no walking command (the robot's command_limits clip the
+# sensible ones further); times start at 0 like the run's clock.
+declare_ranges(CommandPoint, t=Range(0.0, MAX_DURATION_S, "s"), vx=Range(-10.0, 10.0, "m/s"),
+               vy=Range(-10.0, 10.0, "m/s"), wz=Range(-10.0, 10.0, "rad/s"))
+
+
 @dataclass
 class EstimatorConfig:
     """``ground_truth``: encoders plus the base pose/velocity ports (exact in simulation, motion
@@ -111,6 +138,9 @@ class EstimatorConfig:
 
     name: str = "ground_truth"
     rate_hz: float | None = None  # Kalman update rate; None: the controller's rate
+
+
+declare_ranges(EstimatorConfig, rate_hz=RATE_HZ)
 
 
 @dataclass
@@ -134,6 +164,26 @@ class Scenario:
     link: LinkConfig = dataclasses.field(default_factory=LinkConfig)
     # Filled in by load_scenario, not read from YAML.
     name: str = ""
+
+
+# time_step: the controller ticks LINK_TICK_OFFSET after a plant step, before the next one, so
+# the step is longer than that; above 50 ms no contact simulation of a biped holds together
+# (G1 blows up at 20 ms, a fall). initial_height_offset: a drop test from up to 2 m; below 0
+# the feet start inside the ground.
+declare_ranges(Scenario, duration_s=positive(MAX_DURATION_S, "s"),
+               time_step=Range(LINK_TICK_OFFSET, 0.05, "s", lo_open=True),
+               initial_height_offset=Range(0.0, 2.0, "m"))
+# VimpcConfig (planners/vimpc.py) is the scenario's ``vimpc`` section; its table lives here with
+# the other scenario tables. The MPC replans at up to 1 kHz over up to 30 knots of 1-200 ms
+# (defaults: 10 knots of 50 ms at the paper's 200 Hz). The solve grows with the cube of the
+# knots (measured on DRACO: 30 knots ~20 ms a solve, 50 knots ~0.1 s, and 0.8 s over a 25 s
+# horizon), so more is a run that never ends, not a better plan. Weights are a diagonal cost,
+# ≥ 0 (r > 0: the QP needs a positive definite input cost); k1, k2 are eq. 14's gains, of
+# order 1; f_max is the normal force bound (10 kN: well past any humanoid's weight).
+declare_ranges(VimpcConfig, rate_hz=Range(1.0, 1000.0, "Hz"), knots=Range(1, 30), dt=Range(0.001, 0.2, "s"),
+               q=Range(0.0, 1e8, size=12), r=Range(0.0, 1e8, lo_open=True, size=12),
+               q_terminal=Range(0.0, 1e8, size=12), k1=Range(0.0, 10.0), k2=Range(0.0, 10.0),
+               max_step=positive(1.0, "m"), f_max=positive(1e4, "N"), max_age=positive(1.0, "s"))
 
 
 def scenario_names() -> list[str]:
@@ -184,29 +234,20 @@ def validate_scenario(scenario: Scenario, source: str | Path | None = None) -> N
     if scenario.controller.solver != "daqp" and not solves_qp:
         raise ConfigError(where, "controller.solver", f"the QP solver is the TSC-QP's; controller "
                           f"'{scenario.controller.name}' solves no QP")
-    _validate_vimpc(scenario.vimpc, where)
-    for key, value in (("duration_s", scenario.duration_s), ("time_step", scenario.time_step),
-                       ("controller.rate_hz", scenario.controller.rate_hz),
-                       ("estimator.rate_hz", 1.0 if scenario.estimator.rate_hz is None
-                        else scenario.estimator.rate_hz)):
-        if not value > 0:
-            raise ConfigError(where, key, f"must be positive, got {value}")
+    if scenario.vimpc.inertia not in INERTIA_MODES:
+        raise ConfigError(where, "vimpc.inertia", f"'{scenario.vimpc.inertia}' is not one of: "
+                          f"{', '.join(INERTIA_MODES)}")
+    check_ranges(scenario, where)
+    times = [p.t for p in scenario.command]
+    if times != sorted(times):
+        raise ConfigError(where, "command", f"times must increase, got {times}")
 
 
-def _validate_vimpc(c: VimpcConfig, where) -> None:
-    if c.inertia not in INERTIA_MODES:
-        raise ConfigError(where, "vimpc.inertia", f"'{c.inertia}' is not one of: {', '.join(INERTIA_MODES)}")
-    for key in ("q", "r", "q_terminal"):
-        w = getattr(c, key)
-        if len(w) != 12 or not all(math.isfinite(x) and x >= 0.0 for x in w):
-            raise ConfigError(where, f"vimpc.{key}", f"needs 12 finite non-negative weights, got {w}")
-    if not all(x > 0.0 for x in c.r):
-        raise ConfigError(where, "vimpc.r", "input weights must be positive")
-    for key in ("rate_hz", "dt", "f_max", "max_age", "max_step"):
-        if not getattr(c, key) > 0.0:
-            raise ConfigError(where, f"vimpc.{key}", f"must be positive, got {getattr(c, key)}")
-    if c.knots < 1:
-        raise ConfigError(where, "vimpc.knots", f"must be at least 1, got {c.knots}")
+def check_duration(duration: float) -> None:
+    """Rejects a run length (the --duration override) outside the scenarios' duration range."""
+    allowed = RANGES[Scenario]["duration_s"]
+    if not allowed.contains(duration):
+        raise RomocoError(f"--duration must be {allowed.describe()}, got {duration:g}")
 
 
 def uses_motor_command(scenario: Scenario) -> bool:

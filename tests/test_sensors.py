@@ -193,9 +193,9 @@ def test_gyro_is_body_rate_in_the_base_frame():
 def test_config_loads_from_yaml_data_and_rejects_bad_values():
     config = load_typed("sensors.yaml", SensorConfig, {"gyro_bias": [0.0, 0.1, 0.0], "seed": 5})
     assert config.gyro_bias == [0.0, 0.1, 0.0] and config.seed == 5
-    with pytest.raises(ConfigError, match="gyro_noise_std must be >= 0"):
+    with pytest.raises(ConfigError, match=r"gyro_noise_std: must be in \[0, 1\] rad/s"):
         load_typed("sensors.yaml", SensorConfig, {"gyro_noise_std": -1.0})
-    with pytest.raises(ConfigError, match="accel_bias must have 3 values"):
+    with pytest.raises(ConfigError, match="accel_bias: needs 3 values"):
         load_typed("sensors.yaml", SensorConfig, {"accel_bias": [0.0]})
     with pytest.raises(ConfigError, match="unknown key"):
         load_typed("sensors.yaml", SensorConfig, {"gyro_noise": 0.1})

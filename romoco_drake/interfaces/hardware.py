@@ -45,6 +45,7 @@ from pydrake.lcm import DrakeLcmInterface
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem, ValueProducer
 from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
 
+from romoco_drake.config import Range, declare_ranges, positive
 from romoco_drake.interfaces.lcm_codec import (
     BASE_STATE_CHANNEL,
     ESTOP_CHANNEL,
@@ -78,10 +79,12 @@ class LinkConfig:
     max_joint_speed: float = 30.0  # rad/s, |v_d| limit of a sent command
     max_gain_factor: float = 3.0  # K_p, K_d at most this times the robot YAML's gains
 
-    def __post_init__(self):
-        for name in ("timeout_s", "receive_rate_hz", "max_joint_speed", "max_gain_factor"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
+
+# A stream stale for a second has long lost the robot; the receive rate is a clock like the
+# controller's; 100 rad/s is beyond any joint motor; a gain factor of 10 lets a sender ask for
+# 10× the YAML gains, more is no longer the same robot.
+declare_ranges(LinkConfig, timeout_s=positive(1.0, "s"), receive_rate_hz=Range(1.0, 10000.0, "Hz"),
+               max_joint_speed=positive(100.0, "rad/s"), max_gain_factor=positive(10.0))
 
 
 def nominal_measurements(robot: RobotModel) -> dict[str, np.ndarray]:

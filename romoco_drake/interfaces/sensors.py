@@ -21,6 +21,7 @@ from pydrake.multibody.plant import ContactModel, ContactResults, MultibodyPlant
 from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
+from romoco_drake.config import Range, declare_ranges
 from romoco_drake.errors import RomocoError
 from romoco_drake.robots.model import RobotModel
 
@@ -52,23 +53,21 @@ class SensorConfig:
     contact_threshold_fraction: float = 0.02  # foot in contact above this fraction of the weight
     seed: int = 0  # noise and drawn biases are a function of this seed alone
 
-    def __post_init__(self):
-        stds = ("gyro_noise_std", "gyro_bias_std", "accel_noise_std", "accel_bias_std",
-                "orientation_noise_std", "encoder_noise_std", "joint_velocity_noise_std")
-        for name in stds:
-            if getattr(self, name) < 0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
-        for name in ("gyro_bias", "accel_bias"):
-            value = getattr(self, name)
-            if value is not None and len(value) != 3:
-                raise ValueError(f"{name} must have 3 values, got {len(value)}")
-        if self.rate_hz <= 0:
-            raise ValueError(f"rate_hz must be positive, got {self.rate_hz}")
-        if not 0 < self.contact_threshold_fraction < 1:
-            raise ValueError(f"contact_threshold_fraction must be in (0, 1), got "
-                             f"{self.contact_threshold_fraction}")
-        if self.seed < 0:
-            raise ValueError(f"seed must be >= 0, got {self.seed}")
+
+# Noise: zero is an exact sensor; the upper ends are ~100× the defaults' MEMS/encoder figures,
+# past which a measurement is noise alone. Biases of 1 rad/s or 10 m/s² are a broken IMU.
+declare_ranges(
+    SensorConfig,
+    rate_hz=Range(1.0, 10000.0, "Hz"),
+    gyro_noise_std=Range(0.0, 1.0, "rad/s"), gyro_bias_std=Range(0.0, 1.0, "rad/s"),
+    gyro_bias=Range(-1.0, 1.0, "rad/s", size=3),
+    accel_noise_std=Range(0.0, 10.0, "m/s²"), accel_bias_std=Range(0.0, 10.0, "m/s²"),
+    accel_bias=Range(-10.0, 10.0, "m/s²", size=3),
+    orientation_noise_std=Range(0.0, 0.5, "rad"), encoder_noise_std=Range(0.0, 0.1, "rad"),
+    joint_velocity_noise_std=Range(0.0, 10.0, "rad/s"),
+    contact_threshold_fraction=Range(0.0, 1.0, lo_open=True, hi_open=True),
+    seed=Range(0, 2**32 - 1),
+)
 
 
 _NOISE_BLOCK = 1024  # noise samples drawn per generator

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Literal
+
+from romoco_drake.config import Range, declare_ranges, positive
 
 
 @dataclasses.dataclass
@@ -39,6 +42,12 @@ class FootConfig:
     sim_points: list[list[float]] | None = None
 
 
+# Sole points lie on the foot, within a metre of its frame; ``up`` is a direction of any length
+# (RobotModel normalises it and rejects a zero one).
+declare_ranges(FootConfig, points=Range(-1.0, 1.0, "m", size=3), up=Range(-1e3, 1e3, size=3),
+               sim_points=Range(-1.0, 1.0, "m", size=3))
+
+
 @dataclasses.dataclass
 class FeetConfig:
     """Both feet. ``line`` feet have 2 contact points (toe, heel); ``plane`` feet >= 3."""
@@ -47,6 +56,11 @@ class FeetConfig:
     left: FootConfig
     right: FootConfig
     friction: float = 0.8
+
+
+# Coulomb friction: 0 or less is no contact model Drake accepts; rubber on concrete is about
+# 1, nothing a robot walks on reaches 3.
+declare_ranges(FeetConfig, friction=positive(3.0))
 
 
 @dataclasses.dataclass
@@ -60,6 +74,11 @@ class DistanceConstraintConfig:
     length: float
 
 
+# Linkage points sit on their bodies (within 2 m of the frames); a rod is longer than 0.
+declare_ranges(DistanceConstraintConfig, p_AP=Range(-2.0, 2.0, "m", size=3),
+               p_BQ=Range(-2.0, 2.0, "m", size=3), length=positive(3.0, "m"))
+
+
 @dataclasses.dataclass
 class CouplerConstraintConfig:
     """Joint coupling q_follower = ratio * q_leader (e.g. DRACO's rolling knee)."""
@@ -67,6 +86,10 @@ class CouplerConstraintConfig:
     leader: str
     follower: str
     ratio: float = 1.0
+
+
+# A gear or rolling-contact ratio; a larger one is a units mistake.
+declare_ranges(CouplerConstraintConfig, ratio=Range(-10.0, 10.0))
 
 
 @dataclasses.dataclass
@@ -78,6 +101,11 @@ class JointGains:
     kd: float
 
 
+# Zero is a joint left passive (kp) or undamped (kd); negative gains push joints away from
+# their targets. 1e5 N·m/rad is about 70× the stiffest shipped gain (1500).
+declare_ranges(JointGains, kp=Range(0.0, 1e5, "N·m/rad"), kd=Range(0.0, 1e4, "N·m·s/rad"))
+
+
 @dataclasses.dataclass
 class NominalConfig:
     """How to find the nominal standing pose by inverse kinematics."""
@@ -86,6 +114,10 @@ class NominalConfig:
     foot_separation: float
     # Initial guess and posture target for the IK (joint name -> angle, rad).
     joint_guess: dict[str, float] = dataclasses.field(default_factory=dict)
+
+
+declare_ranges(NominalConfig, com_height=positive(3.0, "m"), foot_separation=positive(2.0, "m"),
+               joint_guess=Range(-2 * math.pi, 2 * math.pi, "rad"))
 
 
 @dataclasses.dataclass
@@ -106,10 +138,10 @@ class CommandLimits:
     ay: float = 0.5
     wz_rate: float = 2.0
 
-    def __post_init__(self):
-        for name in ("vx", "vy", "wz", "ax", "ay", "wz_rate"):
-            if getattr(self, name) <= 0.0:
-                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
+
+# Envelopes a biped can be asked for: 5 m/s is a sprint, 10 rad/s a pirouette.
+declare_ranges(CommandLimits, vx=positive(5.0, "m/s"), vy=positive(5.0, "m/s"), wz=positive(10.0, "rad/s"),
+               ax=positive(20.0, "m/s²"), ay=positive(20.0, "m/s²"), wz_rate=positive(50.0, "rad/s²"))
 
 
 @dataclasses.dataclass
@@ -122,6 +154,13 @@ class WalkingConfig:
     step_width: float
     swing_height: float
     command_limits: CommandLimits = dataclasses.field(default_factory=CommandLimits)
+
+
+# A single-support phase under 0.1 s leaves no time to swing a leg (and t_ss ≤ 0 never steps);
+# z0 is the LIP height, a walking height above the ground (z0 = 0 never steps either); a
+# zero swing height drags the foot.
+declare_ranges(WalkingConfig, t_ss=Range(0.1, 2.0, "s"), t_ds=Range(0.0, 1.0, "s"), z0=Range(0.1, 3.0, "m"),
+               step_width=Range(0.0, 1.0, "m"), swing_height=positive(0.5, "m"))
 
 
 @dataclasses.dataclass
@@ -146,3 +185,7 @@ class RobotConfig:
     effort_limits: dict[str, float] = dataclasses.field(default_factory=dict)
     # Default effort limit for joints whose model file gives none.
     default_effort_limit: float | None = None
+
+
+# Motor torque limits: Drake rejects a negative one; 1e4 N·m is beyond any humanoid's joint.
+declare_ranges(RobotConfig, effort_limits=positive(1e4, "N·m"), default_effort_limit=positive(1e4, "N·m"))
