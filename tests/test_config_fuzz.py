@@ -56,7 +56,8 @@ def _scenario_data(name: str) -> dict:
 
 
 BASES = {name: _scenario_data(name) for name in ("g1_stand", "g1_walk", "draco_walk")}
-ROBOTS = {name: yaml.safe_load((ROBOTS_DIR / f"{name}.yaml").read_text()) for name in ("g1", "cassie", "draco")}
+ROBOTS = {name: yaml.safe_load((ROBOTS_DIR / f"{name}.yaml").read_text())
+          for name in ("g1", "cassie", "draco")}
 
 
 def _paths(data, prefix=()) -> list[tuple]:
