@@ -84,11 +84,17 @@ class VimpcConfig:
     rate_hz: float = 200.0
     knots: int = 10
     dt: float = 0.05
+    # Roll/pitch 10 and ω 5 (were 100 and 1): holding the orientation stiffly with little damping
+    # asked DRACO's stance foot for |f_xy| up to 150 N and CoPs at the patch edges, the stance
+    # knee and hip_aa saturated in 10-14 % of ticks and draco_walk fell (network 6.0 s,
+    # nominal 7.5 s); with these it walks in all three modes (knee, hip_aa 8-10 %). Roll/pitch 5
+    # with ω 10 fell again (network 7.2 s). draco_circle still falls (6.7 s); yaw 20 walks it
+    # (30: falls at 8.6 s) but made draco_walk fall in network (20) or nominal (30) mode.
     q: list[float] = field(default_factory=lambda: [
-        100.0, 100.0, 50.0, 50.0, 50.0, 500.0, 1.0, 1.0, 1.0, 10.0, 10.0, 5.0])
+        10.0, 10.0, 50.0, 50.0, 50.0, 500.0, 5.0, 5.0, 5.0, 10.0, 10.0, 5.0])
     r: list[float] = field(default_factory=lambda: [1e-4] * 3 + [1e-5] * 3 + [1e-4] * 3 + [1e-5] * 3)
     q_terminal: list[float] = field(default_factory=lambda: [
-        100.0, 100.0, 50.0, 50.0, 50.0, 500.0, 1.0, 1.0, 1.0, 10.0, 10.0, 5.0])
+        10.0, 10.0, 50.0, 50.0, 50.0, 500.0, 5.0, 5.0, 5.0, 10.0, 10.0, 5.0])
     k1: float = 0.1
     k2: float = 1.0
     max_step: float = 0.35
