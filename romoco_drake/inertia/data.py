@@ -62,7 +62,7 @@ class MotionBounds:
     turn_yaw: float = 0.6
     base_dx: float = 0.08
     base_dy: float = 0.04
-    base_height: tuple[float, float] = (0.72, 0.86)
+    base_height: tuple[float, float] = (0.80, 0.94)
     base_roll: float = 0.08
     base_pitch: tuple[float, float] = (-0.1, 0.15)
     base_tilt_change: float = 0.05
