@@ -92,7 +92,7 @@ def _cmd_run(args) -> int:
     from romoco_drake.scenario import load_scenario, with_overrides
 
     scenario = with_overrides(load_scenario(args.scenario), args.planner, args.controller, args.command,
-                              args.estimator, args.solver)
+                              args.estimator, args.solver, args.push)
     if args.via_lcm and args.hardware:
         raise RomocoError("--via-lcm and --hardware exclude each other")
     link = "via_lcm" if args.via_lcm else "hardware" if args.hardware else "sim"
@@ -366,6 +366,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--controller", help="override the scenario's controller (see romoco list)")
     p.add_argument("--command", metavar="T:VX,VY,WZ;...",
                    help="override the velocity command: piecewise constant from each time T (s)")
+    p.add_argument("--push", action="append", metavar="T:FX,FY,FZ[:DURATION]",
+                   help="push the base from time T (s) with force (N) in the heading frame, for DURATION "
+                        "(s, default 0.1); repeatable")
     p.add_argument("--plot", type=Path, metavar="DIR", help="write velocity and tracking-error PNGs")
     p.add_argument("--estimator", help="override the scenario's estimator: ground_truth or kalman")
     p.add_argument("--solver", help="override the TSC-QP's QP solver: daqp or clarabel (the reference)")

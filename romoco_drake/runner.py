@@ -184,7 +184,8 @@ def run_robot_sim(scenario: Scenario, duration: float | None = None, lcm_url: st
     robot = load_robot(scenario.robot)
     motor_pd = uses_motor_command(scenario)
     robot_sim = make_robot_sim(robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link,
-                               wait_for_commands_s=wait_s, motor_pd=motor_pd)
+                               wait_for_commands_s=wait_s, motor_pd=motor_pd,
+                               disturbances=scenario.disturbances)
     simulator = Simulator(robot_sim)
     context = simulator.get_mutable_context()
     station = robot_sim.GetSubsystemByName("station")

@@ -42,6 +42,7 @@ from romoco_drake.estimation.ground_truth import GroundTruthEstimator
 from romoco_drake.estimation.kalman_estimator import KalmanEstimator
 from romoco_drake.estimation.registry import ESTIMATORS
 from romoco_drake.estimation.rom_state import RomStateFromRobot
+from romoco_drake.interfaces.disturbance import Disturbance, body_names
 from romoco_drake.interfaces.hardware import (
     PUBLISH_DELAY,
     LinkConfig,
@@ -162,6 +163,8 @@ class Scenario:
     initial_height_offset: float = 0.0
     sensors: SensorConfig = dataclasses.field(default_factory=SensorConfig)
     link: LinkConfig = dataclasses.field(default_factory=LinkConfig)
+    # Pushes on the simulated robot (interfaces/disturbance.py); none on hardware.
+    disturbances: list[Disturbance] = dataclasses.field(default_factory=list)
     # Filled in by load_scenario, not read from YAML.
     name: str = ""
 
@@ -184,6 +187,13 @@ declare_ranges(VimpcConfig, rate_hz=Range(1.0, 1000.0, "Hz"), knots=Range(1, 30)
                q=Range(0.0, 1e8, size=12), r=Range(0.0, 1e8, lo_open=True, size=12),
                q_terminal=Range(0.0, 1e8, size=12), k1=Range(0.0, 10.0), k2=Range(0.0, 10.0),
                max_step=positive(1.0, "m"), f_max=positive(1e4, "N"), max_age=positive(1.0, "s"))
+
+# Disturbance (interfaces/disturbance.py) is the scenario's ``disturbances`` entry; its table lives
+# here. A push starts within the run's clock and lasts up to 10 s (longer is a steady force, not a
+# push); each force component is bounded by 5 kN (over 10x a humanoid's weight, a crash not a
+# push), each torque component by 1 kN·m.
+declare_ranges(Disturbance, t=Range(0.0, MAX_DURATION_S, "s"), duration=positive(10.0, "s"),
+               force=Range(-5000.0, 5000.0, "N", size=3), torque=Range(-1000.0, 1000.0, "N·m", size=3))
 
 
 def scenario_names() -> list[str]:
@@ -241,6 +251,22 @@ def validate_scenario(scenario: Scenario, source: str | Path | None = None) -> N
     times = [p.t for p in scenario.command]
     if times != sorted(times):
         raise ConfigError(where, "command", f"times must increase, got {times}")
+    _check_disturbances(scenario, where)
+
+
+def _check_disturbances(scenario: Scenario, where: str | Path) -> None:
+    """Each push names a body of the robot and a frame (a typed load checks the frame already; a
+    scenario built in Python may not)."""
+    if not scenario.disturbances:
+        return
+    known = body_names(load_robot(scenario.robot))
+    for i, push in enumerate(scenario.disturbances):
+        if push.body and push.body not in known:
+            raise ConfigError(where, f"disturbances[{i}].body",
+                              f"unknown body '{push.body}' (known: {', '.join(known)})")
+        if push.frame not in ("world", "heading"):
+            raise ConfigError(where, f"disturbances[{i}].frame",
+                              f"'{push.frame}' is not one of: world, heading")
 
 
 def check_duration(duration: float) -> None:
@@ -307,11 +333,29 @@ def parse_command(text: str) -> list[CommandPoint]:
     return points
 
 
+def parse_push(text: str) -> Disturbance:
+    """``"t:fx,fy,fz[:duration]"`` → a push on the base in the heading frame (the --push flag)."""
+    try:
+        t, force, *rest = text.strip().split(":")
+        if len(rest) > 1:
+            raise ValueError
+        fx, fy, fz = (float(v) for v in force.split(","))
+        push = Disturbance(float(t), float(rest[0]) if rest else 0.1, force=[fx, fy, fz], frame="heading")
+    except ValueError:
+        raise RomocoError(f"--push: '{text}' is not t:fx,fy,fz[:duration] (e.g. '2:0,60,0:0.1')") from None
+    check = {"t": [push.t], "duration": [push.duration], "force": push.force}
+    for key, values in check.items():
+        allowed = RANGES[Disturbance][key]
+        if not all(allowed.contains(v) for v in values):
+            raise RomocoError(f"--push: '{text}': {key} must be {allowed.describe()}")
+    return push
+
+
 def with_overrides(scenario: Scenario, planner: str | None = None, controller: str | None = None,
-                   command: str | None = None, estimator: str | None = None, solver: str | None = None
-                   ) -> Scenario:
+                   command: str | None = None, estimator: str | None = None, solver: str | None = None,
+                   pushes: list[str] | None = None) -> Scenario:
     """``scenario`` with the CLI's --planner/--controller/--command/--estimator/--solver applied
-    (names checked)."""
+    (names checked) and each --push appended to its disturbances."""
     if solver is not None:
         if solver not in QP_SOLVERS:
             raise RomocoError(f"unknown QP solver '{solver}' (known: {', '.join(QP_SOLVERS)})")
@@ -330,6 +374,9 @@ def with_overrides(scenario: Scenario, planner: str | None = None, controller: s
             scenario, controller=dataclasses.replace(scenario.controller, name=controller))
     if command is not None:
         scenario = dataclasses.replace(scenario, command=parse_command(command))
+    if pushes:
+        added = [parse_push(text) for text in pushes]
+        scenario = dataclasses.replace(scenario, disturbances=[*scenario.disturbances, *added])
     return scenario
 
 
@@ -363,6 +410,9 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
         raise RomocoError(f"unknown link '{link}' (known: {', '.join(LINKS)})")
     if link != "sim" and lcm is None:
         raise RomocoError(f"link '{link}' needs an LCM instance")
+    if link == "hardware" and scenario.disturbances:
+        raise ConfigError(f"<scenario {scenario.name or scenario.robot}>", "disturbances",
+                          "disturbances need a simulated plant (not the hardware link)")
     robot = load_robot(scenario.robot)
     builder = DiagramBuilder()
     motor_pd = uses_motor_command(scenario)
@@ -370,7 +420,8 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
     offset = LINK_TICK_OFFSET
     plant_station = robot_sim = None
     if link == "sim":
-        station = make_station(robot, scenario.time_step, meshcat, motor_pd, scenario.sensors)
+        station = make_station(robot, scenario.time_step, meshcat, motor_pd, scenario.sensors,
+                               disturbances=scenario.disturbances)
         plant_station = builder.AddNamedSystem("station", station)
     else:
         station = builder.AddNamedSystem(
@@ -378,7 +429,8 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
                                              require_base_state=scenario.estimator.name == "ground_truth"))
         if link == "via_lcm":
             robot_sim = builder.AddNamedSystem("robot", make_robot_sim(
-                robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link, motor_pd=motor_pd))
+                robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link, motor_pd=motor_pd,
+                disturbances=scenario.disturbances))
             plant_station = robot_sim.GetSubsystemByName("station")
     estimator = _add_estimator(builder, scenario, robot, station, link != "hardware", offset)
     kinematics = builder.AddNamedSystem("kinematics", RobotKinematicsSystem(robot))

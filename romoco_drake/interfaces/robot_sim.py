@@ -21,6 +21,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.lcm import LcmInterfaceSystem
 from pydrake.systems.primitives import ConstantVectorSource
 
+from romoco_drake.interfaces.disturbance import Disturbance
 from romoco_drake.interfaces.hardware import (
     PUBLISH_DELAY,
     EstopLatch,
@@ -160,7 +161,8 @@ class MeasurementSender(LeafSystem):
 def make_robot_sim(robot: RobotModel, lcm: DrakeLcmInterface, time_step: float = 0.001,
                    sensors: SensorConfig | None = None, meshcat: Meshcat | None = None,
                    config: LinkConfig | None = None, publish_period: float = 0.001,
-                   wait_for_commands_s: float = 0.0, motor_pd: bool = True) -> Diagram:
+                   wait_for_commands_s: float = 0.0, motor_pd: bool = True,
+                   disturbances: list[Disturbance] | None = None) -> Diagram:
     """The simulated robot behind LCM (module docstring); no exported ports.
 
     Measurements are published every ``publish_period`` s (the robot's own rate). With
@@ -173,11 +175,13 @@ def make_robot_sim(robot: RobotModel, lcm: DrakeLcmInterface, time_step: float =
     the plant step, as a torque-controlled drive does (for torque controllers: with K_p = K_d = 0
     the implicit loop still acts as a damper, K_p⁰·h, and an inertia, K_d⁰·h, at every joint,
     and G1 walked 8 % fast and kept stepping after the stop over LCM).
+    ``disturbances`` push the simulated robot (:func:`~romoco_drake.interfaces.station.make_station`).
     """
     config = config or LinkConfig()
     builder = DiagramBuilder()
     builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
-    station = builder.AddNamedSystem("station", make_station(robot, time_step, meshcat, motor_pd, sensors))
+    station = builder.AddNamedSystem("station", make_station(
+        robot, time_step, meshcat, motor_pd, sensors, disturbances=disturbances))
     receiver = builder.AddNamedSystem("receiver", CommandReceiver(robot, config))
     sender = builder.AddNamedSystem("sender", MeasurementSender(robot))
     subscribe(builder, lcm, MOTOR_COMMAND_CHANNEL, receiver.GetInputPort("command"), wait_for_commands_s)

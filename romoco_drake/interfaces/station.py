@@ -29,6 +29,9 @@ command's own gains are honoured by moving the setpoints (:class:`MotorCommandAd
 The station also watches the plant's true state, for scoring runs whatever the estimator
 believes: subsystem ``truth_log`` logs it every ``truth_log_period`` s and subsystem
 ``monitor`` (:class:`~romoco_drake.interfaces.monitor.FallMonitor`) records falls.
+
+With ``disturbances`` (pushes, :mod:`~romoco_drake.interfaces.disturbance`), subsystem
+``disturbances`` feeds the plant's applied spatial force input; without, that input stays unconnected.
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import Adder, LogVectorOutput
 
+from romoco_drake.interfaces.disturbance import Disturbance, DisturbanceSource
 from romoco_drake.interfaces.monitor import FallMonitor
 from romoco_drake.interfaces.motors import MotorCommandAdapter
 from romoco_drake.interfaces.sensors import SensorConfig, add_sensors
@@ -46,6 +50,7 @@ from romoco_drake.robots.model import RobotModel
 def make_station(
     robot: RobotModel, time_step: float = 0.001, meshcat: Meshcat | None = None, motor_pd: bool = False,
     sensors: SensorConfig | None = None, truth_log_period: float = 0.01,
+    disturbances: list[Disturbance] | None = None,
 ) -> Diagram:
     """Builds the simulated station for ``robot`` (see the module docstring for ports)."""
     builder = DiagramBuilder()
@@ -69,6 +74,11 @@ def make_station(
     truth.set_name("truth_log")
     monitor = builder.AddNamedSystem("monitor", FallMonitor(robot))
     builder.Connect(plant.get_state_output_port(), monitor.state_input)
+    if disturbances:
+        pushes = builder.AddNamedSystem("disturbances",
+                                        DisturbanceSource(plant, robot, disturbances, meshcat))
+        builder.Connect(plant.get_body_poses_output_port(), pushes.body_poses_port)
+        builder.Connect(pushes.forces_port, plant.get_applied_spatial_force_input_port())
     if meshcat is not None:
         MeshcatVisualizer.AddToBuilder(
             builder, scene_graph, meshcat,
