@@ -138,38 +138,45 @@ def _assert_truthful(summary: dict, height_offset: float) -> None:
         assert 0.0 <= summary["base_height_drift_m"] <= height_offset + 1.0
 
 
-@FUZZ
-@given(mutated(BASES))
-def test_mutated_scenario_is_one_line_or_a_truthful_run(tmp_path_factory, case):
+def _one_line_or_run(tmp_path_factory, case, run) -> dict | None:
+    """Writes the mutated file and runs ``run(path)`` under the wall limit: the summary, or None
+    after checking that a RomocoError was one line naming the file."""
     name, text = case
     path = tmp_path_factory.mktemp("fuzz") / f"{name}.yaml"
     path.write_bytes(text)
     with wall_limit(EXAMPLE_WALL_S):
         try:
-            scenario = load_scenario(str(path))
-            summary = run_scenario(scenario, duration=RUN_S)
+            summary = run(path, name)
         except RomocoError as e:
             _assert_one_line(e, path)
             event(f"rejected: {type(e).__name__}")
-            return
+            return None
     event("ran")
-    _assert_truthful(summary, scenario.initial_height_offset)
+    return summary
+
+
+@FUZZ
+@given(mutated(BASES))
+def test_mutated_scenario_is_one_line_or_a_truthful_run(tmp_path_factory, case):
+    loaded = {}
+
+    def run(path, name):
+        loaded["scenario"] = load_scenario(str(path))
+        return run_scenario(loaded["scenario"], duration=RUN_S)
+
+    summary = _one_line_or_run(tmp_path_factory, case, run)
+    if summary is not None:
+        _assert_truthful(summary, loaded["scenario"].initial_height_offset)
 
 
 @FUZZ
 @given(mutated(ROBOTS))
 def test_mutated_robot_is_one_line_or_a_truthful_run(tmp_path_factory, case):
-    name, text = case
-    path = tmp_path_factory.mktemp("fuzz") / f"{name}.yaml"
-    path.write_bytes(text)
-    with wall_limit(EXAMPLE_WALL_S):
-        try:
-            robot = RobotModel(load_robot_config_file(path), path)
-            with mock.patch("romoco_drake.scenario.load_robot", return_value=robot):
-                summary = run_scenario(load_scenario(f"{name}_stand"), duration=RUN_S)
-        except RomocoError as e:
-            _assert_one_line(e, path)
-            event(f"rejected: {type(e).__name__}")
-            return
-    event("ran")
-    _assert_truthful(summary, 0.0)
+    def run(path, name):
+        robot = RobotModel(load_robot_config_file(path), path)
+        with mock.patch("romoco_drake.scenario.load_robot", return_value=robot):
+            return run_scenario(load_scenario(f"{name}_stand"), duration=RUN_S)
+
+    summary = _one_line_or_run(tmp_path_factory, case, run)
+    if summary is not None:
+        _assert_truthful(summary, 0.0)

@@ -73,10 +73,8 @@ class SrbMpcProgram:
               foot_yaw: np.ndarray, contact: np.ndarray) -> MpcSolution:
         """As :meth:`romoco_drake.rom.srb_mpc.SrbMpc.solve`."""
         N = self.knots
-        x0, x_ref = np.asarray(x0, dtype=float), np.asarray(x_ref, dtype=float)
-        inertia, feet = np.asarray(inertia, dtype=float), np.asarray(feet, dtype=float)
-        foot_yaw, contact = np.asarray(foot_yaw, dtype=float), np.asarray(contact, dtype=bool)
-        bad = check_inputs(N, x0, x_ref, inertia, feet, foot_yaw, contact)
+        (x0, x_ref, inertia, feet, foot_yaw, contact), bad = check_inputs(N, x0, x_ref, inertia, feet,
+                                                                           foot_yaw, contact)
         if bad is not None:
             return self._failure(x0, bad)
         if np.any(np.abs(np.linalg.det(inertia)) < 1e-12):

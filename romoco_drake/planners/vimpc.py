@@ -221,15 +221,17 @@ class VimpcPlanner(LeafSystem):
         return np.concatenate([theta, kin.p_com, omega, kin.v_com]), R_WB, I_held
 
     def _footholds(self, kin: RobotKinematics, touchdown: np.ndarray, cmd: WalkCommand,
-                   feet_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                   feet_p: np.ndarray, sides: tuple[str, ...] = SIDES) -> tuple[np.ndarray, np.ndarray]:
         """Each foot's next landing point (2, 3) on the ground and yaw (2,), eqs. 14-15, about the
-        torso's heading (eq. 15) in every inertia mode, so the output's and the MPC's agree."""
+        torso's heading (eq. 15) in every inertia mode, so the output's and the MPC's agree. Only
+        the feet in ``sides`` are computed (the others stay zero)."""
         c = self.config
         yaw = float(rpy_from_rotations(kin.R_base)[2])
         p_com, v_com = kin.p_com, kin.v_com
         footholds, yaws = np.zeros((2, 3)), np.zeros(2)
         t_stance = gs.stance_duration(cmd.step_time, self.t_ds)
-        for i, side in enumerate(SIDES):
+        for side in sides:
+            i = SIDES.index(side)
             t_rem = float(touchdown[i]) if math.isfinite(touchdown[i]) else 0.0
             xy, yaws[i] = gs.raibert_foothold(p_com, v_com, np.array([cmd.vx, cmd.vy]), cmd.wz, yaw,
                                               side, t_rem, t_stance, cmd.com_height, cmd.step_width, c.k1,
@@ -252,9 +254,9 @@ class VimpcPlanner(LeafSystem):
         """The swing foot's foothold relative to the stance sole (its yaw frame), with ``mpc``."""
         feet_p = np.array([self.contact.sole_center(kin, s) for s in SIDES])
         touchdown = gs.touchdown_times(True, side, elapsed, cmd.step_time, self.t_ds)
-        footholds, yaws = self._footholds(kin, touchdown, cmd, feet_p)
         stance = SIDES.index(side)
         swing = 1 - stance
+        footholds, yaws = self._footholds(kin, touchdown, cmd, feet_p, (SIDES[swing],))
         R_st = self.contact.sole_rotation(kin, side)
         yaw_st = math.atan2(R_st[1, 0], R_st[0, 0])
         c, s = math.cos(yaw_st), math.sin(yaw_st)

@@ -149,9 +149,15 @@ def discrete_dynamics(mass: float, dt: float, x_ref: np.ndarray, inertia: np.nda
     return A, B, d
 
 
-def check_inputs(knots: int, x0: np.ndarray, x_ref: np.ndarray, inertia: np.ndarray, feet: np.ndarray,
-                 foot_yaw: np.ndarray, contact: np.ndarray) -> str | None:
-    """Raise ValueError on wrong shapes (a programming error); return a status if any value is not finite."""
+def check_inputs(knots: int, x0, x_ref, inertia, feet, foot_yaw, contact
+                 ) -> tuple[tuple[np.ndarray, ...], str | None]:
+    """The solve's inputs as arrays (float; ``contact`` bool), and a status if any value is not finite.
+
+    Raises ValueError on wrong shapes (a programming error)."""
+    x0, x_ref, inertia, feet, foot_yaw = (np.asarray(a, dtype=float)
+                                          for a in (x0, x_ref, inertia, feet, foot_yaw))
+    contact = np.asarray(contact, dtype=bool)
+    arrays = (x0, x_ref, inertia, feet, foot_yaw, contact)
     shapes = {"x0": (x0, (STATE_SIZE,)), "x_ref": (x_ref, (knots + 1, STATE_SIZE)),
               "inertia": (inertia, (knots, 3, 3)), "feet": (feet, (knots, 2, 3)),
               "foot_yaw": (foot_yaw, (knots, 2)), "contact": (contact, (knots, 2))}
@@ -160,9 +166,9 @@ def check_inputs(knots: int, x0: np.ndarray, x_ref: np.ndarray, inertia: np.ndar
             raise ValueError(f"{name} has shape {np.shape(value)}, expected {shape}")
     numeric = ("x0", "x_ref", "inertia", "feet", "foot_yaw")
     if np.isfinite(sum(shapes[name][0].sum() for name in numeric)):  # one test for the common case
-        return None
+        return arrays, None
     bad = [name for name in numeric if not np.all(np.isfinite(shapes[name][0]))]
-    return "non-finite input: " + ", ".join(bad)
+    return arrays, "non-finite input: " + ", ".join(bad)
 
 
 class SrbMpc:
@@ -222,10 +228,8 @@ class SrbMpc:
         ``contact`` (N, 2) bool: which feet are down at each knot.
         """
         N = self.knots
-        x0, x_ref = np.asarray(x0, dtype=float), np.asarray(x_ref, dtype=float)
-        inertia, feet = np.asarray(inertia, dtype=float), np.asarray(feet, dtype=float)
-        foot_yaw, contact = np.asarray(foot_yaw, dtype=float), np.asarray(contact, dtype=bool)
-        bad = check_inputs(N, x0, x_ref, inertia, feet, foot_yaw, contact)
+        (x0, x_ref, inertia, feet, foot_yaw, contact), bad = check_inputs(N, x0, x_ref, inertia, feet,
+                                                                           foot_yaw, contact)
         if bad is not None:
             return self._failure(np.full((N, STATE_SIZE), np.nan), x0, bad)
         integral = self._t_integral(x_ref)
