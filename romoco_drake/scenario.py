@@ -43,6 +43,7 @@ from romoco_drake.estimation.kalman_estimator import KalmanEstimator
 from romoco_drake.estimation.registry import ESTIMATORS
 from romoco_drake.estimation.rom_state import RomStateFromRobot
 from romoco_drake.interfaces.disturbance import Disturbance, body_names
+from romoco_drake.interfaces.dropout import Dropout
 from romoco_drake.interfaces.hardware import (
     PUBLISH_DELAY,
     LinkConfig,
@@ -165,6 +166,8 @@ class Scenario:
     link: LinkConfig = dataclasses.field(default_factory=LinkConfig)
     # Pushes on the simulated robot (interfaces/disturbance.py); none on hardware.
     disturbances: list[Disturbance] = dataclasses.field(default_factory=list)
+    # Lost LCM messages (interfaces/dropout.py); only with both link ends simulated (--via-lcm).
+    dropouts: list[Dropout] = dataclasses.field(default_factory=list)
     # Filled in by load_scenario, not read from YAML.
     name: str = ""
 
@@ -194,6 +197,8 @@ declare_ranges(VimpcConfig, rate_hz=Range(1.0, 1000.0, "Hz"), knots=Range(1, 30)
 # push), each torque component by 1 kN·m.
 declare_ranges(Disturbance, t=Range(0.0, MAX_DURATION_S, "s"), duration=positive(10.0, "s"),
                force=Range(-5000.0, 5000.0, "N", size=3), torque=Range(-1000.0, 1000.0, "N·m", size=3))
+# Dropout (interfaces/dropout.py): within the run's clock, up to 10 s (longer is a lost robot).
+declare_ranges(Dropout, t=Range(0.0, MAX_DURATION_S, "s"), duration=positive(10.0, "s"))
 
 
 def scenario_names() -> list[str]:
@@ -413,6 +418,9 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
     if link == "hardware" and scenario.disturbances:
         raise ConfigError(f"<scenario {scenario.name or scenario.robot}>", "disturbances",
                           "disturbances need a simulated plant (not the hardware link)")
+    if link != "via_lcm" and scenario.dropouts:
+        raise ConfigError(f"<scenario {scenario.name or scenario.robot}>", "dropouts",
+                          "dropouts lose LCM messages between a simulated robot and the controller: use --via-lcm")
     robot = load_robot(scenario.robot)
     builder = DiagramBuilder()
     motor_pd = uses_motor_command(scenario)
@@ -426,11 +434,12 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
     else:
         station = builder.AddNamedSystem(
             "station", make_hardware_station(robot, lcm, period, motor_pd, scenario.link, offset,
-                                             require_base_state=scenario.estimator.name == "ground_truth"))
+                                             require_base_state=scenario.estimator.name == "ground_truth",
+                                             dropouts=scenario.dropouts))
         if link == "via_lcm":
             robot_sim = builder.AddNamedSystem("robot", make_robot_sim(
                 robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link, motor_pd=motor_pd,
-                disturbances=scenario.disturbances))
+                disturbances=scenario.disturbances, dropouts=scenario.dropouts))
             plant_station = robot_sim.GetSubsystemByName("station")
     estimator = _add_estimator(builder, scenario, robot, station, link != "hardware", offset)
     kinematics = builder.AddNamedSystem("kinematics", RobotKinematicsSystem(robot))
@@ -516,6 +525,7 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     builder.Connect(kin, machine.kinematics_port)
     builder.Connect(limiter.command_port, machine.command_port)
     builder.Connect(station.GetOutputPort("foot_contact"), machine.foot_contact_port)
+    builder.Connect(station.GetOutputPort("link_stage"), machine.link_stage_port)
     builder.Connect(kin, rom_state.kinematics_port)
     builder.Connect(machine.gait_phase_port, rom_state.gait_phase_port)
     builder.Connect(machine.gait_phase_port, planner.gait_phase_port)

@@ -92,6 +92,7 @@ def _machine(robot):
     x = np.concatenate([robot.nominal.q, np.zeros(robot.nv)])
     machine.kinematics_port.FixValue(context, RobotKinematics(robot, x))
     machine.foot_contact_port.FixValue(context, [1.0, 1.0])
+    machine.link_stage_port.FixValue(context, [0.0])
     w = robot.config.walking
     return machine, context, x, w
 

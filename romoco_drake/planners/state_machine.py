@@ -16,6 +16,9 @@ from romoco_drake.robots.posture import base_fault
 from romoco_drake.rom.types import COMMAND_SIZE, GAIT_PHASE_SIZE, WalkCommand, other_side
 from romoco_drake.values import SharedValue
 
+# The station's LinkStage.STAND: measurements lost past the ride-through (interfaces import
+# planners, not the other way round, so the value is repeated here; a test checks it).
+BLIND_STAGE = 2
 # A command component below these counts as zero (m/s, m/s, rad/s).
 _ZERO_COMMAND = (1e-3, 1e-3, 1e-3)
 
@@ -58,6 +61,9 @@ class GaitStateMachine(LeafSystem):
       ``touchdown_height``). A sole that landed on its heel (H1's line-modelled feet land
       1-2 cm toe-up) gets up to ``settle_time`` in double support to roll flat; if it does not,
       the robot keeps stepping in place.
+    - walking → standing at once, and no new start, while the link to the robot is past its
+      ride-through (``link_stage`` ≥ STAND: the station holds the robot's posture blind); once
+      measurements resume the robot balances standing and walks on when the command asks.
     - any mode → damping (latched) on a non-finite state, the base below ``fall_height`` of its
       nominal height, or a base tilt above ``fall_tilt`` rad; counted in ``safe_mode_entries``.
 
@@ -66,6 +72,7 @@ class GaitStateMachine(LeafSystem):
     | ``kinematics`` | in | abstract | :class:`~romoco_drake.robots.kinematics.RobotKinematics` of the state |
     | ``command`` | in | 6 | :class:`WalkCommand` vector |
     | ``foot_contact`` | in | 2 | contact switches [left, right], 1.0 in contact |
+    | ``link_stage`` | in | 1 | the station's :class:`~romoco_drake.interfaces.hardware.LinkStage` (0: fresh) |
     | ``mode`` | out | abstract | :class:`~romoco_drake.modes.Mode` |
     | ``gait_phase`` | out | 2 | stance (+1 left, −1 right), time in step [s] |
     | ``schedule`` | out | abstract | :class:`GaitSchedule` |
@@ -84,6 +91,7 @@ class GaitStateMachine(LeafSystem):
         self.kinematics_port = self.DeclareAbstractInputPort("kinematics", kinematics_model_value(robot))
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
         self.foot_contact_port = self.DeclareVectorInputPort("foot_contact", 2)
+        self.link_stage_port = self.DeclareVectorInputPort("link_stage", 1)
         initial = GaitSchedule(Mode.STANDING, "left", 0.0, robot.config.walking.t_ss, 0, 0, 0, "")
         self._schedule = self.DeclareAbstractState(AbstractValue.Make(initial))
         self.mode_port = self.DeclareAbstractOutputPort(
@@ -108,8 +116,9 @@ class GaitStateMachine(LeafSystem):
         out.SetFromVector([1.0 if s.side == "left" else -1.0, tau])
 
     def next_schedule(self, s: GaitSchedule, t: float, kin: RobotKinematics, cmd: WalkCommand,
-                      contact: np.ndarray) -> GaitSchedule:
-        """One tick of the state machine at time t (the periodic update calls this)."""
+                      contact: np.ndarray, blind: bool = False) -> GaitSchedule:
+        """One tick of the state machine at time t (the periodic update calls this); ``blind``:
+        the link is past its ride-through (class docstring)."""
         if cmd.problem() is not None:
             cmd = WalkCommand(step_width=cmd.step_width, com_height=cmd.com_height, step_time=s.t_ss)
         if s.mode != Mode.DAMPING:
@@ -123,6 +132,8 @@ class GaitStateMachine(LeafSystem):
                 s = replace(s, air_since=math.nan)
         elif math.isnan(s.air_since):
             s = replace(s, air_since=t)
+        if blind:
+            return replace(s, mode=Mode.STANDING, idle_steps=0) if s.mode == Mode.WALKING else s
         if s.mode == Mode.STANDING and t - s.air_since >= self.lift_time - 1e-9:
             s = replace(s, mode=Mode.IN_AIR)
         elif s.mode == Mode.IN_AIR and on.all():
@@ -145,7 +156,8 @@ class GaitStateMachine(LeafSystem):
     def _update(self, context, state) -> None:
         s = self.next_schedule(self.schedule(context), context.get_time(), self.kinematics_port.Eval(context),
                                WalkCommand.from_vector(self.command_port.Eval(context)),
-                               self.foot_contact_port.Eval(context))
+                               self.foot_contact_port.Eval(context),
+                               self.link_stage_port.Eval(context)[0] >= BLIND_STAGE)
         state.get_mutable_abstract_state(int(self._schedule)).set_value(s)
 
     def _feet_down(self, kin: RobotKinematics) -> bool:
