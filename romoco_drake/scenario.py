@@ -43,7 +43,7 @@ from romoco_drake.estimation.kalman_estimator import KalmanEstimator
 from romoco_drake.estimation.registry import ESTIMATORS
 from romoco_drake.estimation.rom_state import RomStateFromRobot
 from romoco_drake.interfaces.disturbance import Disturbance, body_names
-from romoco_drake.interfaces.dropout import Dropout
+from romoco_drake.interfaces.dropout import STREAM_CHANNELS, Dropout
 from romoco_drake.interfaces.hardware import (
     PUBLISH_DELAY,
     LinkConfig,
@@ -257,6 +257,10 @@ def validate_scenario(scenario: Scenario, source: str | Path | None = None) -> N
     if times != sorted(times):
         raise ConfigError(where, "command", f"times must increase, got {times}")
     _check_disturbances(scenario, where)
+    for i, dropout in enumerate(scenario.dropouts):
+        if dropout.stream not in STREAM_CHANNELS:
+            raise ConfigError(where, f"dropouts[{i}].stream",
+                              f"'{dropout.stream}' is not one of: {', '.join(STREAM_CHANNELS)}")
 
 
 def _check_disturbances(scenario: Scenario, where: str | Path) -> None:
@@ -356,11 +360,30 @@ def parse_push(text: str) -> Disturbance:
     return push
 
 
+def parse_dropout(text: str) -> Dropout:
+    """``"t:duration[:stream]"`` → a link dropout (the --dropout flag; stream: proprioception,
+    commands or all)."""
+    try:
+        t, duration, *rest = text.strip().split(":")
+        if len(rest) > 1:
+            raise ValueError
+        dropout = Dropout(float(t), float(duration), *rest)
+    except ValueError:
+        raise RomocoError(f"--dropout: '{text}' is not t:duration[:stream] (e.g. '3:0.3:proprioception')") from None
+    if dropout.stream not in STREAM_CHANNELS:
+        raise RomocoError(f"--dropout: '{text}': stream must be one of: {', '.join(STREAM_CHANNELS)}")
+    for key in ("t", "duration"):
+        allowed = RANGES[Dropout][key]
+        if not allowed.contains(getattr(dropout, key)):
+            raise RomocoError(f"--dropout: '{text}': {key} must be {allowed.describe()}")
+    return dropout
+
+
 def with_overrides(scenario: Scenario, planner: str | None = None, controller: str | None = None,
                    command: str | None = None, estimator: str | None = None, solver: str | None = None,
-                   pushes: list[str] | None = None) -> Scenario:
+                   pushes: list[str] | None = None, dropouts: list[str] | None = None) -> Scenario:
     """``scenario`` with the CLI's --planner/--controller/--command/--estimator/--solver applied
-    (names checked) and each --push appended to its disturbances."""
+    (names checked), each --push appended to its disturbances and each --dropout to its dropouts."""
     if solver is not None:
         if solver not in QP_SOLVERS:
             raise RomocoError(f"unknown QP solver '{solver}' (known: {', '.join(QP_SOLVERS)})")
@@ -382,6 +405,9 @@ def with_overrides(scenario: Scenario, planner: str | None = None, controller: s
     if pushes:
         added = [parse_push(text) for text in pushes]
         scenario = dataclasses.replace(scenario, disturbances=[*scenario.disturbances, *added])
+    if dropouts:
+        lost = [parse_dropout(text) for text in dropouts]
+        scenario = dataclasses.replace(scenario, dropouts=[*scenario.dropouts, *lost])
     return scenario
 
 

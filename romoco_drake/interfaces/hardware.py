@@ -72,7 +72,8 @@ from romoco_drake.interfaces.lcm_codec import (
 from romoco_drake.modes import Mode
 from romoco_drake.robots.model import RobotModel
 
-LINK_COUNTERS = ("stale_events", "rejected_messages", "clamped_commands", "estop")
+LINK_COUNTERS = ("stale_events", "ride_through_events", "stand_events", "damping_events", "rejected_messages",
+                 "clamped_commands", "estop")
 # Messages leave this long after the step or tick they report: a publish event at the step's
 # own instant sees the state from before that step's updates (the previous step's values).
 PUBLISH_DELAY = 2e-5  # s, less than any plant step

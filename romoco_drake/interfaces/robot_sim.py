@@ -68,10 +68,15 @@ class CommandReceiver(LeafSystem):
     | stats         | out | 5        | rejected messages, stale events, E-stop engagements, holds, dampings |
     """
 
-    def __init__(self, robot: RobotModel, config: LinkConfig):
+    def __init__(self, robot: RobotModel, config: LinkConfig, time_step: float = 0.001):
+        """``time_step``: the plant's, over which a torque drive's output is held."""
         super().__init__()
-        self.robot, self.config = robot, config
+        self.robot, self.config, self.time_step = robot, config, time_step
         nu = robot.nu
+        plant = robot.plant
+        nominal = plant.CreateDefaultContext()
+        plant.SetPositions(nominal, robot.nominal.q)
+        self._inertia = np.diag(plant.CalcMassMatrix(nominal))[robot.actuated_v_index]
         self._joint_of_actuator = np.array(
             [robot.joint_names.index(name) for name in robot.actuator_names], dtype=int)
 
@@ -92,13 +97,22 @@ class CommandReceiver(LeafSystem):
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.receive_rate_hz, 0.0, self._update)
 
     def _torque(self, context, out) -> None:
-        """The motor command as a drive's torque at the measured joints, within the effort limits."""
+        """The motor command as a drive's torque at the measured joints, within the effort limits.
+
+        A drive closes its PD loop far faster than the plant step, over which this torque is held.
+        Held as computed from the step's start, the YAML gains of light joints (G1's wrists:
+        K_d h / I ≈ 10 at h = 2 ms) diverge, which the drive's own loop never does. So the PD is
+        the stable (implicit) one of Tan, Liu and Turk (2011) for each joint's own inertia I
+        (the mass matrix diagonal at the nominal pose): the torque that, applied over the step,
+        meets the PD law at its end, τ = [K_p (q_d − q − h v) + K_d (v_d − v)] / (1 + K_d h / I).
+        """
         r = self.robot
         q_d, v_d, tau_ff, kp, kd = self.motor_command_port.Eval(context).reshape(5, r.nu)
         js = self.joint_state_port.Eval(context)
         nj = len(r.joint_names)
         q, v = js[self._joint_of_actuator], js[nj + self._joint_of_actuator]
-        tau = kp * (q_d - q) + kd * (v_d - v) + tau_ff
+        h = self.time_step
+        tau = (kp * (q_d - q - h * v) + kd * (v_d - v)) / (1.0 + kd * h / self._inertia) + tau_ff
         out.SetFromVector(np.clip(tau, -r.effort_limits, r.effort_limits))
 
     def _motor_command(self, context, out) -> None:
@@ -215,7 +229,7 @@ def make_robot_sim(robot: RobotModel, lcm: DrakeLcmInterface, time_step: float =
     builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
     station = builder.AddNamedSystem("station", make_station(
         robot, time_step, meshcat, motor_pd, sensors, disturbances=disturbances))
-    receiver = builder.AddNamedSystem("receiver", CommandReceiver(robot, config))
+    receiver = builder.AddNamedSystem("receiver", CommandReceiver(robot, config, time_step))
     sender = builder.AddNamedSystem("sender", MeasurementSender(robot))
     subscribe(builder, lcm, MOTOR_COMMAND_CHANNEL, receiver.GetInputPort("command"), wait_for_commands_s)
     subscribe(builder, lcm, ESTOP_CHANNEL, receiver.estop_port)

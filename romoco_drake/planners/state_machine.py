@@ -36,6 +36,8 @@ class GaitSchedule(SharedValue):
     safe_mode_entries: int
     fall_reason: str
     air_since: float = math.nan  # since when neither foot switch has reported contact (s)
+    recovering: bool = False  # a blind link paused walking: step to a stop
+    paused: bool = False  # the step clock is stopped while the link is blind
 
 
 def is_zero(cmd: WalkCommand) -> bool:
@@ -61,9 +63,11 @@ class GaitStateMachine(LeafSystem):
       ``touchdown_height``). A sole that landed on its heel (H1's line-modelled feet land
       1-2 cm toe-up) gets up to ``settle_time`` in double support to roll flat; if it does not,
       the robot keeps stepping in place.
-    - walking → standing at once, and no new start, while the link to the robot is past its
-      ride-through (``link_stage`` ≥ STAND: the station holds the robot's posture blind); once
-      measurements resume the robot balances standing and walks on when the command asks.
+    - while the link to the robot is past its ride-through (``link_stage`` ≥ STAND: the station
+      holds the robot's predicted posture blind) the step clock stops with it and nothing
+      starts. When measurements resume the step goes on from where it stopped, or, if the
+      held swing foot came down meanwhile, the support switches at once; then the robot steps
+      to a stop as under a zero command, and walks on from standing when the command asks.
     - any mode → damping (latched) on a non-finite state, the base below ``fall_height`` of its
       nominal height, or a base tilt above ``fall_tilt`` rad; counted in ``safe_mode_entries``.
 
@@ -83,7 +87,7 @@ class GaitStateMachine(LeafSystem):
                  touchdown_height: float = 0.01, settle_time: float = 0.2, lift_time: float = 0.01,
                  offset: float = 0.0):
         super().__init__()
-        self.robot, self.t_ds = robot, t_ds
+        self.robot, self.t_ds, self.period = robot, t_ds, period
         self.balance_speed, self.stop_steps = balance_speed, stop_steps
         self.touchdown_height, self.settle_time, self.lift_time = touchdown_height, settle_time, lift_time
         self._min_base_z = fall_height * robot.nominal.base_height
@@ -133,7 +137,17 @@ class GaitStateMachine(LeafSystem):
         elif math.isnan(s.air_since):
             s = replace(s, air_since=t)
         if blind:
-            return replace(s, mode=Mode.STANDING, idle_steps=0) if s.mode == Mode.WALKING else s
+            if s.mode == Mode.WALKING:  # the step clock stops with the robot's posture
+                s = replace(s, step_start=s.step_start + self.period, idle_steps=0, recovering=True, paused=True)
+            return s
+        if s.recovering:
+            cmd = WalkCommand(step_width=cmd.step_width, com_height=cmd.com_height, step_time=cmd.step_time)
+        if s.paused:
+            s = replace(s, paused=False)
+            if s.mode == Mode.WALKING and (on[1] if s.side == "left" else on[0]):
+                # The held swing foot came down while the robot was blind: that was its touchdown.
+                return replace(s, side=other_side(s.side), step_start=t, t_ss=cmd.step_time,
+                               steps=s.steps + 1, idle_steps=s.idle_steps + 1)
         if s.mode == Mode.STANDING and t - s.air_since >= self.lift_time - 1e-9:
             s = replace(s, mode=Mode.IN_AIR)
         elif s.mode == Mode.IN_AIR and on.all():
@@ -147,7 +161,7 @@ class GaitStateMachine(LeafSystem):
             # A stop holds the step in double support for up to settle_time while a sole rolls flat.
             settling = stopping and t - s.step_start < s.t_ss + self.t_ds + self.settle_time
             if stopping and self._feet_down(kin):
-                s = replace(s, mode=Mode.STANDING, idle_steps=0, steps=s.steps + 1)
+                s = replace(s, mode=Mode.STANDING, idle_steps=0, steps=s.steps + 1, recovering=False)
             elif not settling:
                 s = replace(s, side=other_side(s.side), step_start=t, t_ss=cmd.step_time, steps=s.steps + 1,
                             idle_steps=idle)
