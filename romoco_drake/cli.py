@@ -225,15 +225,24 @@ def _cmd_bench_matrix(args) -> int:
     planners = _names(args.planners, ("hlip", "mlip", "dcm"), "planner", PLANNERS)
     controllers = _names(args.controllers, ("tscqp",), "walking controller", walking_controllers)
     rows = bench_matrix(robots, planners, controllers, args.duration, progress=stderr_progress)
-    if args.json:
+
+    def line(r: dict) -> str:
+        fell = f"{r['fall_time_s']:.1f} s" if r["fell"] else "no"
+        return (f"{r['robot']:7s} {r['planner']:13s} {r['controller']:11s} {fell:6s} "
+                f"{r['velocity_rms_error']!s:26s} {r['realtime_factor']:8.2f}  {r['controller_tick_ms']['median']}")
+
+    return _print_rows(args.json, rows, "robot   planner       controller  fell   vel rms err (vx, vy, wz)   "
+                       "realtime  tick ms", line)
+
+
+def _print_rows(as_json: bool, rows: list[dict], header: str, line) -> int:
+    """A bench's rows: one JSON list, or ``header`` and ``line(row)`` for each row."""
+    if as_json:
         print(json.dumps(rows))
-    else:
-        print("robot   planner       controller  fell   vel rms err (vx, vy, wz)   realtime  tick ms")
-        for r in rows:
-            fell = f"{r['fall_time_s']:.1f} s" if r["fell"] else "no"
-            print(f"{r['robot']:7s} {r['planner']:13s} {r['controller']:11s} {fell:6s} "
-                  f"{r['velocity_rms_error']!s:26s} {r['realtime_factor']:8.2f}  "
-                  f"{r['controller_tick_ms']['median']}")
+        return 0
+    print(header)
+    for r in rows:
+        print(line(r))
     return 0
 
 
@@ -255,14 +264,31 @@ def _cmd_bench_agility(args) -> int:
     if not args.rate > 0.0:
         raise RomocoError(f"--rate must be positive, got {args.rate}")
     rows = bench_agility(args.robot, modes, motions, args.rate, args.top, progress=stderr_progress)
-    if args.json:
-        print(json.dumps(rows))
-        return 0
-    print("motion     inertia   tracked   paper (case 3 / cases 1-2)   ended")
-    for r in rows:
-        print(f"{r['motion']:10s} {r['inertia']:9s} {r['tracked']:7.2f}   "
-              f"{PAPER[r['motion']][0]:.1f} / {PAPER[r['motion']][1]:.1f}{'':18s} {r['ended']}")
-    return 0
+    return _print_rows(args.json, rows, "motion     inertia   tracked   paper (case 3 / cases 1-2)   ended",
+                       lambda r: f"{r['motion']:10s} {r['inertia']:9s} {r['tracked']:7.2f}   "
+                                 f"{PAPER[r['motion']][0]:.1f} / {PAPER[r['motion']][1]:.1f}{'':18s} {r['ended']}")
+
+
+def _cmd_bench_dropout(args) -> int:
+    from romoco_drake.bench.dropout import bench_dropout
+    from romoco_drake.interfaces.dropout import STREAM_CHANNELS
+    from romoco_drake.runner import stderr_progress
+
+    if args.stream not in STREAM_CHANNELS:
+        raise RomocoError(f"--stream must be one of: {', '.join(STREAM_CHANNELS)}")
+    try:
+        durations = [float(d) for d in args.durations.split(",")]
+    except ValueError:
+        raise RomocoError(f"--durations: '{args.durations}' is not a comma-separated list of seconds") from None
+    if not all(0.0 < d <= 10.0 for d in durations) or not 1 <= args.phases <= 20:
+        raise RomocoError("--durations must be in (0, 10] s and --phases in [1, 20]")
+    rows = bench_dropout(args.robot, durations, args.phases, args.stream, progress=stderr_progress)
+    return _print_rows(args.json, rows,
+                       "dropout  start   phase  fell  ride-through  stand  damping  robot holds  end vx (m/s)",
+                       lambda r: f"{r['duration_s']:5.2f} s {r['t']:6.3f}  {r['phase']:5.2f}  "
+                                 f"{'yes' if r['fell'] else 'no':4s}  {r['ride_through_events']:12d}  "
+                                 f"{r['stand_events']:5d}  {r['damping_events']:7d}  {r['robot_hold_events']:11d}  "
+                                 f"{r['end_vx']:6.3f}")
 
 
 def _cmd_bench_tick(args) -> int:
@@ -429,6 +455,14 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--top", type=float, default=None, help="ramp ceiling (default: 1.5x the paper's best)")
     p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
     p.set_defaults(func=_cmd_bench_agility)
+    p = bench.add_parser("dropout", help="walking at 0.4 m/s over LCM through link dropouts at several "
+                         "gait phases")
+    p.add_argument("--robot", default="g1")
+    p.add_argument("--durations", default="0.1,0.3", help="comma-separated dropout lengths (s)")
+    p.add_argument("--phases", type=int, default=4, help="start times spread over one step")
+    p.add_argument("--stream", default="proprioception", help="proprioception, commands or all")
+    p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
+    p.set_defaults(func=_cmd_bench_dropout)
     p = bench.add_parser("tick", help="per-component controller tick time on a running closed loop")
     p.add_argument("--scenario", default="g1_walk")
     p.add_argument("--planner")

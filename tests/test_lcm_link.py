@@ -209,6 +209,9 @@ def test_dropouts_need_the_simulated_robot_and_a_known_stream(capsys):
         assert main(["run", "g1_walk", "--via-lcm", "--dropout", bad]) == 2
         err = capsys.readouterr().err
         assert says in err and len(err.strip().splitlines()) == 1, err
+    for flags in (["--durations", "0.1,x"], ["--durations", "0"], ["--phases", "0"], ["--stream", "radio"]):
+        assert main(["bench", "dropout", *flags]) == 2
+        assert len(capsys.readouterr().err.strip().splitlines()) == 1
 
 
 # ---------------------------------------------------------------- controller side: faults

@@ -1,0 +1,63 @@
+"""``romoco bench dropout``: a robot walking at 0.4 m/s over LCM loses its link for a while.
+
+For each dropout length and each of ``phases`` start times spread over one step, the robot's
+walking scenario runs over an in-process LCM link (``--via-lcm``) with a forward command ramped to
+``SPEED`` and one dropout of the chosen stream. Each run reports whether the robot fell, the
+link's stage counters (ride-through, stand, damping; the robot side's holds), and how it ended:
+its mean forward speed over the last ``TAIL_S`` seconds, which is the command's when it walks on
+and about 0 when it stopped standing.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from romoco_drake.interfaces.dropout import Dropout
+from romoco_drake.metrics import heading_velocity
+from romoco_drake.robots.model import load_robot
+from romoco_drake.runner import log_samples, run_scenario
+from romoco_drake.scenario import CommandPoint, Scenario, load_scenario
+
+SPEED = 0.4  # m/s, the walking speed the dropout hits
+START_S = 4.0  # the first dropout starts here, 2 s into the cruise
+AFTER_S = 3.0  # simulated after the dropout ends
+TAIL_S = 1.0  # the end speed is averaged over the run's last second
+
+
+def dropout_scenario(robot: str, t: float, duration: float, stream: str) -> Scenario:
+    """``{robot}_walk`` ramped to SPEED forward (0.2 m/s from 1 s, SPEED from 2 s), with one dropout."""
+    scenario = load_scenario(f"{robot}_walk")
+    return dataclasses.replace(
+        scenario, duration_s=t + duration + AFTER_S,
+        command=[CommandPoint(1.0, 0.5 * SPEED), CommandPoint(2.0, SPEED)],
+        dropouts=[Dropout(t, duration, stream)])
+
+
+def bench_dropout(robot: str = "g1", durations=(0.1, 0.3), phases: int = 4, stream: str = "proprioception",
+                  progress=None) -> list[dict]:
+    """One row per (dropout length, start time); see the module docstring."""
+    walking = load_robot(robot).config.walking
+    step = walking.t_ss + walking.t_ds
+    rows = []
+    for duration in durations:
+        for k in range(phases):
+            t = START_S + k * step / phases
+            if progress is not None:
+                progress(f"[bench dropout] {robot}: {duration:g} s of {stream} from t = {t:.3f} s")
+            tail = {}
+
+            def end_speed(built, context, tail=tail):
+                times, states = log_samples(built.state_log.FindLog(context), None)
+                last = times >= times[-1] - TAIL_S
+                tail["vx"] = float(np.mean(heading_velocity(built.robot, times[last], states[:, last])[:, 0]))
+
+            s = run_scenario(dropout_scenario(robot, t, duration, stream), link="via_lcm", inspect=end_speed)
+            rows.append({
+                "robot": robot, "stream": stream, "duration_s": duration, "t": round(t, 4),
+                "phase": round(k / phases, 3), "fell": s["fell"], "fall_reason": s["fall_reason"],
+                "ride_through_events": s["ride_through_events"], "stand_events": s["stand_events"],
+                "damping_events": s["damping_events"], "robot_hold_events": s["robot_link"]["hold_events"],
+                "end_vx": round(tail["vx"], 3), "steps": s.get("steps")})
+    return rows
