@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from romoco_drake.embedding.references import FREEZE_FRACTION
 from romoco_drake.embedding.system import OutputEmbedding
 from romoco_drake.modes import Mode
 from romoco_drake.robots.kinematics import RobotKinematics
@@ -117,13 +116,15 @@ def test_replanning_keeps_the_swing_reference_continuous():
     assert final[0] == pytest.approx(new_plan.swing_target[0], abs=1e-9)
 
 
-def test_target_freezes_late_in_the_swing():
-    _, system, context, simulator, plan, _, _ = _setup("g1", tau=0.0)
+# G1 keeps the default freeze (0.85 of single support); DRACO's walking config holds it at 0.5.
+@pytest.mark.parametrize("name,move_at", [("g1", 0.85), ("draco", 0.55)])
+def test_target_freezes_late_in_the_swing(name, move_at):
+    _, system, context, simulator, plan, _, _ = _setup(name, tau=0.0)
     moved = PlannerOutput(**{**plan.__dict__, "swing_target": plan.swing_target + [0.2, 0.0, 0.0]})
     t, before = 0.0, None
     while t < 0.95 * plan.t_ss:
         t += PERIOD
-        if t > FREEZE_FRACTION * plan.t_ss + PERIOD:
+        if t > move_at * plan.t_ss + PERIOD:
             before = before or system.swing_state(context).trajectory
             system.planner_output_port.FixValue(context, moved)
         system.gait_phase_port.FixValue(context, [1.0, t])

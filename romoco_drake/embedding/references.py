@@ -8,7 +8,8 @@ wraps it as a system. Desired values per mode:
   the planned yaw change and the swing hip yaw the other half (linear in the step), so at
   touchdown the feet differ by the planned yaw and the pelvis bisects them; pelvis and swing-sole
   tilt zero; the swing sole follows a Bezier trajectory from lift-off to the plan's target
-  (apex ``swing_height``, zero touchdown velocity), replanned each tick from its own state.
+  (apex ``swing_height``, zero touchdown velocity), replanned each tick from its own state until
+  ``swing_target_freeze`` of single support has passed.
   The horizontal CoM reference (``com_plan``, read by the momentum controller; the other
   controllers leave the horizontal CoM to the pendulum) is the ALIP flow about the stance
   contact frame {c} from the CoM and contact momentum latched at the step's first tick, at the
@@ -40,9 +41,6 @@ from romoco_drake.rom.lip import GRAVITY
 from romoco_drake.rom.types import MpcReference, PlannerOutput
 from romoco_drake.values import SharedValue
 
-# The swing target is frozen once this fraction of single support has passed: late target
-# moves would need large swing accelerations just before touchdown.
-FREEZE_FRACTION = 0.85
 STAND_SETTLE_S = 1.0
 # Each step moves the CoM height from its lift-off value to the plan's over this time (a
 # standing robot often carries its CoM higher than its walking height).
@@ -143,6 +141,7 @@ class EmbeddingCore:
         self.contact = contact or ContactModel(robot, line_contact=line,
                                                cop_margin=COP_MARGIN if robot.is_line_foot else 0.0)
         self.swing_height = robot.config.walking.swing_height
+        self.swing_freeze = robot.config.walking.swing_target_freeze
         self.nominal_com_height = float(robot.nominal.p_WCoM[2])
         self.nominal_joints = robot.nominal.q[robot.actuated_q_index]
         plant = robot.plant
@@ -175,7 +174,7 @@ class EmbeddingCore:
     def update_swing(self, swing: SwingState, tau: float, plan: PlannerOutput) -> SwingState:
         """Replans the swing toward the plan's latest target, from the trajectory's own state at
         ``tau`` seconds into the step."""
-        if swing.trajectory is None or tau >= FREEZE_FRACTION * plan.t_ss:
+        if swing.trajectory is None or tau >= self.swing_freeze * plan.t_ss:
             return swing
         trajectory = swing.trajectory.replan(tau, self._target(plan))
         return replace(swing, trajectory=trajectory)

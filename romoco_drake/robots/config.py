@@ -154,13 +154,17 @@ class WalkingConfig:
     step_width: float
     swing_height: float
     command_limits: CommandLimits = dataclasses.field(default_factory=CommandLimits)
+    # The fraction of single support after which the swing foot's target is no longer replanned
+    # (late target moves need large swing accelerations just before touchdown).
+    swing_target_freeze: float = 0.85
 
 
 # A single-support phase under 0.1 s leaves no time to swing a leg (and t_ss ≤ 0 never steps);
 # z0 is the LIP height, a walking height above the ground (z0 = 0 never steps either); a
 # zero swing height drags the foot.
 declare_ranges(WalkingConfig, t_ss=Range(0.1, 2.0, "s"), t_ds=Range(0.0, 1.0, "s"), z0=Range(0.1, 3.0, "m"),
-               step_width=Range(0.0, 1.0, "m"), swing_height=positive(0.5, "m"))
+               step_width=Range(0.0, 1.0, "m"), swing_height=positive(0.5, "m"),
+               swing_target_freeze=Range(0.0, 1.0))
 
 
 @dataclasses.dataclass
