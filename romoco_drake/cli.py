@@ -264,8 +264,9 @@ def _cmd_bench_agility(args) -> int:
     if not args.rate > 0.0:
         raise RomocoError(f"--rate must be positive, got {args.rate}")
     rows = bench_agility(args.robot, modes, motions, args.rate, args.top, progress=stderr_progress)
-    return _print_rows(args.json, rows, "motion     inertia   tracked   paper (case 3 / cases 1-2)   ended",
-                       lambda r: f"{r['motion']:10s} {r['inertia']:9s} {r['tracked']:7.2f}   "
+    return _print_rows(args.json, rows,
+                       "motion     inertia   tracked   settled   paper (case 3 / cases 1-2)   ended",
+                       lambda r: f"{r['motion']:10s} {r['inertia']:9s} {r['tracked']:7.2f}   {r['settled']:7.2f}   "
                                  f"{PAPER[r['motion']][0]:.1f} / {PAPER[r['motion']][1]:.1f}{'':18s} {r['ended']}")
 
 

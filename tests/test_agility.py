@@ -3,6 +3,7 @@
 import numpy as np
 
 from romoco_drake.bench.agility import GIVE_UP_S, MOTIONS, START_S, TOLERANCE, ramp, tracked_speed
+from romoco_drake.metrics import AVERAGE_WINDOW_S, moving_average
 
 
 def _run(direction, measured_of_speed, duration=12.0, rate=0.1, fall=None):
@@ -40,3 +41,17 @@ def test_a_short_excursion_is_forgiven_and_a_fall_ends_the_ramp():
     (score, reason), speed = _run(MOTIONS["turning"], measured, fall=9.0)
     assert reason == "fell"
     assert abs(score - 0.1 * (9.0 - START_S)) < 0.011
+
+
+def test_a_lurch_before_a_fall_counts_in_tracked_but_not_in_settled():
+    """Walking at 0.5 under a rising command, then lurching forward for 0.5 s before a fall at 8 s:
+    the trailing 1 s average is back within 20 % only in the last window before the fall."""
+    times = np.arange(0.0, 10.0, 0.01)
+    speed = np.clip(0.1 * (times - START_S), 0.0, None)
+    raw = np.where(times < 7.5, np.minimum(speed, 0.5), 1.4)
+    direction = MOTIONS["forward"]
+    measured = moving_average(times, raw[:, None] * np.array(direction), AVERAGE_WINDOW_S)
+    wanted = moving_average(times, speed[:, None] * np.array(direction), AVERAGE_WINDOW_S)
+    lurch, _ = tracked_speed(times, measured, wanted, direction, 8.0)
+    settled, _ = tracked_speed(times, measured, wanted, direction, 8.0 - AVERAGE_WINDOW_S)
+    assert lurch > 0.6 and settled < 0.6

@@ -76,7 +76,9 @@ class VimpcConfig:
     ``inertia``: the paper's cases 1-3 (module docstring). ``q``, ``r``, ``q_terminal``: the
     diagonal weights of eq. 18 on x = [Θ, p_c, ω, ṗ_c] and u = [τ_L, f_L, τ_R, f_R].
     ``k1``, ``k2``: eq. 14's velocity-feedback and centrifugal gains; ``max_step`` (m): the
-    foothold's largest offset from the hip; ``f_max`` (N): the normal force bound; ``max_age``
+    foothold's largest offset from the hip; ``hip_prediction``: the velocity the hip moves at
+    until touchdown in eq. 14, the measured CoM velocity or the command; ``f_max`` (N): the
+    normal force bound; ``max_age``
     (s): how long a reference outlives a failed solve.
     """
 
@@ -98,6 +100,7 @@ class VimpcConfig:
     k1: float = 0.1
     k2: float = 1.0
     max_step: float = 0.35
+    hip_prediction: Literal["command", "measured"] = "measured"
     f_max: float = 800.0
     max_age: float = 0.02
 
@@ -107,6 +110,8 @@ class VimpcPlanner(LeafSystem):
 
     def __init__(self, robot: RobotModel, contact: ContactModel, config: VimpcConfig, offset: float = 0.0):
         super().__init__()
+        if config.hip_prediction not in ("command", "measured"):
+            raise ValueError(f"vimpc.hip_prediction must be 'command' or 'measured', got {config.hip_prediction!r}")
         if config.inertia not in INERTIA_MODES:
             raise ValueError(f"vimpc.inertia must be one of {INERTIA_MODES}, got {config.inertia!r}")
         self.robot, self.contact, self.config = robot, contact, config
@@ -230,12 +235,16 @@ class VimpcPlanner(LeafSystem):
         p_com, v_com = kin.p_com, kin.v_com
         footholds, yaws = np.zeros((2, 3)), np.zeros(2)
         t_stance = gs.stance_duration(cmd.step_time, self.t_ds)
+        v_hip = None
+        if c.hip_prediction == "measured":
+            cy, sy = math.cos(yaw), math.sin(yaw)
+            v_hip = np.array([cy * v_com[0] + sy * v_com[1], -sy * v_com[0] + cy * v_com[1]])
         for side in sides:
             i = SIDES.index(side)
             t_rem = float(touchdown[i]) if math.isfinite(touchdown[i]) else 0.0
             xy, yaws[i] = gs.raibert_foothold(p_com, v_com, np.array([cmd.vx, cmd.vy]), cmd.wz, yaw,
                                               side, t_rem, t_stance, cmd.com_height, cmd.step_width, c.k1,
-                                              c.k2, c.max_step)
+                                              c.k2, c.max_step, v_body_hip=v_hip)
             footholds[i, :2], footholds[i, 2] = xy, feet_p[:, 2].min()
         return footholds, yaws
 

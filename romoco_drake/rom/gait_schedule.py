@@ -25,7 +25,13 @@ Fixes to the paper's formulas (each checked in ``tests/test_gait_schedule.py``):
   hip *at touchdown*. For the biped the landing foot stays down for T_DS + T_SS + T_DS, and in
   steady walking the CoM passes over it in the middle of its single support, T_DS + T_SS/2 after
   it lands: T_stance = T_SS + 2 T_DS (:func:`stance_duration`). The hip at touchdown is predicted
-  along the commanded arc, p_c + ∫₀^Δt_rem Rz(ψ + ω s) v_cmd ds, plus the ±w/2 lateral offset.
+  along the commanded arc, p_c + ∫₀^Δt_rem Rz(ψ + ω s) v ds, plus the ±w/2 lateral offset, with v
+  the commanded velocity or (``v_body_hip``) the measured one. With the command, a robot that
+  cannot keep up overreaches: at v_cmd − v = 0.3 m/s the foot lands 0.3 Δt_rem further ahead than
+  the hip will be (5 cm when the target freezes mid-swing on DRACO), more than k1 (v − v_cmd)
+  pulls it back, so every step brakes harder as the command rises. DRACO's forward ramp then
+  peaked at 0.63 m/s and walked backwards to a fall; with the measured velocity the speed error
+  acts only through the k1 term, which steps closer to speed up.
 - eq. 15's foot yaw ψ + ω Δt_rem/2 has the same flaw; the landing yaw is the torso's yaw in the
   middle of the foot's stance, ψ + ω (Δt_rem + T_stance/2), so the hip yaw swings symmetrically
   about zero while the foot is down. The lateral hip offset is rotated by that same yaw.
@@ -118,7 +124,8 @@ def touchdown_times(walking: bool, side: str, elapsed: float, t_ss: float, t_ds:
 
 def raibert_foothold(p_com: np.ndarray, v_com: np.ndarray, v_body_cmd: np.ndarray, yaw_rate_cmd: float,
                      yaw: float, side: str, t_rem: float, t_stance: float, height: float, step_width: float,
-                     k1: float, k2: float, max_step: float, g: float = GRAVITY) -> tuple[np.ndarray, float]:
+                     k1: float, k2: float, max_step: float, g: float = GRAVITY,
+                     v_body_hip: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Landing point (2,) in world [m] and yaw [rad] of the ``side`` foot (eqs. 14–15, fixed).
 
     p_f = p_hip(t_td) + (T_stance/2) ṗ_c + k1 (ṗ_c − ṗ_c^cmd) + k2 (h/g) ṗ_c × ω^cmd, with the hip at
@@ -129,12 +136,15 @@ def raibert_foothold(p_com: np.ndarray, v_com: np.ndarray, v_body_cmd: np.ndarra
     ``v_body_cmd``: commanded (vx, vy) in the heading frame; ``yaw``: torso (or WBO) yaw;
     ``t_rem``: time until this foot lands (:func:`touchdown_times`); ``t_stance``: how long it
     then stays down (:func:`stance_duration`); ``height``: CoM height; ``step_width``: lateral
-    distance between the hips' footholds, w (the foot lands w/2 to its side of the CoM path).
+    distance between the hips' footholds, w (the foot lands w/2 to its side of the CoM path);
+    ``v_body_hip``: the heading-frame velocity the hip is predicted to move at until touchdown
+    (default the command, ``v_body_cmd``).
     """
     _check_side(side)
+    v_body_hip = v_body_cmd if v_body_hip is None else v_body_hip
     foot_yaw = yaw + yaw_rate_cmd * (t_rem + 0.5 * t_stance)
     lateral = 0.5 * step_width if side == "left" else -0.5 * step_width
-    p_hip = (np.asarray(p_com, float)[:2] + heading_integral(yaw, yaw_rate_cmd, t_rem) @ v_body_cmd
+    p_hip = (np.asarray(p_com, float)[:2] + heading_integral(yaw, yaw_rate_cmd, t_rem) @ v_body_hip
              + _rot2(foot_yaw) @ np.array([0.0, lateral]))
     v = np.asarray(v_com, float)[:2]
     v_cmd = _rot2(yaw) @ np.asarray(v_body_cmd, float)
