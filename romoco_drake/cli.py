@@ -98,10 +98,14 @@ def _cmd_run(args) -> int:
     link = "via_lcm" if args.via_lcm else "hardware" if args.hardware else "sim"
     if args.lcm_url is not None and link == "sim":
         raise RomocoError("--lcm-url needs --via-lcm or --hardware")
+    if args.teleop and not args.meshcat:
+        raise RomocoError("--teleop needs --meshcat (the page is the command source)")
+    if args.teleop and args.command is not None:
+        raise RomocoError("--teleop and --command exclude each other (the page gives the command)")
     meshcat = _live_meshcat(args.meshcat)
     summary = run_scenario(scenario, duration=args.duration, meshcat=meshcat,
                            record=args.record, progress=stderr_progress, plot_dir=args.plot, link=link,
-                           lcm_url=args.lcm_url, lcm_log=args.lcm_log)
+                           lcm_url=args.lcm_url, lcm_log=args.lcm_log, teleop=args.teleop)
     if args.json:
         print(json.dumps(summary))
     else:
@@ -364,6 +368,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--record", type=Path, metavar="FILE.html", help="write an offline Meshcat replay")
     p.add_argument("--json", action="store_true", help="print the run summary as JSON (last line)")
     p.add_argument("--no-wait", action="store_true", help="with --meshcat, exit when the run ends")
+    p.add_argument("--teleop", action="store_true",
+                   help="with --meshcat: drive the robot from the page (sliders, buttons, gamepad) at real "
+                        "time until Ctrl-C or --duration")
     p.add_argument("--planner", help="override the scenario's planner (see romoco list)")
     p.add_argument("--controller", help="override the scenario's controller (see romoco list)")
     p.add_argument("--command", metavar="T:VX,VY,WZ;...",
