@@ -23,10 +23,10 @@ from romoco_drake.planners.command import CommandSource, segments_from_log
 from romoco_drake.planners.vimpc import VimpcPlanner
 from romoco_drake.robots.model import load_robot
 from romoco_drake.scenario import (
+    MAX_DURATION_S,
     Scenario,
     build_diagram,
     check_duration,
-    MAX_DURATION_S,
     initial_positions,
     uses_motor_command,
 )
@@ -136,8 +136,9 @@ def run_scenario(
             now = time.perf_counter()
             if progress is not None and now - last_print > PROGRESS_WALL_S:
                 if teleop:
-                    progress(f"[{scenario.name} teleop] t = {t:.1f} s, {(t - last_t) / (now - last_print):.2f}x "
-                             "real time (Ctrl-C ends the run)")
+                    rate = (t - last_t) / (now - last_print)
+                    progress(f"[{scenario.name} teleop] t = {t:.1f} s, {rate:.2f}x real time "
+                             "(Ctrl-C ends the run)")
                 else:
                     progress(f"[{scenario.name}] t = {t:.1f}/{duration:.1f} s ({100 * t / duration:.0f}%)")
                 last_print, last_t = now, t

@@ -616,4 +616,5 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
         builder.Connect(heading.command_port, recorder.command_port)
         builder.Connect(rom_state.rom_state_port, recorder.rom_state_port)
         momentum_log = LogVectorOutput(recorder.record_port, builder, period)
-    return WalkingLoop(machine, planner, embedding, controller, tick_log, error_log, limiter, momentum_log, gate)
+    return WalkingLoop(machine, planner, embedding, controller, tick_log, error_log, limiter, momentum_log,
+                       gate)

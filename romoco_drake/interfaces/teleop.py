@@ -72,7 +72,8 @@ class MeshcatRadio(LeafSystem):
 
     | port | kind | size | meaning |
     |---|---|---|---|
-    | ``command`` | out | 6 | :class:`~romoco_drake.rom.types.WalkCommand` vector: (vx, vy, wz) as set on the page, the robot's step width, CoM height and T_SS |
+    | ``command`` | out | 6 | :class:`~romoco_drake.rom.types.WalkCommand` vector: (vx, vy, wz) |
+    | | | | from the page, the robot's step width, CoM height and T_SS |
     | ``estop`` | out | abstract | ROMOCO_ESTOP bytes: released, engaged from the first E-stop on |
 
     The page is an input from outside the diagram, read every ``period`` in a discrete update
@@ -81,7 +82,8 @@ class MeshcatRadio(LeafSystem):
     Sliders span ± the robot's ``walking.command_limits``.
     """
 
-    def __init__(self, meshcat: Meshcat, robot: RobotModel, period: float = RADIO_PERIOD, offset: float = 0.0):
+    def __init__(self, meshcat: Meshcat, robot: RobotModel, period: float = RADIO_PERIOD,
+                 offset: float = 0.0):
         super().__init__()
         self.meshcat = meshcat
         w = robot.config.walking
@@ -174,8 +176,8 @@ class PageDisplay(LeafSystem):
     | ``command`` | in | 6 | the limited command the controller walks |
     | ``state`` | in | nq+nv | the controller's state estimate |
     | ``mode`` | in | abstract | :class:`~romoco_drake.modes.Mode` the controller acts on |
-    | ``planner_output`` | in | abstract | :class:`~romoco_drake.rom.types.PlannerOutput`: the planned foothold |
-    | ``kinematics`` | in | abstract | :class:`~romoco_drake.robots.kinematics.RobotKinematics` (stance frame) |
+    | ``planner_output`` | in | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` (foothold) |
+    | ``kinematics`` | in | abstract | :class:`~romoco_drake.robots.kinematics.RobotKinematics` |
 
     Every ``period``: a discrete update low-passes the measured heading-frame velocity (time
     constant ``MEASURED_TAU``), and a publish shows it beside the command as read-out sliders
@@ -195,7 +197,10 @@ class PageDisplay(LeafSystem):
                 meshcat.AddSlider(f"{kind} {name} ({UNITS[name]})", -2.0 * limit, 2.0 * limit, 0.01, 0.0)
         meshcat.AddButton(MODE_PREFIX + Mode.STANDING.value)
         meshcat.SetObject(FOOTHOLD, Cylinder(0.06, 0.005), Rgba(1.0, 0.5, 0.0, 0.8))
-        meshcat.SetObject(MODE_LAMP, Sphere(0.05), MODE_COLORS[Mode.STANDING])
+        # One lamp per mode: a replay animates an object's visibility, not its colour.
+        for mode, color in MODE_COLORS.items():
+            meshcat.SetObject(f"{MODE_LAMP}/{mode.value}", Sphere(0.05), color)
+            meshcat.SetProperty(f"{MODE_LAMP}/{mode.value}", "visible", mode == Mode.STANDING)
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
         self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
         self.mode_port = self.DeclareAbstractInputPort("mode", AbstractValue.Make(Mode.STANDING))
@@ -239,7 +244,8 @@ class PageDisplay(LeafSystem):
         m.SetTransform(SCENE, RigidTransform(-shift), t)
         m.SetTransform(GRID, RigidTransform(-np.fmod(shift, GRID_CELL)), t)
         m.SetTransform(MODE_LAMP, RigidTransform(p_base + [0.0, 0.0, 0.6]), t)
-        m.SetProperty(MODE_LAMP, "color", list(MODE_COLORS[mode].rgba), t)
+        for lamp in MODE_COLORS:
+            m.SetProperty(f"{MODE_LAMP}/{lamp.value}", "visible", lamp == mode, t)
         plan: PlannerOutput = self.planner_output_port.Eval(context)
         walking = mode == Mode.WALKING and plan.valid
         m.SetProperty(FOOTHOLD, "visible", walking, t)
