@@ -173,6 +173,7 @@ def test_teleop_page_drives_the_robot(browser, tmp_path):
         assert _mode_shown(browser) == "damping"  # latched
         assert _js_errors(browser) == []
     finally:
+        browser.get("about:blank")  # leave the page before its server goes away
         browser.execute_cdp_cmd("Page.removeScriptToEvaluateOnNewDocument",
                                 {"identifier": script["identifier"]})
         proc.send_signal(signal.SIGINT)
@@ -194,6 +195,7 @@ def test_replay_loads_and_keeps_the_robot_in_frame(browser, tmp_path):
     subprocess.run([sys.executable, "-m", "romoco_drake.cli", "run", "g1_walk", "--duration", "3",
                     "--command", "0:0.8,0,0", "--record", str(replay)], check=True, env=env,
                    stdout=subprocess.DEVNULL, cwd=tmp_path)
+    browser.get_log("browser")  # drop what earlier pages logged
     browser.get(replay.as_uri())
     _wait("the replay's scene", lambda: any(
         p.endswith("/pelvis") for p in _scene_paths(browser, ["drake", "robot"])))
