@@ -115,9 +115,8 @@ class MeshcatRadio(LeafSystem):
             sticks = stick_velocity(gamepad.axes, self.limits)
             for name, value in zip(VELOCITIES, sticks, strict=True):
                 self.meshcat.SetSliderValue(name, float(value))
-            pressed = gamepad.button_values[ESTOP_GAMEPAD_BUTTON] > 0.5 if len(
-                gamepad.button_values) > ESTOP_GAMEPAD_BUTTON else False
-            estop = estop or pressed
+            buttons = gamepad.button_values
+            estop = estop or (len(buttons) > ESTOP_GAMEPAD_BUTTON and buttons[ESTOP_GAMEPAD_BUTTON] > 0.5)
         s[_CMD] = [self.meshcat.GetSliderValue(name) for name in VELOCITIES]
         if stand or walk:
             s[_STAND] = float(stand and not walk)
