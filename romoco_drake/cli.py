@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import select
 import sys
 from pathlib import Path
 
@@ -50,6 +52,7 @@ def _robot_facts(robot) -> dict:
 
 def _cmd_show(args) -> int:
     from pydrake.geometry import Meshcat
+    from pydrake.multibody.meshcat import JointSliders
     from pydrake.systems.framework import DiagramBuilder
 
     from romoco_drake.interfaces.station import make_station
@@ -67,6 +70,7 @@ def _cmd_show(args) -> int:
     station.GetInputPort("actuation").FixValue(station.GetMyMutableContextFromRoot(context),
                                                [0.0] * robot.nu)
     diagram.ForcedPublish(context)
+    sliders = JointSliders(meshcat, plant, initial_value=robot.nominal.q)
     if args.json:
         print(json.dumps(facts | {"meshcat_url": meshcat.web_url()}))
     else:
@@ -78,15 +82,30 @@ def _cmd_show(args) -> int:
             print(f"  {side} {facts['foot_type']} foot ({robot.feet[side].body_name}): {pts}")
         print(f"  Meshcat: {meshcat.web_url()}")
     if not args.no_wait and sys.stdin.isatty():
-        try:
-            input("Press Enter to quit. ")
-        except (EOFError, KeyboardInterrupt):
-            pass
+        print("Move the page's joint sliders; press Enter to quit. ", end="", flush=True)
+        with contextlib.suppress(KeyboardInterrupt):
+            _follow_sliders(sliders, plant, diagram, context)
     return 0
 
 
-def _cmd_run(args) -> int:
+def _follow_sliders(sliders, plant, diagram, context, period: float = 0.05) -> None:
+    """Poses the robot as the page's joint sliders say until Enter is pressed."""
+    import numpy as np
 
+    sliders_context = sliders.CreateDefaultContext()
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+    shown = plant.GetPositions(plant_context).copy()
+    while not select.select([sys.stdin], [], [], period)[0]:
+        q = sliders.get_output_port().Eval(sliders_context)
+        if not np.array_equal(q, shown):
+            plant.SetPositions(plant_context, q)
+            diagram.ForcedPublish(context)
+            shown = q.copy()
+    sys.stdin.readline()
+
+
+def _cmd_run(args) -> int:
+    from romoco_drake.control.registry import CONTROLLERS
     from romoco_drake.interfaces.hardware import LINK_COUNTERS
     from romoco_drake.runner import run_scenario, stderr_progress
     from romoco_drake.scenario import load_scenario, with_overrides
@@ -98,10 +117,16 @@ def _cmd_run(args) -> int:
     link = "via_lcm" if args.via_lcm else "hardware" if args.hardware else "sim"
     if args.lcm_url is not None and link == "sim":
         raise RomocoError("--lcm-url needs --via-lcm or --hardware")
+    if args.teleop and not args.meshcat:
+        raise RomocoError("--teleop needs --meshcat (the page is the command source)")
+    if args.teleop and args.command is not None:
+        raise RomocoError("--teleop and --command exclude each other (the page gives the command)")
+    if args.teleop and not CONTROLLERS[scenario.controller.name].facts["walking"]:
+        raise RomocoError(f"--teleop needs a walking controller, not '{scenario.controller.name}'")
     meshcat = _live_meshcat(args.meshcat)
     summary = run_scenario(scenario, duration=args.duration, meshcat=meshcat,
                            record=args.record, progress=stderr_progress, plot_dir=args.plot, link=link,
-                           lcm_url=args.lcm_url, lcm_log=args.lcm_log)
+                           lcm_url=args.lcm_url, lcm_log=args.lcm_log, teleop=args.teleop)
     if args.json:
         print(json.dumps(summary))
     else:
@@ -391,6 +416,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--record", type=Path, metavar="FILE.html", help="write an offline Meshcat replay")
     p.add_argument("--json", action="store_true", help="print the run summary as JSON (last line)")
     p.add_argument("--no-wait", action="store_true", help="with --meshcat, exit when the run ends")
+    p.add_argument("--teleop", action="store_true",
+                   help="with --meshcat: drive the robot from the page (sliders, buttons, gamepad) at real "
+                        "time until Ctrl-C or --duration")
     p.add_argument("--planner", help="override the scenario's planner (see romoco list)")
     p.add_argument("--controller", help="override the scenario's controller (see romoco list)")
     p.add_argument("--command", metavar="T:VX,VY,WZ;...",

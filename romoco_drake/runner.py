@@ -19,9 +19,11 @@ from romoco_drake.interfaces.hardware import link_summary
 from romoco_drake.interfaces.lcm_log import LcmLogRecorder
 from romoco_drake.interfaces.robot_sim import make_robot_sim, robot_summary
 from romoco_drake.metrics import finite_or_none, momentum_summary, velocity_tracking
+from romoco_drake.planners.command import CommandSource, segments_from_log
 from romoco_drake.planners.vimpc import VimpcPlanner
 from romoco_drake.robots.model import load_robot
 from romoco_drake.scenario import (
+    MAX_DURATION_S,
     Scenario,
     build_diagram,
     check_duration,
@@ -65,6 +67,7 @@ def run_scenario(
     lcm_log: Path | None = None,
     stop_after_fall: float | None = None,
     inspect=None,
+    teleop: bool = False,
 ) -> dict:
     """Simulates ``scenario`` and returns the run summary (see ``romoco run --json``).
 
@@ -75,30 +78,34 @@ def run_scenario(
     planner, e.g. a custom one. ``link`` is ``"sim"``, ``"via_lcm"`` (robot and controller in
     this process over ``lcm_url``, default ``memq://``) or ``"hardware"`` (the controller only,
     at real time, against a robot on ``lcm_url``, default Drake's UDP multicast);
-    ``lcm_log`` records the LCM traffic of the run.
+    ``lcm_log`` records the LCM traffic of the run. ``teleop``: the ``meshcat`` page commands the
+    robot (:mod:`~romoco_drake.interfaces.teleop`); the run goes at real time (as far as the loop
+    keeps up) until ``duration`` if given, else until Ctrl-C, and the progress line shows the
+    achieved real-time rate.
     """
-    duration = scenario.duration_s if duration is None else duration
+    if duration is None:
+        duration = MAX_DURATION_S if teleop else scenario.duration_s
     check_duration(duration)
     if lcm_log is not None and link == "sim":
         raise RomocoError("--lcm-log records LCM traffic: use it with --via-lcm or --hardware")
     if record is not None and meshcat is None:
         meshcat = Meshcat()
     lcm = make_lcm(lcm_url or ("memq://" if link == "via_lcm" else None)) if link != "sim" else None
-    built = build_diagram(scenario, meshcat, law, link, lcm)
+    built = build_diagram(scenario, meshcat, law, link, lcm, teleop)
     simulator = Simulator(built.diagram)
     context = simulator.get_mutable_context()
     if built.plant_station is not None:
         plant = built.plant_station.GetSubsystemByName("plant")
         q0 = initial_positions(built.robot, scenario)
         plant.SetPositions(plant.GetMyMutableContextFromRoot(context), q0)
-    if link == "hardware":
+    if link == "hardware" or teleop:
         simulator.set_target_realtime_rate(1.0)
     recorder = LcmLogRecorder(lcm, Path(lcm_log), clock=context.get_time) if lcm_log is not None else None
     if record is not None:
         meshcat.StartRecording(frames_per_second=30.0)
     wall0 = time.perf_counter()
     simulator.Initialize()
-    last_print = wall0
+    last_print, last_t = wall0, 0.0
     chunk = min(0.1, duration)
     t, diverged, stopped = 0.0, None, None
     # The log is closed however the run ends (Ctrl-C on --hardware included).
@@ -109,6 +116,11 @@ def run_scenario(
             t = min(duration, t + chunk)
             try:
                 simulator.AdvanceTo(t)
+            except KeyboardInterrupt:
+                if not teleop:
+                    raise
+                duration = t = context.get_time()  # Ctrl-C ends a teleop run; summarise it
+                break
             except Exception as e:
                 # A diverged simulation ends the run as a fall (the monitor may not have sampled
                 # it yet), without a traceback; anything else is a bug and goes up as it is.
@@ -123,8 +135,13 @@ def run_scenario(
                     break
             now = time.perf_counter()
             if progress is not None and now - last_print > PROGRESS_WALL_S:
-                progress(f"[{scenario.name}] t = {t:.1f}/{duration:.1f} s ({100 * t / duration:.0f}%)")
-                last_print = now
+                if teleop:
+                    rate = (t - last_t) / (now - last_print)
+                    progress(f"[{scenario.name} teleop] t = {t:.1f} s, {rate:.2f}x real time "
+                             "(Ctrl-C ends the run)")
+                else:
+                    progress(f"[{scenario.name}] t = {t:.1f}/{duration:.1f} s ({100 * t / duration:.0f}%)")
+                last_print, last_t = now, t
     wall = time.perf_counter() - wall0
     if record is not None:
         meshcat.StopRecording()
@@ -166,6 +183,8 @@ def run_scenario(
         summary["lcm_log"] = {"path": str(recorder.path), "events": recorder.count}
     if built.walking is not None:
         summary.update(_walking_summary(built, context, scenario, plot_dir, until))
+    if teleop:
+        summary["teleop_estop"] = built.command.estop_pressed(built.command.GetMyContextFromRoot(context))
     if record is not None:
         summary["record"] = str(record)
     return summary
@@ -274,7 +293,10 @@ def stderr_progress(message: str) -> None:
 
 def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, until: float | None) -> dict:
     times, states = log_samples(built.state_log.FindLog(context), until)
-    tracking = velocity_tracking(built.robot, built.command, times, states)
+    command = built.command
+    if built.command_log is not None:  # teleop: score against the commands the page gave
+        command = CommandSource(segments_from_log(*log_samples(built.command_log.FindLog(context), until)))
+    tracking = velocity_tracking(built.robot, command, times, states)
     ticks = built.walking.tick_log.FindLog(context).data()[0, 1:]  # the first sample precedes any tick
     loop = built.walking
     schedule = loop.state_machine.schedule(loop.state_machine.GetMyContextFromRoot(context))
@@ -291,7 +313,7 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, 
         "velocity_rms_error": finite_or_none(tracking["velocity_rms_error"]),
         "mean_velocity": finite_or_none(tracking["mean_velocity"]),
         "steps": schedule.steps,
-        "command_clipped_segments": sum(loop.limiter.clipped(seg.command) for seg in built.command.segments),
+        "command_clipped_segments": sum(loop.limiter.clipped(seg.command) for seg in command.segments),
         "qp_failures": int(failures),
         "relaxed_ticks": int(relaxed),
         "safe_mode_entries": schedule.safe_mode_entries,

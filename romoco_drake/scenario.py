@@ -51,11 +51,12 @@ from romoco_drake.interfaces.hardware import (
     make_hardware_station,
     publish,
 )
-from romoco_drake.interfaces.lcm_codec import STATUS_CHANNEL
+from romoco_drake.interfaces.lcm_codec import ESTOP_CHANNEL, STATUS_CHANNEL
 from romoco_drake.interfaces.monitor import FallMonitor
 from romoco_drake.interfaces.robot_sim import make_robot_sim
 from romoco_drake.interfaces.sensors import SensorConfig
 from romoco_drake.interfaces.station import make_station
+from romoco_drake.interfaces.teleop import RADIO_PERIOD, EstopGate, MeshcatRadio, PageDisplay
 from romoco_drake.planners.command import CommandLimiter, CommandSegment, CommandSource
 from romoco_drake.planners.foot_placement import FootPlacementPlanner
 from romoco_drake.planners.heading import HeadingHold
@@ -301,11 +302,12 @@ class BuiltDiagram:
     monitor: FallMonitor
     state_log: VectorLogSink
     estimate_log: VectorLogSink
-    command: CommandSource | None = None
+    command: CommandSource | MeshcatRadio | None = None
     walking: WalkingLoop | None = None
     plant_station: Diagram | None = None  # the simulated station holding the plant, if any
     robot_sim: Diagram | None = None  # the LCM robot side (via_lcm)
     estimator: KalmanEstimator | GroundTruthEstimator | None = None
+    command_log: VectorLogSink | None = None  # the radio's command (teleop), for the summary
 
 
 @dataclass
@@ -320,6 +322,7 @@ class WalkingLoop:
     error_log: VectorLogSink  # embedding tracking errors per group
     limiter: CommandLimiter
     momentum_log: VectorLogSink | None = None  # MomentumLog records, for controllers that regulate momentum
+    estop_gate: EstopGate | None = None  # the controller's mode, damping after a page E-stop (teleop)
 
 
 def parse_command(text: str) -> list[CommandPoint]:
@@ -429,10 +432,13 @@ def initial_positions(robot: RobotModel, scenario: Scenario) -> np.ndarray:
 
 def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
                   law: FootPlacementLaw | None = None, link: str = "sim",
-                  lcm: DrakeLcmInterface | None = None) -> BuiltDiagram:
+                  lcm: DrakeLcmInterface | None = None, teleop: bool = False) -> BuiltDiagram:
     """Wires the closed loop of ``scenario``; ``law`` replaces the scenario's planner law.
 
     ``link`` (module docstring) picks the station; ``"hardware"`` and ``"via_lcm"`` need ``lcm``.
+    ``teleop``: the ``meshcat`` page is the command source (:mod:`~romoco_drake.interfaces.teleop`)
+    and its E-stop latches the controller's damping (on LCM links it is also published as
+    ROMOCO_ESTOP). With ``meshcat``, a walking loop shows what it does on the page.
     The estimate feeds one :class:`~romoco_drake.robots.kinematics.RobotKinematicsSystem`
     (``kinematics``), the controller-plant evaluation every controller system of the tick shares.
     """
@@ -447,6 +453,10 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
     if link != "via_lcm" and scenario.dropouts:
         raise ConfigError(f"<scenario {scenario.name or scenario.robot}>", "dropouts",
                           "dropouts lose LCM messages between a simulated robot and the controller: use --via-lcm")
+    if teleop and meshcat is None:
+        raise RomocoError("--teleop needs --meshcat (the page is the command source)")
+    if teleop and not CONTROLLERS[scenario.controller.name].facts["walking"]:
+        raise RomocoError(f"--teleop needs a walking controller, not '{scenario.controller.name}'")
     robot = load_robot(scenario.robot)
     builder = DiagramBuilder()
     motor_pd = uses_motor_command(scenario)
@@ -470,16 +480,24 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
     estimator = _add_estimator(builder, scenario, robot, station, link != "hardware", offset)
     kinematics = builder.AddNamedSystem("kinematics", RobotKinematicsSystem(robot))
     builder.Connect(estimator.state_output, kinematics.state_port)
-    walking = command = None
+    walking = command = command_log = None
     entry = CONTROLLERS[scenario.controller.name]
     if not entry.facts["walking"]:
         controller = builder.AddNamedSystem("controller", entry.factory(robot, period, offset))
         builder.Connect(kinematics.kinematics_port, controller.kinematics_port)
         builder.Connect(controller.actuation_output, station.GetInputPort("actuation"))
     else:
-        command = builder.AddNamedSystem("command", CommandSource(command_segments(scenario, robot)))
+        if teleop:
+            command = builder.AddNamedSystem("command", MeshcatRadio(meshcat, robot, offset=offset))
+            command_log = LogVectorOutput(command.command_port, builder, STATE_LOG_PERIOD)
+            if link != "sim":
+                publish(builder, lcm, ESTOP_CHANNEL, command.estop_port, RADIO_PERIOD, offset + PUBLISH_DELAY)
+        else:
+            command = builder.AddNamedSystem("command", CommandSource(command_segments(scenario, robot)))
         walking = _add_walking_loop(builder, scenario, robot, estimator.state_output, kinematics, command,
-                                    station, period, offset, law)
+                                    station, period, offset, law, command.estop_port if teleop else None)
+        if meshcat is not None:
+            _add_page_display(builder, meshcat, robot, walking, estimator.state_output, kinematics, offset)
         if link != "sim":
             status = builder.AddNamedSystem("status", StatusSender(
                 robot, command.command_port.size(), walking.embedding.tracking_error_port.size()))
@@ -499,7 +517,19 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
     diagram = builder.Build()
     diagram.set_name(scenario.name or scenario.robot)
     return BuiltDiagram(diagram, robot, station, monitor, state_log, estimate_log, command, walking,
-                        plant_station, robot_sim, estimator)
+                        plant_station, robot_sim, estimator, command_log)
+
+
+def _add_page_display(builder: DiagramBuilder, meshcat: Meshcat, robot: RobotModel, walking: WalkingLoop,
+                      state, kinematics: RobotKinematicsSystem, offset: float) -> None:
+    """Shows the walking loop's mode, command, measured velocity and foothold on the page."""
+    page = builder.AddNamedSystem("page", PageDisplay(meshcat, robot, offset=offset))
+    builder.Connect(walking.limiter.command_port, page.command_port)
+    builder.Connect(state, page.state_port)
+    mode = walking.estop_gate.mode_port if walking.estop_gate else walking.state_machine.mode_port
+    builder.Connect(mode, page.mode_port)
+    builder.Connect(walking.planner.planner_output_port, page.planner_output_port)
+    builder.Connect(kinematics.kinematics_port, page.kinematics_port)
 
 
 def _add_estimator(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, station,
@@ -518,9 +548,10 @@ def _add_estimator(builder: DiagramBuilder, scenario: Scenario, robot: RobotMode
 
 def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, state,
                       kinematics: RobotKinematicsSystem, command: CommandSource, station, period: float,
-                      offset: float, law: FootPlacementLaw | None) -> WalkingLoop:
+                      offset: float, law: FootPlacementLaw | None, estop=None) -> WalkingLoop:
     """Command limiter → state machine → planner → output embedding → whole-body controller, all
-    at ``period``; the last three and the ROM state read the shared ``kinematics``."""
+    at ``period``; the last three and the ROM state read the shared ``kinematics``. With ``estop``
+    (a port of ROMOCO_ESTOP bytes) the controller's mode passes an :class:`EstopGate`."""
     mpc = law is None and not PLANNERS[scenario.planner.name].facts["law"]
     if law is None and not mpc:
         cfg = scenario.planner
@@ -562,7 +593,12 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     builder.Connect(machine.mode_port, embedding.mode_port)
     builder.Connect(kin, controller.kinematics_port)
     builder.Connect(embedding.task_references_port, controller.task_references_port)
-    builder.Connect(machine.mode_port, controller.mode_port)
+    gate = None
+    if estop is not None:
+        gate = builder.AddNamedSystem("estop_gate", EstopGate(period, offset))
+        builder.Connect(machine.mode_port, gate.mode_in_port)
+        builder.Connect(estop, gate.estop_port)
+    builder.Connect(gate.mode_port if gate else machine.mode_port, controller.mode_port)
     if uses_motor_command(scenario):
         builder.Connect(controller.motor_command_port, station.GetInputPort("motor_command"))
         zero = builder.AddNamedSystem("no_extra_torque", ConstantVectorSource(np.zeros(robot.nu)))
@@ -580,4 +616,5 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
         builder.Connect(heading.command_port, recorder.command_port)
         builder.Connect(rom_state.rom_state_port, recorder.rom_state_port)
         momentum_log = LogVectorOutput(recorder.record_port, builder, period)
-    return WalkingLoop(machine, planner, embedding, controller, tick_log, error_log, limiter, momentum_log)
+    return WalkingLoop(machine, planner, embedding, controller, tick_log, error_log, limiter, momentum_log,
+                       gate)

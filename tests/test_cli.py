@@ -81,6 +81,9 @@ def test_run_text_summary():
         (["bench", "matrix", "--robots", "atlas"], "unknown robot 'atlas'"),
         (["bench", "rom", "--planner", "alip", "--gain", "lqr"], "supports gains"),
         (["bench", "rom", "--planner", "hlip", "--t-ds", "-0.1"], "t_ds must be non-negative"),
+        (["run", "g1_walk", "--teleop"], "--teleop needs --meshcat"),
+        (["run", "g1_walk", "--meshcat", "--teleop", "--command", "0:0.1,0,0"], "exclude each other"),
+        (["run", "g1_stand", "--meshcat", "--teleop"], "needs a walking controller"),
     ],
 )
 def test_bad_input_is_one_line_exit_2(args, words):

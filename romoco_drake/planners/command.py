@@ -48,6 +48,16 @@ class CommandSource(LeafSystem):
         out.SetFromVector(self.command_at(context.get_time()).to_vector())
 
 
+def segments_from_log(times: np.ndarray, data: np.ndarray) -> list[CommandSegment]:
+    """The piecewise-constant profile of logged command vectors (``data``: 6 × N): a segment at
+    the first sample and at each change, so a live run is scored as a scripted one."""
+    if len(times) == 0:
+        return [CommandSegment(0.0, WalkCommand())]
+    changed = np.flatnonzero(np.any(np.diff(data, axis=1) != 0.0, axis=0)) + 1
+    return [CommandSegment(0.0 if i == 0 else float(times[i]), WalkCommand.from_vector(data[:, i]))
+            for i in [0, *changed]]
+
+
 def limited_velocity(held: np.ndarray, target: np.ndarray, limits: CommandLimits, dt: float) -> np.ndarray:
     """The limited (vx, vy, wz) ``dt`` after ``held``: toward ``target`` clipped to the velocity
     limits, at most at the acceleration limits (``held`` is inside the velocity limits)."""
