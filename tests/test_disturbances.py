@@ -64,7 +64,7 @@ def test_world_and_heading_forces_only_inside_their_windows():
 def test_arrow_is_drawn_while_a_push_acts():
     meshcat = Meshcat()
     _, source, context = _source([Disturbance(t=0.5, force=[0.0, 80.0, 0.0])], meshcat=meshcat)
-    assert meshcat.HasPath("/disturbances/push_0/shaft")
+    assert meshcat.HasPath("/drake/disturbances/push_0/shaft")
     for t in (0.0, 0.55, 0.7):
         context.SetTime(t)
         source.ForcedPublish(context)

@@ -115,7 +115,8 @@ class DisturbanceSource(LeafSystem):
         out.set_value(forces)
 
     def _arrow_path(self, i: int) -> str:
-        return f"/disturbances/push_{i}"
+        """Under Drake's /drake tree, which the page display shifts to keep the robot in view."""
+        return f"/drake/disturbances/push_{i}"
 
     def _add_arrows(self, meshcat: Meshcat) -> None:
         """One arrow per push with a force, its length set by the force's size, tip at the origin
