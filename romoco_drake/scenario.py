@@ -99,9 +99,18 @@ class ControllerConfig:
     name: str = "standing"
     rate_hz: float = 1000.0
     solver: Literal["daqp", "clarabel"] = "daqp"
+    # The TSC-QP's balance terms beyond foot placement (control/tscqp.py): the hip strategy's
+    # centroidal angular-momentum damping task (weight per (N·m)², rate 1/s) and the ankle
+    # strategy's CoP shift per metre of DCM error.
+    angular_momentum_weight: float = 0.1
+    angular_momentum_damping: float = 10.0
+    ankle_gain: float = 1.0
 
 
-declare_ranges(ControllerConfig, rate_hz=RATE_HZ)
+# Task weights are O(1-10); 1e4 would override every task. Damping above 1e3/s outruns any
+# controller tick; a CoP shift 10× the DCM error is a bang-bang ankle.
+declare_ranges(ControllerConfig, rate_hz=RATE_HZ, angular_momentum_weight=Range(0.0, 1e4),
+               angular_momentum_damping=Range(0.0, 1e3, "1/s"), ankle_gain=Range(0.0, 10.0))
 
 
 @dataclass
