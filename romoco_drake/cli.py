@@ -281,13 +281,15 @@ def _cmd_bench_push(args) -> int:
     if args.json:
         print(json.dumps(result))
         return 0
+    adapt = "on" if result["step_adaptation"] else "off"
     print(f"{result['robot']}: largest impulse survived (N·s), walking {result['speed_mps']} m/s, "
-          f"{result['push_s']} s pushes on the base, step adaptation {'on' if result['step_adaptation'] else 'off'}")
+          f"{result['push_s']} s pushes on the base, step adaptation {adapt}")
     print(f"survival: {result['criterion']}; phase: fraction of the {result['step_s']} s step")
     print("direction  " + "".join(f"phase {ph:<5g}" for ph in phases) + "  min")
     for d in directions:
         row = [c for c in result["cells"] if c["direction"] == d]
-        print(f"{d:10s} " + "".join(f"{c['survived']:>10g} " for c in row) + f"{result['per_direction'][d]:>5g}")
+        cells = "".join(f"{c['survived']:>10g} " for c in row)
+        print(f"{d:10s} {cells}{result['per_direction'][d]:>5g}")
     return 0
 
 
@@ -463,10 +465,12 @@ def make_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_bench_agility)
     p = bench.add_parser("push", help="largest push survived while walking, per direction and gait phase")
     p.add_argument("--robot", default="g1")
-    p.add_argument("--impulses", default="10,15,20,25,30", help="N·s, comma-separated, tried in increasing order")
+    p.add_argument("--impulses", default="10,15,20,25,30",
+                   help="N·s, comma-separated, tried in increasing order")
     p.add_argument("--phases", default="0,0.25,0.5,0.75", help="push start as fractions of the step")
     p.add_argument("--directions", help="comma-separated (default: forward,backward,left,right)")
-    p.add_argument("--no-adapt", action="store_true", help="without step adaptation (the planner's own steps)")
+    p.add_argument("--no-adapt", action="store_true",
+                   help="without step adaptation (the planner's own steps)")
     p.add_argument("--json", action="store_true", help="print one JSON object (last line)")
     p.set_defaults(func=_cmd_bench_push)
     p = bench.add_parser("tick", help="per-component controller tick time on a running closed loop")

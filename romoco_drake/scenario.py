@@ -101,10 +101,12 @@ class ControllerConfig:
     solver: Literal["daqp", "clarabel"] = "daqp"
     # The TSC-QP's balance terms beyond foot placement (control/tscqp.py): the hip strategy's
     # centroidal angular-momentum damping task (weight per (N·m)², rate 1/s) and the ankle
-    # strategy's CoP shift per metre of DCM error.
-    angular_momentum_weight: float = 0.1
+    # strategy's CoP shift per metre of DCM error. Off by default: on G1's plane feet (1.0 and 0.1,
+    # diagrams/g1_walk.yaml) they also tracked velocity better, on the line feet of H1 and Cassie
+    # worse (H1 vx rms error 0.035 → 0.064 m/s).
+    angular_momentum_weight: float = 0.0
     angular_momentum_damping: float = 10.0
-    ankle_gain: float = 1.0
+    ankle_gain: float = 0.0
 
 
 # Task weights are O(1-10); 1e4 would override every task. Damping above 1e3/s outruns any

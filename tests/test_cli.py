@@ -81,6 +81,11 @@ def test_run_text_summary():
         (["bench", "matrix", "--robots", "atlas"], "unknown robot 'atlas'"),
         (["bench", "rom", "--planner", "alip", "--gain", "lqr"], "supports gains"),
         (["bench", "rom", "--planner", "hlip", "--t-ds", "-0.1"], "t_ds must be non-negative"),
+        (["bench", "push", "--robot", "atlas"], "unknown robot 'atlas'"),
+        (["bench", "push", "--impulses", "10,x"], "not a comma-separated list"),
+        (["bench", "push", "--impulses", "-5"], "--impulses must be in"),
+        (["bench", "push", "--phases", "1.5"], "--phases must be in [0, 1)"),
+        (["bench", "push", "--directions", "up"], "unknown direction 'up'"),
     ],
 )
 def test_bad_input_is_one_line_exit_2(args, words):

@@ -14,7 +14,9 @@ from romoco_drake.rom.step_adapt import StepAdapter, StepAdaptWeights, StepBound
 from romoco_drake.rom.types import WalkCommand
 
 MASS, Z0 = 33.0, 0.65
-BOUNDS = StepBounds(forward=0.3, backward=0.25, lateral_min=0.12, lateral_max=0.45, t_ss_min=0.2, t_ss_max=0.45)
+BOUNDS = StepBounds(forward=0.3, backward=0.25, lateral_min=0.12, lateral_max=0.45, t_ss_min=0.2,
+                    t_ss_max=0.45)
+ADAPTER = StepAdapter(BOUNDS, MASS)
 CMD = WalkCommand(vx=0.4, step_width=0.2, com_height=Z0, step_time=0.3)
 LAM = math.sqrt(9.81 / Z0)
 
@@ -24,7 +26,7 @@ def rom_state(p, v):
     return [p[0], p[1], Z0, -MASS * Z0 * v[1], MASS * Z0 * v[0], 0.0]
 
 
-def _plan_and_adapt(law_name, state, side, tau, adapter=StepAdapter(BOUNDS, MASS)):
+def _plan_and_adapt(law_name, state, side, tau, adapter=ADAPTER):
     law = make_planner(law_name, PlannerParams(mass=MASS))
     plan = law.plan(state, side, tau, CMD)
     return plan, adapter.adapt(plan, state, tau)
@@ -89,9 +91,9 @@ def test_qp_solution_matches_brute_force():
         sigma_n, sigma_box = 3.2, (2.17, 5.7)
         sigma, u = solve_step_qp(u_n, sigma_n, offset_n, dcm0, box, sigma_box, w)
 
-        def cost(s, u):
-            return (w.step * sum((a - b) ** 2 for a, b in zip(u, u_n)) + w.timing * (s - sigma_n) ** 2
-                    + w.offset * sum((d * s - o - a) ** 2 for d, o, a in zip(dcm0, offset_n, u)))
+        def cost(s, u, u_n=u_n, dcm0=dcm0, offset_n=offset_n):
+            return (w.step * sum((a - b) ** 2 for a, b in zip(u, u_n, strict=True))
+                    + w.timing * (s - 3.2) ** 2 + w.offset * sum((d * s - o - a) ** 2 for d, o, a in zip(dcm0, offset_n, u, strict=True)))
 
         best = math.inf
         for s in np.linspace(*sigma_box, 2001):

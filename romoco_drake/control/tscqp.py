@@ -182,8 +182,8 @@ class TscQp:
                  gains=DEFAULT_TASK_GAINS, regularization: tuple[float, float, float] = (1e-5, 1e-7, 1e-7),
                  constraint_damping: float = 20.0,
                  pivot_moment_weight: float = 1.0, load_split_weight: float = 1e-4,
-                 clarabel_tolerance: float = 1e-6, angular_momentum_weight: float = 0.1,
-                 angular_momentum_damping: float = 10.0, ankle_gain: float = 1.0):
+                 clarabel_tolerance: float = 1e-6, angular_momentum_weight: float = 0.0,
+                 angular_momentum_damping: float = 10.0, ankle_gain: float = 0.0):
         if solver not in QP_SOLVERS:
             raise RomocoError(f"unknown QP solver '{solver}' (known: {', '.join(QP_SOLVERS)})")
         self.robot, self.contact, self.solver_name = robot, contact, solver
