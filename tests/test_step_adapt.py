@@ -92,8 +92,9 @@ def test_qp_solution_matches_brute_force():
         sigma, u = solve_step_qp(u_n, sigma_n, offset_n, dcm0, box, sigma_box, w)
 
         def cost(s, u, u_n=u_n, dcm0=dcm0, offset_n=offset_n):
-            return (w.step * sum((a - b) ** 2 for a, b in zip(u, u_n, strict=True))
-                    + w.timing * (s - 3.2) ** 2 + w.offset * sum((d * s - o - a) ** 2 for d, o, a in zip(dcm0, offset_n, u, strict=True)))
+            step = sum((a - b) ** 2 for a, b in zip(u, u_n, strict=True))
+            offset = sum((d * s - o - a) ** 2 for d, o, a in zip(dcm0, offset_n, u, strict=True))
+            return w.step * step + w.timing * (s - 3.2) ** 2 + w.offset * offset
 
         best = math.inf
         for s in np.linspace(*sigma_box, 2001):
