@@ -92,7 +92,7 @@ def _cmd_run(args) -> int:
     from romoco_drake.scenario import load_scenario, with_overrides
 
     scenario = with_overrides(load_scenario(args.scenario), args.planner, args.controller, args.command,
-                              args.estimator, args.solver, args.push)
+                              args.estimator, args.solver, args.push, args.dropout)
     if args.via_lcm and args.hardware:
         raise RomocoError("--via-lcm and --hardware exclude each other")
     link = "via_lcm" if args.via_lcm else "hardware" if args.hardware else "sim"
@@ -120,6 +120,8 @@ def _cmd_run(args) -> int:
                   f"{summary['estimator_rejected_updates']} rejected updates")
         if link != "sim":
             print("  link: " + ", ".join(f"{k} {summary[k]}" for k in LINK_COUNTERS))
+        if "robot_link" in summary:
+            print("  robot side: " + ", ".join(f"{k} {v}" for k, v in summary["robot_link"].items()))
         if "lcm_log" in summary:
             print(f"  LCM log {summary['lcm_log']['path']}: {summary['lcm_log']['events']} messages")
         for path in summary.get("plots", []):
@@ -408,6 +410,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--push", action="append", metavar="T:FX,FY,FZ[:DURATION]",
                    help="push the base from time T (s) with force (N) in the heading frame, for DURATION "
                         "(s, default 0.1); repeatable")
+    p.add_argument("--dropout", action="append", metavar="T:DURATION[:STREAM]",
+                   help="with --via-lcm: lose the link's STREAM (proprioception, commands or all; default "
+                        "proprioception) from time T (s) for DURATION (s); repeatable")
     p.add_argument("--plot", type=Path, metavar="DIR", help="write velocity and tracking-error PNGs")
     p.add_argument("--estimator", help="override the scenario's estimator: ground_truth or kalman")
     p.add_argument("--solver", help="override the TSC-QP's QP solver: daqp or clarabel (the reference)")

@@ -43,6 +43,7 @@ from romoco_drake.estimation.kalman_estimator import KalmanEstimator
 from romoco_drake.estimation.registry import ESTIMATORS
 from romoco_drake.estimation.rom_state import RomStateFromRobot
 from romoco_drake.interfaces.disturbance import Disturbance, body_names
+from romoco_drake.interfaces.dropout import STREAM_CHANNELS, Dropout
 from romoco_drake.interfaces.hardware import (
     PUBLISH_DELAY,
     LinkConfig,
@@ -197,6 +198,8 @@ class Scenario:
     link: LinkConfig = dataclasses.field(default_factory=LinkConfig)
     # Pushes on the simulated robot (interfaces/disturbance.py); none on hardware.
     disturbances: list[Disturbance] = dataclasses.field(default_factory=list)
+    # Lost LCM messages (interfaces/dropout.py); only with both link ends simulated (--via-lcm).
+    dropouts: list[Dropout] = dataclasses.field(default_factory=list)
     # Filled in by load_scenario, not read from YAML.
     name: str = ""
 
@@ -226,6 +229,8 @@ declare_ranges(VimpcConfig, rate_hz=Range(1.0, 1000.0, "Hz"), knots=Range(1, 30)
 # push), each torque component by 1 kN·m.
 declare_ranges(Disturbance, t=Range(0.0, MAX_DURATION_S, "s"), duration=positive(10.0, "s"),
                force=Range(-5000.0, 5000.0, "N", size=3), torque=Range(-1000.0, 1000.0, "N·m", size=3))
+# Dropout (interfaces/dropout.py): within the run's clock, up to 10 s (longer is a lost robot).
+declare_ranges(Dropout, t=Range(0.0, MAX_DURATION_S, "s"), duration=positive(10.0, "s"))
 
 
 def scenario_names() -> list[str]:
@@ -284,6 +289,10 @@ def validate_scenario(scenario: Scenario, source: str | Path | None = None) -> N
     if times != sorted(times):
         raise ConfigError(where, "command", f"times must increase, got {times}")
     _check_disturbances(scenario, where)
+    for i, dropout in enumerate(scenario.dropouts):
+        if dropout.stream not in STREAM_CHANNELS:
+            raise ConfigError(where, f"dropouts[{i}].stream",
+                              f"'{dropout.stream}' is not one of: {', '.join(STREAM_CHANNELS)}")
 
 
 def _check_disturbances(scenario: Scenario, where: str | Path) -> None:
@@ -383,11 +392,30 @@ def parse_push(text: str) -> Disturbance:
     return push
 
 
+def parse_dropout(text: str) -> Dropout:
+    """``"t:duration[:stream]"`` → a link dropout (the --dropout flag; stream: proprioception,
+    commands or all)."""
+    try:
+        t, duration, *rest = text.strip().split(":")
+        if len(rest) > 1:
+            raise ValueError
+        dropout = Dropout(float(t), float(duration), *rest)
+    except ValueError:
+        raise RomocoError(f"--dropout: '{text}' is not t:duration[:stream] (e.g. '3:0.3:proprioception')") from None
+    if dropout.stream not in STREAM_CHANNELS:
+        raise RomocoError(f"--dropout: '{text}': stream must be one of: {', '.join(STREAM_CHANNELS)}")
+    for key in ("t", "duration"):
+        allowed = RANGES[Dropout][key]
+        if not allowed.contains(getattr(dropout, key)):
+            raise RomocoError(f"--dropout: '{text}': {key} must be {allowed.describe()}")
+    return dropout
+
+
 def with_overrides(scenario: Scenario, planner: str | None = None, controller: str | None = None,
                    command: str | None = None, estimator: str | None = None, solver: str | None = None,
-                   pushes: list[str] | None = None) -> Scenario:
+                   pushes: list[str] | None = None, dropouts: list[str] | None = None) -> Scenario:
     """``scenario`` with the CLI's --planner/--controller/--command/--estimator/--solver applied
-    (names checked) and each --push appended to its disturbances."""
+    (names checked), each --push appended to its disturbances and each --dropout to its dropouts."""
     if solver is not None:
         if solver not in QP_SOLVERS:
             raise RomocoError(f"unknown QP solver '{solver}' (known: {', '.join(QP_SOLVERS)})")
@@ -409,6 +437,9 @@ def with_overrides(scenario: Scenario, planner: str | None = None, controller: s
     if pushes:
         added = [parse_push(text) for text in pushes]
         scenario = dataclasses.replace(scenario, disturbances=[*scenario.disturbances, *added])
+    if dropouts:
+        lost = [parse_dropout(text) for text in dropouts]
+        scenario = dataclasses.replace(scenario, dropouts=[*scenario.dropouts, *lost])
     return scenario
 
 
@@ -445,6 +476,9 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
     if link == "hardware" and scenario.disturbances:
         raise ConfigError(f"<scenario {scenario.name or scenario.robot}>", "disturbances",
                           "disturbances need a simulated plant (not the hardware link)")
+    if link != "via_lcm" and scenario.dropouts:
+        raise ConfigError(f"<scenario {scenario.name or scenario.robot}>", "dropouts",
+                          "dropouts lose LCM messages between a simulated robot and the controller: use --via-lcm")
     robot = load_robot(scenario.robot)
     builder = DiagramBuilder()
     motor_pd = uses_motor_command(scenario)
@@ -458,11 +492,12 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
     else:
         station = builder.AddNamedSystem(
             "station", make_hardware_station(robot, lcm, period, motor_pd, scenario.link, offset,
-                                             require_base_state=scenario.estimator.name == "ground_truth"))
+                                             require_base_state=scenario.estimator.name == "ground_truth",
+                                             dropouts=scenario.dropouts))
         if link == "via_lcm":
             robot_sim = builder.AddNamedSystem("robot", make_robot_sim(
                 robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link, motor_pd=motor_pd,
-                disturbances=scenario.disturbances))
+                disturbances=scenario.disturbances, dropouts=scenario.dropouts))
             plant_station = robot_sim.GetSubsystemByName("station")
     estimator = _add_estimator(builder, scenario, robot, station, link != "hardware", offset)
     kinematics = builder.AddNamedSystem("kinematics", RobotKinematicsSystem(robot))
@@ -562,6 +597,7 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     builder.Connect(kin, machine.kinematics_port)
     builder.Connect(limiter.command_port, machine.command_port)
     builder.Connect(station.GetOutputPort("foot_contact"), machine.foot_contact_port)
+    builder.Connect(station.GetOutputPort("link_stage"), machine.link_stage_port)
     builder.Connect(kin, rom_state.kinematics_port)
     builder.Connect(machine.gait_phase_port, rom_state.gait_phase_port)
     builder.Connect(machine.gait_phase_port, planner.gait_phase_port)

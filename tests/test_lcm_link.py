@@ -14,6 +14,7 @@ from romoco_drake.interfaces import lcm_codec as codec
 from romoco_drake.interfaces.hardware import (
     CommandSender,
     LinkConfig,
+    LinkStage,
     link_summary,
     make_hardware_station,
     nominal_measurements,
@@ -25,7 +26,9 @@ from romoco_drake.runner import run_scenario
 from romoco_drake.scenario import build_diagram, initial_positions, load_scenario, with_overrides
 
 TICK = 0.001  # s: the robot's publish period and the link's default receive period
-NO_FAULTS = {"stale_events": 0, "rejected_messages": 0, "clamped_commands": 0, "estop": 0}
+NO_FAULTS = {"stale_events": 0, "ride_through_events": 0, "stand_events": 0, "damping_events": 0,
+             "rejected_messages": 0, "clamped_commands": 0, "estop": 0}
+ROBOT_NO_FAULTS = {"stale_events": 0, "hold_events": 0, "damping_events": 0, "rejected_messages": 0, "estop": 0}
 
 
 @pytest.fixture(scope="module")
@@ -46,12 +49,13 @@ def _inside_limits(robot, fraction: float) -> np.ndarray:
 
 
 def _proprioception(robot, utime: int, q: np.ndarray, num_joints: int | None = None,
-                    imu: np.ndarray | None = None) -> bytes:
-    """Encoded ROMOCO_PROPRIOCEPTION at rest at ``q`` (the encoder checks shapes only)."""
+                    imu: np.ndarray | None = None, v: np.ndarray | None = None) -> bytes:
+    """Encoded ROMOCO_PROPRIOCEPTION at ``q`` (at rest unless ``v``; the encoder checks shapes only)."""
     n = len(q) if num_joints is None else num_joints
     imu = nominal_measurements(robot)["imu"] if imu is None else imu
+    v = np.zeros(n) if v is None else v
     return codec.encode_proprioception(codec.Proprioception(
-        utime, q[:n], np.zeros(n), np.zeros(n), imu, np.ones(2)))
+        utime, q[:n], v[:n], np.zeros(n), imu, np.ones(2)))
 
 
 def _decode_command(robot, data: bytes) -> dict:
@@ -144,7 +148,7 @@ def test_hardware_station_exports_the_sim_station_ports(name, motor_pd):
     inputs = [("motor_command", 5 * robot.nu, vector)] if motor_pd else []
     assert hardware[0] == inputs + [("actuation", robot.nu, vector)]
     assert hardware[1] == [("joint_state", 2 * nj, vector), ("imu", 10, vector), ("foot_contact", 2, vector),
-                           ("base_pose", 7, vector), ("base_velocity", 6, vector)]
+                           ("base_pose", 7, vector), ("base_velocity", 6, vector), ("link_stage", 1, vector)]
 
 
 # ---------------------------------------------------------------- closed loop over LCM
@@ -158,7 +162,7 @@ def test_g1_stands_over_lcm_like_the_direct_simulation():
     direct = run_scenario(scenario, 2.0, link="sim")
     assert via["link"] == "via_lcm" and not via["fell"] and not direct["fell"]
     assert {k: via[k] for k in NO_FAULTS} == NO_FAULTS
-    assert via["robot_link"] == {"stale_events": 0, "rejected_messages": 0, "estop": 0}
+    assert via["robot_link"] == ROBOT_NO_FAULTS
     assert via["final_base_height_m"] == pytest.approx(direct["final_base_height_m"], abs=0.005)
     assert abs(via["base_height_drift_m"]) < 0.01
 
@@ -173,56 +177,126 @@ def test_g1_walks_over_lcm_and_tracks_like_the_direct_simulation():
     assert via["mean_velocity"][0] > 0.1 and via["steps"] >= 4
     assert via["qp_failures"] == 0 and via["safe_mode_entries"] == 0
     assert {k: via[k] for k in NO_FAULTS} == NO_FAULTS
-    assert via["robot_link"] == {"stale_events": 0, "rejected_messages": 0, "estop": 0}
+    assert via["robot_link"] == ROBOT_NO_FAULTS
     # Same timing on both links: the LCM path is the direct loop, to the messages' round-off.
     np.testing.assert_allclose(via["velocity_rms_error"], direct["velocity_rms_error"], atol=1e-3)
     np.testing.assert_allclose(via["mean_velocity"], direct["mean_velocity"], atol=1e-3)
     assert via["steps"] == direct["steps"]
 
 
+def test_g1_walks_through_a_proprioception_dropout_and_a_command_dropout():
+    """G1 walking at 0.4 m/s over LCM loses its measurements for 0.1 s (ride-through: the
+    controller walks on, the robot is held along its predicted posture) and later its commands
+    for 0.1 s (the robot holds its posture): it stays up and keeps walking at the command, and
+    each stage is counted once."""
+    scenario = with_overrides(load_scenario("g1_walk"), command="0:0,0,0;1:0.2,0,0;2:0.4,0,0",
+                              dropouts=["3.0:0.1:proprioception", "4.5:0.1:commands"])
+    summary = run_scenario(scenario, 6.0, link="via_lcm")
+    assert not summary["fell"] and summary["safe_mode_entries"] == 0
+    assert summary["steps"] >= 14 and summary["velocity_rms_error"][0] < 0.1
+    assert summary["mean_velocity"][0] > 0.2
+    assert {k: summary[k] for k in NO_FAULTS} == NO_FAULTS | {"stale_events": 1, "ride_through_events": 1}
+    assert summary["robot_link"] == ROBOT_NO_FAULTS | {"stale_events": 1, "hold_events": 1}
+
+
+def test_dropouts_need_the_simulated_robot_and_a_known_stream(capsys):
+    """Dropouts are a test-rig fault of the LCM link: without --via-lcm, or with an unknown
+    stream, one line and exit 2."""
+    assert main(["run", "g1_walk", "--dropout", "3:0.1"]) == 2
+    assert "use --via-lcm" in capsys.readouterr().err
+    for bad, says in (("3:0.1:radio", "stream must be one of"), ("3", "is not t:duration"),
+                      ("3:-1", "duration must be")):
+        assert main(["run", "g1_walk", "--via-lcm", "--dropout", bad]) == 2
+        err = capsys.readouterr().err
+        assert says in err and len(err.strip().splitlines()) == 1, err
+
+
 # ---------------------------------------------------------------- controller side: faults
 
 
-def test_stalled_proprioception_sends_damping_counts_once_and_resumes(g1):
-    """No proprioception for timeout_s: damping about the last measured q, one stale event per
-    fresh → stale transition; control resumes with the messages."""
+def _assert_hold(robot, command: dict, q_actuated: np.ndarray, atol: float = 1e-9) -> None:
+    """K_p, K_d = the YAML's, τ_ff = 0, v_d = 0, q_d = the given posture."""
+    np.testing.assert_array_equal(command["kp"], robot.kp)
+    np.testing.assert_array_equal(command["kd"], robot.kd)
+    np.testing.assert_array_equal(command["tau_ff"], 0.0)
+    np.testing.assert_array_equal(command["v_d"], 0.0)
+    np.testing.assert_allclose(command["q_d"], q_actuated, atol=atol)
+
+
+def test_stalled_proprioception_degrades_in_stages_counts_each_and_resumes(g1):
+    """No proprioception: after timeout_s the ride-through holds the predicted posture, after
+    ride_through_s more the posture is frozen (stand), after stand_s more damping; each stage
+    entered counts once per loss, and control resumes with the messages."""
     tau = 0.1 * g1.effort_limits
-    side = ControllerSide(g1, tau)
-    timeout = side.config.timeout_s
+    config = LinkConfig(ride_through_s=0.05, stand_s=0.05)
+    side = ControllerSide(g1, tau, config)
+    timeout = config.timeout_s
 
     side.advance(0.03)  # no robot yet: damping about the nominal pose, nothing lost, nothing counted
     _assert_damping(g1, side.last_command(), g1.nominal.q[g1.actuated_q_index])
     assert side.summary() == NO_FAULTS
+    assert side.output("link_stage")[0] == LinkStage.DAMPING
 
+    nj = len(g1.joint_names)
     q1, q2 = _inside_limits(g1, 0.05), _inside_limits(g1, 0.1)
-    side.advance(0.03, lambda utime: _proprioception(g1, utime, q1))
+    v1 = np.linspace(-0.2, 0.2, nj)
+    side.advance(0.03, lambda utime: _proprioception(g1, utime, q1, v=v1))
+    last = side.time - TICK  # the last message's time (the receiver takes it at the next tick)
     command = side.last_command()
     np.testing.assert_allclose(command["tau_ff"], tau)
     np.testing.assert_array_equal(command["kp"], 0.0)
     np.testing.assert_array_equal(command["kd"], 0.0)
-    np.testing.assert_allclose(side.output("joint_state")[:len(q1)], q1)
+    assert side.output("link_stage")[0] == LinkStage.FRESH
 
-    side.advance(0.5 * timeout)  # not yet stale
+    side.advance(0.5 * timeout)  # not yet stale: the last values, not predicted
     np.testing.assert_allclose(side.last_command()["tau_ff"], tau)
+    np.testing.assert_allclose(side.output("joint_state")[:nj], q1)
     assert side.summary()["stale_events"] == 0
 
-    side.advance(timeout + 0.005)
-    _assert_damping(g1, side.last_command(), _actuated(g1, q1))
-    assert side.summary() == NO_FAULTS | {"stale_events": 1}
-    side.advance(0.05)  # staying stale is not another event
-    _assert_damping(g1, side.last_command(), _actuated(g1, q1))
-    assert side.summary()["stale_events"] == 1
+    side.advance(timeout)  # ride-through: joints predicted at constant velocity, held there by PD
+    assert side.output("link_stage")[0] == LinkStage.RIDE_THROUGH
+    age = side.time - last
+    predicted = side.output("joint_state")[:nj]
+    np.testing.assert_allclose(predicted, q1 + v1 * age, atol=1.5 * TICK * np.abs(v1).max())
+    # The command went out one tick before the port was read here, on that tick's prediction.
+    _assert_hold(g1, side.last_command(), _actuated(g1, predicted), atol=1.5 * TICK * np.abs(v1).max())
+    assert side.summary() == NO_FAULTS | {"stale_events": 1, "ride_through_events": 1}
+
+    side.advance(config.ride_through_s)  # stand: the prediction stops at timeout + ride_through
+    assert side.output("link_stage")[0] == LinkStage.STAND
+    frozen = q1 + v1 * (timeout + config.ride_through_s)
+    np.testing.assert_allclose(side.output("joint_state")[:nj], frozen, atol=1e-9)
+    _assert_hold(g1, side.last_command(), _actuated(g1, frozen))
+    assert side.summary() == NO_FAULTS | {"stale_events": 1, "ride_through_events": 1, "stand_events": 1}
+
+    side.advance(config.stand_s)
+    _assert_damping(g1, side.last_command(), _actuated(g1, frozen))
+    assert side.summary() == NO_FAULTS | {"stale_events": 1, "ride_through_events": 1, "stand_events": 1,
+                                          "damping_events": 1}
+    side.advance(0.05)  # staying lost is not another event
+    assert side.summary()["damping_events"] == 1
 
     side.advance(0.01, lambda utime: _proprioception(g1, utime, q2))
     command = side.last_command()
     np.testing.assert_allclose(command["tau_ff"], tau)
     np.testing.assert_array_equal(command["kd"], 0.0)
     np.testing.assert_allclose(command["q_d"], _actuated(g1, q2))
-    assert side.summary()["stale_events"] == 1
 
     side.advance(timeout + 0.005)  # a second loss is a second event
-    _assert_damping(g1, side.last_command(), _actuated(g1, q2))
-    assert side.summary() == NO_FAULTS | {"stale_events": 2}
+    _assert_hold(g1, side.last_command(), _actuated(g1, q2))
+    assert side.summary() == NO_FAULTS | {"stale_events": 2, "ride_through_events": 2, "stand_events": 1,
+                                          "damping_events": 1}
+
+
+def test_without_ride_through_a_loss_goes_to_stand_then_damping(g1):
+    """ride_through_s = 0 and stand_s = 0: a stale stream is damping at once (the old link), and
+    the skipped stages are not counted."""
+    side = ControllerSide(g1, np.zeros(g1.nu), LinkConfig(ride_through_s=0.0, stand_s=0.0))
+    q1 = _inside_limits(g1, 0.05)
+    side.advance(0.02, lambda utime: _proprioception(g1, utime, q1))
+    side.advance(side.config.timeout_s + 0.005)
+    _assert_damping(g1, side.last_command(), _actuated(g1, q1))
+    assert side.summary() == NO_FAULTS | {"stale_events": 1, "damping_events": 1}
 
 
 def test_bad_measurements_are_rejected_once_each_and_last_good_values_kept(g1):
@@ -294,7 +368,7 @@ class SenderBench:
         self.context = self.sender.CreateDefaultContext()
         self.q = _inside_limits(robot, 0.1)
         self.sender.joint_state_port.FixValue(self.context, np.concatenate([self.q, np.zeros(len(self.q))]))
-        self.sender.link_port.FixValue(self.context, [1.0])
+        self.sender.link_port.FixValue(self.context, [float(LinkStage.FRESH)])
         self.sender.estop_port.FixValue(self.context, b"")
         self.sender.actuation_port.FixValue(self.context, np.zeros(robot.nu))
         self.simulator = Simulator(self.sender, self.context)
@@ -425,8 +499,7 @@ def test_estop_latches_damping_on_both_sides():
         _assert_damping(robot, controller, measured, atol=0.02)
         _assert_damping(robot, applied, measured, atol=0.02)
         assert link_summary(built.station, context) == NO_FAULTS | {"estop": 1}
-        assert robot_summary(built.robot_sim, context) == {"stale_events": 0, "rejected_messages": 0,
-                                                           "estop": 1}
+        assert robot_summary(built.robot_sim, context) == ROBOT_NO_FAULTS | {"estop": 1}
 
 
 # ---------------------------------------------------------------- robot side
@@ -470,38 +543,64 @@ class RobotSide:
         return robot_summary(self.diagram, self.context)
 
 
-def test_robot_side_damps_a_stalled_or_rejected_command_stream(g1):
-    """The robot's own watchdog: commands stop (or every command is rejected) for timeout_s →
-    its motors get damping, one stale event per loss; commands resuming take over again."""
-    side = RobotSide(g1)
+def test_robot_side_holds_then_damps_a_stalled_or_rejected_command_stream(g1):
+    """The robot's own watchdog: commands stop (or every command is rejected) for timeout_s → its
+    motors hold the last posture with the last gains for hold_s, then damp; each stage counts once
+    per loss; commands resuming take over again."""
+    config = LinkConfig(hold_s=0.03)
+    side = RobotSide(g1, config)
     side.start(g1.nominal.q)
-    hold = [g1.nominal.q[g1.actuated_q_index], np.zeros(g1.nu), np.full(g1.nu, 0.5), g1.kp, g1.kd]
+    posture = [g1.nominal.q[g1.actuated_q_index], np.zeros(g1.nu), np.full(g1.nu, 0.5), 2.0 * g1.kp, g1.kd]
 
     def command(utime):
-        return codec.encode_motor_command(codec.MotorCommand(utime, *hold))
+        return codec.encode_motor_command(codec.MotorCommand(utime, *posture))
 
     side.advance(0.03, command)
-    for key, value in zip(("q_d", "v_d", "tau_ff", "kp", "kd"), hold, strict=True):
+    for key, value in zip(("q_d", "v_d", "tau_ff", "kp", "kd"), posture, strict=True):
         np.testing.assert_allclose(side.applied()[key], value, err_msg=key)
-    assert side.summary() == {"stale_events": 0, "rejected_messages": 0, "estop": 0}
+    assert side.summary() == ROBOT_NO_FAULTS
 
-    side.advance(side.config.timeout_s + 0.005)
+    side.advance(config.timeout_s + 0.005)  # hold: the last posture and gains, no feed-forward
+    held = side.applied()
+    for key, value in (("q_d", posture[0]), ("v_d", 0.0), ("tau_ff", 0.0), ("kp", posture[3]), ("kd", posture[4])):
+        np.testing.assert_allclose(held[key], value, err_msg=key)
+    assert side.summary() == ROBOT_NO_FAULTS | {"stale_events": 1, "hold_events": 1}
+
+    side.advance(config.hold_s)
     _assert_damping(g1, side.applied(), side.measured_q(), atol=0.02)
-    assert side.summary() == {"stale_events": 1, "rejected_messages": 0, "estop": 0}
+    assert side.summary() == ROBOT_NO_FAULTS | {"stale_events": 1, "hold_events": 1, "damping_events": 1}
     side.advance(0.02)
-    assert side.summary()["stale_events"] == 1
+    assert side.summary()["damping_events"] == 1
 
     side.advance(0.01, command)
-    np.testing.assert_allclose(side.applied()["kp"], g1.kp)
-    assert side.summary()["stale_events"] == 1
+    np.testing.assert_allclose(side.applied()["kp"], posture[3])
 
-    nan_hold = [x.copy() for x in hold]
-    nan_hold[0][0] = np.nan
-    ticks = round((side.config.timeout_s + 0.01) / TICK)
-    side.advance(ticks * TICK, lambda utime: codec.encode_motor_command(codec.MotorCommand(utime, *nan_hold)))
+    nan_posture = [x.copy() for x in posture]
+    nan_posture[0][0] = np.nan
+    ticks = round((config.timeout_s + config.hold_s + 0.01) / TICK)
+    side.advance(ticks * TICK, lambda utime: codec.encode_motor_command(codec.MotorCommand(utime, *nan_posture)))
     side.advance(0.003)  # the last ones are taken
     _assert_damping(g1, side.applied(), side.measured_q(), atol=0.02)
-    assert side.summary() == {"stale_events": 2, "rejected_messages": ticks, "estop": 0}
+    assert side.summary() == {"stale_events": 2, "hold_events": 2, "damping_events": 2,
+                              "rejected_messages": ticks, "estop": 0}
+
+
+def test_robot_side_holds_a_torque_stream_at_the_measured_posture_with_yaml_gains(g1):
+    """A torque command (K_p = K_d = 0) carries no posture: the hold takes the joints measured when
+    the stream was lost, with the robot YAML's gains, rather than going limp."""
+    side = RobotSide(g1)
+    side.start(g1.nominal.q)
+    torque = [g1.nominal.q[g1.actuated_q_index], np.zeros(g1.nu), np.zeros(g1.nu), np.zeros(g1.nu),
+              np.zeros(g1.nu)]
+    side.advance(0.02, lambda utime: codec.encode_motor_command(codec.MotorCommand(utime, *torque)))
+    side.advance(side.config.timeout_s + 0.002)
+    held = side.applied()
+    np.testing.assert_array_equal(held["kp"], g1.kp)
+    np.testing.assert_array_equal(held["kd"], g1.kd)
+    np.testing.assert_allclose(held["q_d"], side.measured_q(), atol=0.02)
+    side.advance(0.02)
+    np.testing.assert_array_equal(side.applied()["q_d"], held["q_d"])  # held, not following the joints
+    assert side.summary()["hold_events"] == 1
 
 
 def test_robot_side_base_state_decodes_after_quaternion_drift(g1):
@@ -570,8 +669,8 @@ def test_malformed_estop_engages_once_and_fails_safe(g1):
 
 
 def test_motion_capture_is_part_of_the_link_when_the_estimator_reads_it(g1):
-    """With the ground-truth estimator on hardware, a missing or stalled ROMOCO_BASE_STATE stream
-    means damping (and a stale event), as a stalled proprioception stream does."""
+    """With the ground-truth estimator on hardware, a missing ROMOCO_BASE_STATE stream means
+    damping and a stalled one a ride-through (and a stale event), as for proprioception."""
     side = ControllerSide(g1, np.full(g1.nu, 1.0), require_base_state=True)
     q = _inside_limits(g1, 0.0)
     pose = nominal_measurements(g1)["base_pose"]
@@ -591,5 +690,5 @@ def test_motion_capture_is_part_of_the_link_when_the_estimator_reads_it(g1):
     run(0.01, with_base=True)
     assert np.all(side.last_command()["tau_ff"] == 1.0)
     run(side.config.timeout_s + 0.005, with_base=False)
-    _assert_damping(g1, side.last_command(), _actuated(g1, q))
-    assert side.summary()["stale_events"] == 1
+    _assert_hold(g1, side.last_command(), _actuated(g1, q))
+    assert side.summary()["stale_events"] == 1 and side.summary()["ride_through_events"] == 1

@@ -22,7 +22,7 @@ from romoco_drake.runner import run_scenario
 
 def _walking_tick(machine, robot, schedule, t, plan):
     kin = RobotKinematics(robot, np.concatenate([robot.nominal.q, np.zeros(robot.nv)]))
-    return machine.next_schedule(schedule, t, kin, WalkCommand(vx=0.3), np.ones(2), plan)
+    return machine.next_schedule(schedule, t, kin, WalkCommand(vx=0.3), np.ones(2), plan=plan)
 
 
 def test_state_machine_follows_an_adapted_step_time_until_committed():

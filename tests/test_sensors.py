@@ -199,3 +199,28 @@ def test_config_loads_from_yaml_data_and_rejects_bad_values():
         load_typed("sensors.yaml", SensorConfig, {"accel_bias": [0.0]})
     with pytest.raises(ConfigError, match="unknown key"):
         load_typed("sensors.yaml", SensorConfig, {"gyro_noise": 0.1})
+
+
+@pytest.mark.parametrize("quaternion", [[np.nan, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 0.0], [np.inf, 1.0, 0.0, 0.0]])
+def test_a_diverged_state_reads_as_malformed_measurements_not_an_exception(quaternion):
+    """After a fall the plant's state can blow up; the IMU and motion capture then read NaN
+    (which the estimators reject and count) instead of raising "Quaternion is not normalized"
+    from inside the simulator's step."""
+    from pydrake.common.value import AbstractValue
+    from pydrake.multibody.math import SpatialAcceleration
+    from pydrake.multibody.plant import ContactResults
+
+    run = simulate(EXACT, standing=False)
+    sensors, robot = run.sensors, run.robot
+    context = sensors.CreateDefaultContext()
+    x = np.concatenate([robot.nominal.q, np.zeros(robot.nv)])
+    x[robot.base_q_start:robot.base_q_start + 4] = quaternion
+    sensors.plant_state_input.FixValue(context, x)
+    sensors.accelerations_input.FixValue(
+        context, AbstractValue.Make([SpatialAcceleration()] * run.plant.num_bodies()))
+    sensors.contact_results_input.FixValue(context, AbstractValue.Make(ContactResults()))
+    imu = sensors.imu_output.Eval(context)
+    pose = sensors.base_pose_output.Eval(context)
+    assert np.isnan(imu).all()
+    assert np.isnan(pose[:4]).all() and np.allclose(pose[4:], robot.nominal.q[robot.base_q_start + 4:
+                                                                                robot.base_q_start + 7])

@@ -13,14 +13,19 @@ change when a robot replaces the simulator:
 | foot_contact  | out | 2    | ROMOCO_PROPRIOCEPTION contact flags                             |
 | base_pose     | out | 7    | ROMOCO_BASE_STATE (motion capture) quaternion, position          |
 | base_velocity | out | 6    | ROMOCO_BASE_STATE angular, linear velocity (world)              |
+| link_stage    | out | 1    | :class:`LinkStage` of the measurements (the sim station: 0)     |
 
 Safety at the interface (each counted, see :func:`link_summary`):
 
-- **stale proprioception** (and motion capture, when the estimator reads it): no new message
-  for ``timeout_s`` → the command becomes damping
-  (q_d = q, v_d = 0, τ_ff = 0, K_p = 0, K_d from the robot YAML) until messages resume;
-  ``stale_events`` counts fresh → stale transitions. Before the first message the robot is
-  also sent damping (not counted: nothing was lost yet).
+- **lost measurements** (proprioception, and motion capture when the estimator reads it), in
+  stages by the age of the last good message (:class:`LinkStage`), each entry counted:
+  ``timeout_s`` without a message is a ``stale_events``; up to ``ride_through_s`` the
+  measurement ports carry a constant-velocity prediction from the last message and the
+  controller keeps walking (``ride_through_events``); for ``stand_s`` more the state machine
+  stops stepping and the robot is sent a joint PD hold of its predicted posture with the YAML's
+  gains (``stand_events``); after that damping (q_d = q, v_d = 0, τ_ff = 0, K_p = 0, K_d from
+  the robot YAML; ``damping_events``). Messages resuming end any stage. Before the first
+  message the robot is sent damping (not counted: nothing was lost yet).
 - **rejected messages**: bytes that do not decode, the wrong joint count, NaN/Inf, non-unit
   quaternions, times that go backwards (:mod:`~romoco_drake.interfaces.lcm_codec`) are dropped
   and the last good values kept; a non-finite command from the controller is not sent
@@ -38,14 +43,17 @@ rest, so the controller starts from a sane state while the robot is still sent d
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import IntEnum
 
 import numpy as np
+from pydrake.common.eigen_geometry import Quaternion
 from pydrake.common.value import AbstractValue
 from pydrake.lcm import DrakeLcmInterface
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem, ValueProducer
 from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
 
 from romoco_drake.config import Range, declare_ranges, positive
+from romoco_drake.interfaces.dropout import STREAM_CHANNELS, Dropout, DroppingPublisher
 from romoco_drake.interfaces.lcm_codec import (
     BASE_STATE_CHANNEL,
     ESTOP_CHANNEL,
@@ -64,7 +72,8 @@ from romoco_drake.interfaces.lcm_codec import (
 from romoco_drake.modes import Mode
 from romoco_drake.robots.model import RobotModel
 
-LINK_COUNTERS = ("stale_events", "rejected_messages", "clamped_commands", "estop")
+LINK_COUNTERS = ("stale_events", "ride_through_events", "stand_events", "damping_events", "rejected_messages",
+                 "clamped_commands", "estop")
 # Messages leave this long after the step or tick they report: a publish event at the step's
 # own instant sees the state from before that step's updates (the previous step's values).
 PUBLISH_DELAY = 2e-5  # s, less than any plant step
@@ -78,13 +87,70 @@ class LinkConfig:
     receive_rate_hz: float = 1000.0  # how often received messages are checked and taken over
     max_joint_speed: float = 30.0  # rad/s, |v_d| limit of a sent command
     max_gain_factor: float = 3.0  # K_p, K_d at most this times the robot YAML's gains
+    # Controller side, measurements lost: predicted up to this age of the last message (walking on) ...
+    ride_through_s: float = 0.1
+    # ... then held at the robot's predicted posture by joint PD (standing) this much longer, then damping.
+    stand_s: float = 2.0
+    # Robot side, commands lost: the last posture is held by joint PD this long, then damping.
+    hold_s: float = 0.5
 
 
 # A stream stale for a second has long lost the robot; the receive rate is a clock like the
 # controller's; 100 rad/s is beyond any joint motor; a gain factor of 10 lets a sender ask for
-# 10× the YAML gains, more is no longer the same robot.
+# 10× the YAML gains, more is no longer the same robot. A prediction from joint velocities is
+# worthless after a second (a whole gait cycle); a blind posture hold beyond a minute is a robot
+# left alone, which damping should take over.
 declare_ranges(LinkConfig, timeout_s=positive(1.0, "s"), receive_rate_hz=Range(1.0, 10000.0, "Hz"),
-               max_joint_speed=positive(100.0, "rad/s"), max_gain_factor=positive(10.0))
+               max_joint_speed=positive(100.0, "rad/s"), max_gain_factor=positive(10.0),
+               ride_through_s=Range(0.0, 1.0, "s"), stand_s=Range(0.0, 60.0, "s"),
+               hold_s=Range(0.0, 60.0, "s"))
+
+
+class LinkStage(IntEnum):
+    """How the controller side acts on the age of the newest measurement (module docstring)."""
+
+    FRESH = 0  # measurements arrive: the controller's command is sent
+    RIDE_THROUGH = 1  # lost for less than ride_through_s: predicted measurements, the command is sent
+    STAND = 2  # lost for up to stand_s more: stop stepping, hold the predicted posture by joint PD
+    DAMPING = 3  # lost for longer (or never received): damping
+
+
+def link_stage(age: float, config: LinkConfig) -> LinkStage:
+    """The stage for measurements last received ``age`` s ago (inf: never)."""
+    if age <= config.timeout_s:
+        return LinkStage.FRESH
+    if age <= config.timeout_s + config.ride_through_s:
+        return LinkStage.RIDE_THROUGH
+    return LinkStage.STAND if age <= config.timeout_s + config.ride_through_s + config.stand_s else LinkStage.DAMPING
+
+
+def predict_proprioception(values: np.ndarray, num_joints: int, dt: float) -> np.ndarray:
+    """[q; v; imu; contact] ``dt`` s later at constant joint velocity and base angular velocity
+    (the IMU's quaternion turned by its gyro); the accelerometer and contacts are held."""
+    out = values.copy()
+    nj = num_joints
+    out[:nj] += dt * values[nj:2 * nj]
+    imu = values[2 * nj:2 * nj + 10]
+    out[2 * nj:2 * nj + 4] = _turned(imu[:4], imu[4:7] * dt, body=True)
+    return out
+
+
+def predict_base_state(values: np.ndarray, dt: float) -> np.ndarray:
+    """[quaternion; position; ω_W; v_W] (motion capture) ``dt`` s later at constant velocity."""
+    out = values.copy()
+    out[:4] = _turned(values[:4], values[7:10] * dt, body=False)
+    out[4:7] += dt * values[10:13]
+    return out
+
+
+def _turned(wxyz: np.ndarray, theta: np.ndarray, body: bool) -> np.ndarray:
+    """The unit quaternion ``wxyz`` turned by the rotation vector θ, in its body frame or the world."""
+    angle = float(np.linalg.norm(theta))
+    if angle == 0.0 or not np.isfinite(angle):
+        return wxyz.copy()
+    dq = Quaternion(wxyz=np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * theta / angle]))
+    q = Quaternion(wxyz=wxyz / np.linalg.norm(wxyz))
+    return (q.multiply(dq) if body else dq.multiply(q)).wxyz()
 
 
 def nominal_measurements(robot: RobotModel) -> dict[str, np.ndarray]:
@@ -105,6 +171,12 @@ def damping_command(robot: RobotModel, q: np.ndarray) -> np.ndarray:
     """[q_d; v_d; τ_ff; K_p; K_d] holding nothing: joint damping −K_d v about the measured q."""
     nu = robot.nu
     return np.concatenate([q, np.zeros(2 * nu), np.zeros(nu), robot.kd])
+
+
+def hold_command(robot: RobotModel, q: np.ndarray) -> np.ndarray:
+    """[q_d; v_d; τ_ff; K_p; K_d] holding the posture ``q`` with the robot YAML's joint PD gains."""
+    nu = robot.nu
+    return np.concatenate([q, np.zeros(2 * nu), robot.kp, robot.kd])
 
 
 class EstopLatch:
@@ -205,6 +277,13 @@ class Inbox:
         _, arrival, received = state.get_discrete_state().get_vector(int(self.meta)).value()
         return bool(received) and context.get_time() - arrival <= timeout
 
+    def age(self, context, state=None) -> float:
+        """Time since the last good message arrived (inf before the first); ``state``: after
+        this update's ``take``."""
+        source = context if state is None else state
+        _, arrival, received = source.get_discrete_state().get_vector(int(self.meta)).value()
+        return context.get_time() - arrival if received else np.inf
+
 
 class MeasurementReceiver(LeafSystem):
     """Proprioception and motion-capture messages → the station's measurement ports.
@@ -213,9 +292,15 @@ class MeasurementReceiver(LeafSystem):
     |-----------------|-----|----------|------------------------------------------------------|
     | proprioception  | in  | abstract | raw bytes of ROMOCO_PROPRIOCEPTION                    |
     | base_state      | in  | abstract | raw bytes of ROMOCO_BASE_STATE                        |
-    | joint_state, imu, foot_contact, base_pose, base_velocity | out | as the station | newest good values |
-    | link            | out | 1        | 1 while the needed streams are fresh, else 0          |
-    | stats           | out | 2        | rejected messages, stale events                       |
+    | joint_state, imu, foot_contact, base_pose, base_velocity | out | as the station | newest good values, or their prediction |
+    | link            | out | 1        | the :class:`LinkStage` of the needed streams          |
+    | stats           | out | 5        | rejected messages, stale events, then entries to ride-through, stand and damping |
+
+    While the needed streams are stale (no message for ``timeout_s``) the outputs are predicted
+    from the last good values (:func:`predict_proprioception`, :func:`predict_base_state`) up to
+    ``ride_through_s`` after it arrived, and held at that prediction afterwards, so the estimator
+    and controller carry on (ride-through) and the posture held in the STAND stage is where the
+    robot was predicted to be. A stream that is not needed is predicted the same way while stale.
     """
 
     def __init__(self, robot: RobotModel, config: LinkConfig, require_base_state: bool = False):
@@ -238,8 +323,10 @@ class MeasurementReceiver(LeafSystem):
         self.proprioception = Inbox(self, "proprioception", proprioception, first)
         self.base_state = Inbox(self, "base_state", base_state,
                                 np.concatenate([start["base_pose"], start["base_velocity"]]))
-        self._link = self.DeclareDiscreteState(1)
-        self._stats = self.DeclareDiscreteState(2)
+        predictors = {self.proprioception: lambda values, dt: predict_proprioception(values, nj, dt),
+                      self.base_state: predict_base_state}
+        self._link = self.DeclareDiscreteState([float(LinkStage.DAMPING)])
+        self._stats = self.DeclareDiscreteState(5)
         layout = {"joint_state": (self.proprioception, 0, 2 * nj),
                   "imu": (self.proprioception, 2 * nj, 2 * nj + 10),
                   "foot_contact": (self.proprioception, 2 * nj + 10, 2 * nj + 12),
@@ -247,24 +334,36 @@ class MeasurementReceiver(LeafSystem):
         for name, (inbox, a, b) in layout.items():
             self.DeclareVectorOutputPort(
                 name, b - a, lambda context, out, inbox=inbox, a=a, b=b:
-                out.SetFromVector(inbox.latest.Eval(context)[a:b]),
-                prerequisites_of_calc={inbox.latest.ticket()})
+                out.SetFromVector(self._measured(context, inbox, predictors[inbox])[a:b]),
+                prerequisites_of_calc={inbox.latest.ticket(), self.time_ticket()})
         self.link_port = self.DeclareStateOutputPort("link", self._link)
         self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.receive_rate_hz, 0.0, self._update)
 
+    def _measured(self, context, inbox: Inbox, predict) -> np.ndarray:
+        """The inbox's newest values, predicted forward while its stream is stale."""
+        age = inbox.age(context)
+        if age <= self.config.timeout_s or not np.isfinite(age):
+            return inbox.latest.Eval(context)
+        stored = context.get_discrete_state(inbox.values).value()
+        return predict(stored, min(age, self.config.timeout_s + self.config.ride_through_s))
+
     def _update(self, context, state) -> None:
-        rejected, stale_events = context.get_discrete_state(self._stats).value()
+        rejected, stale_events, *entries = context.get_discrete_state(self._stats).value()
         for inbox in (self.proprioception, self.base_state):
             rejected += not inbox.take(context, state)
-        timeout = self.config.timeout_s
-        link = float(self.proprioception.fresh(context, state, timeout) and (
-            not self.require_base_state or self.base_state.fresh(context, state, timeout)))
-        was = context.get_discrete_state(self._link).GetAtIndex(0)
-        stale_events += was == 1.0 and link == 0.0
-        state.get_mutable_discrete_state().get_mutable_vector(int(self._link)).SetFromVector([link])
+        age = self.proprioception.age(context, state)
+        if self.require_base_state:
+            age = max(age, self.base_state.age(context, state))
+        stage = link_stage(age, self.config)
+        was = LinkStage(int(context.get_discrete_state(self._link).GetAtIndex(0)))
+        lost = np.isfinite(age)  # before the first message nothing is lost yet
+        stale_events += was == LinkStage.FRESH and stage != LinkStage.FRESH
+        if lost and stage > was:  # each stage entered counts; skipped ones (ride_through_s 0) do not
+            entries[stage - 1] += 1
+        state.get_mutable_discrete_state().get_mutable_vector(int(self._link)).SetFromVector([float(stage)])
         state.get_mutable_discrete_state().get_mutable_vector(int(self._stats)).SetFromVector(
-            [rejected, stale_events])
+            [rejected, stale_events, *entries])
 
 
 class CommandSender(LeafSystem):
@@ -275,15 +374,16 @@ class CommandSender(LeafSystem):
     | actuation     | in  | nu       | joint torques (N·m), added to τ_ff                     |
     | motor_command | in  | 5·nu     | (``motor_pd`` only) q_d, v_d, τ_ff, K_p, K_d             |
     | joint_state   | in  | 2·nj     | measured joints (damping holds these)                  |
-    | link          | in  | 1        | 1 while proprioception is fresh                        |
+    | link          | in  | 1        | :class:`LinkStage` of the measurements                 |
     | estop         | in  | abstract | raw bytes of ROMOCO_ESTOP                              |
     | message       | out | abstract | encoded biped_motor_command_t of the last update       |
     | command       | out | 5·nu     | the command sent                                        |
     | stats         | out | 3        | rejected (non-finite) commands, clamped commands, E-stop engagements |
 
-    The command is computed from the current inputs: damping while the link is not fresh or the
-    E-stop is engaged (:class:`EstopLatch`), else the controller's command, clamped (module
-    docstring). It is published ``PUBLISH_DELAY`` after each controller tick, because a publish
+    The command is computed from the current inputs: the controller's command, clamped (module
+    docstring), while measurements are fresh or ridden through; in the STAND stage a joint PD hold
+    of the (predicted) measured posture; damping after that, before the first measurement, or
+    while the E-stop is engaged (:class:`EstopLatch`). It is published ``PUBLISH_DELAY`` after each controller tick, because a publish
     at the tick's own instant sees the state from before that tick's updates, i.e. the previous
     tick's command. The periodic update (every ``period``) latches the E-stop and counts.
     """
@@ -317,7 +417,10 @@ class CommandSender(LeafSystem):
         """(command to send, rejected as non-finite, clamped) for the current inputs."""
         nu = self.robot.nu
         q = self.joint_state_port.Eval(context)[self._joint_of_actuator]
-        if self.link_port.Eval(context)[0] != 1.0 or latched:
+        stage = self.link_port.Eval(context)[0]
+        if stage in (LinkStage.RIDE_THROUGH, LinkStage.STAND) and not latched:
+            return hold_command(self.robot, q), False, False
+        if stage not in (LinkStage.FRESH, LinkStage.RIDE_THROUGH) or latched:
             return damping_command(self.robot, q), False, False
         if self.motor_pd:
             wanted = self.motor_command_port.Eval(context).copy()
@@ -356,20 +459,25 @@ def subscribe(builder: DiagramBuilder, lcm: DrakeLcmInterface, channel: str, por
 
 
 def publish(builder: DiagramBuilder, lcm: DrakeLcmInterface, channel: str, port, period: float,
-            offset: float = 0.0) -> None:
-    """Publishes the bytes on ``port`` to ``channel`` every ``period`` s (from ``offset``)."""
-    pub = builder.AddNamedSystem(f"{channel.lower()}_publisher",
-                                 LcmPublisherSystem(channel, RawBytesSerializer(), lcm, period, offset))
+            offset: float = 0.0, dropouts: list[Dropout] | None = None) -> None:
+    """Publishes the bytes on ``port`` to ``channel`` every ``period`` s (from ``offset``), except
+    while one of ``dropouts`` covers the channel."""
+    if any(channel in STREAM_CHANNELS[d.stream] for d in dropouts or ()):
+        system = DroppingPublisher(channel, lcm, period, offset, dropouts)
+    else:
+        system = LcmPublisherSystem(channel, RawBytesSerializer(), lcm, period, offset)
+    pub = builder.AddNamedSystem(f"{channel.lower()}_publisher", system)
     builder.Connect(port, pub.get_input_port())
 
 
 def make_hardware_station(robot: RobotModel, lcm: DrakeLcmInterface, period: float, motor_pd: bool = False,
                           config: LinkConfig | None = None, offset: float = 0.0,
-                          require_base_state: bool = False) -> Diagram:
+                          require_base_state: bool = False, dropouts: list[Dropout] | None = None) -> Diagram:
     """The controller's side of the LCM link, with the simulated station's ports (module docstring).
 
     ``period`` and ``offset`` are the controller's tick: commands are sent then.
     ``require_base_state`` makes motion capture part of the link (see MeasurementReceiver).
+    ``dropouts`` lose the commands this side sends (a test-rig fault, :mod:`.dropout`).
     """
     config = config or LinkConfig()
     builder = DiagramBuilder()
@@ -379,7 +487,8 @@ def make_hardware_station(robot: RobotModel, lcm: DrakeLcmInterface, period: flo
     subscribe(builder, lcm, PROPRIOCEPTION_CHANNEL, receiver.GetInputPort("proprioception"))
     subscribe(builder, lcm, BASE_STATE_CHANNEL, receiver.GetInputPort("base_state"))
     subscribe(builder, lcm, ESTOP_CHANNEL, sender.estop_port)
-    publish(builder, lcm, MOTOR_COMMAND_CHANNEL, sender.message_port, period, offset + PUBLISH_DELAY)
+    publish(builder, lcm, MOTOR_COMMAND_CHANNEL, sender.message_port, period, offset + PUBLISH_DELAY,
+            dropouts)
     builder.Connect(receiver.GetOutputPort("joint_state"), sender.joint_state_port)
     builder.Connect(receiver.link_port, sender.link_port)
     if motor_pd:
@@ -387,6 +496,7 @@ def make_hardware_station(robot: RobotModel, lcm: DrakeLcmInterface, period: flo
     builder.ExportInput(sender.actuation_port, "actuation")
     for name in ("joint_state", "imu", "foot_contact", "base_pose", "base_velocity"):
         builder.ExportOutput(receiver.GetOutputPort(name), name)
+    builder.ExportOutput(receiver.link_port, "link_stage")
     diagram = builder.Build()
     diagram.set_name(f"{robot.name}_hardware_station")
     return diagram
@@ -395,9 +505,10 @@ def make_hardware_station(robot: RobotModel, lcm: DrakeLcmInterface, period: flo
 def link_summary(station: Diagram, context) -> dict:
     """The safety counters of a hardware station (``context``: the root context)."""
     receiver, sender = station.GetSubsystemByName("receiver"), station.GetSubsystemByName("sender")
-    rejected_in, stale = receiver.stats_port.Eval(receiver.GetMyContextFromRoot(context))
+    rejected_in, stale, *entries = receiver.stats_port.Eval(receiver.GetMyContextFromRoot(context))
     rejected_out, clamped, estops = sender.stats_port.Eval(sender.GetMyContextFromRoot(context))
-    return {"stale_events": int(stale), "rejected_messages": int(rejected_in + rejected_out),
+    stages = dict(zip(("ride_through_events", "stand_events", "damping_events"), map(int, entries), strict=True))
+    return {"stale_events": int(stale), **stages, "rejected_messages": int(rejected_in + rejected_out),
             "clamped_commands": int(clamped), "estop": int(estops)}
 
 

@@ -5,10 +5,13 @@ It is the robot's side of the link the hardware station talks to
 sensors published as ROMOCO_PROPRIOCEPTION and its base as ROMOCO_BASE_STATE (what a
 motion-capture system would send), and ROMOCO_MOTOR_COMMAND applied to the motors.
 
-Like a robot's own firmware it protects itself: a command stream that stops, or carries only
+Like a robot's own firmware it protects itself. A command stream that stops, or carries only
 rejected messages (no good new command within ``timeout_s``; a single rejected message leaves
-the last good command in force until then), or an engaged ROMOCO_ESTOP puts the motors in
-damping (K_p = 0, the YAML's K_d); the E-stop latches. Counted in ``robot_summary``.
+the last good command in force until then), first holds the last joint-space posture with the
+PD gains last received (``hold_s``; a torque command has no posture or gains, so the measured
+posture when the stream was lost and the YAML's gains), then puts the motors in damping
+(K_p = 0, the YAML's K_d). An engaged ROMOCO_ESTOP puts them in damping at once and latches.
+Counted in ``robot_summary``.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from pydrake.systems.lcm import LcmInterfaceSystem
 from pydrake.systems.primitives import ConstantVectorSource
 
 from romoco_drake.interfaces.disturbance import Disturbance
+from romoco_drake.interfaces.dropout import Dropout
 from romoco_drake.interfaces.hardware import (
     PUBLISH_DELAY,
     EstopLatch,
@@ -47,6 +51,10 @@ from romoco_drake.interfaces.station import make_station
 from romoco_drake.robots.model import RobotModel
 
 
+# The robot side's stages of a command stream: fresh, holding the last posture, damping.
+_FRESH, _HOLD, _DAMPING = 0.0, 1.0, 2.0
+
+
 class CommandReceiver(LeafSystem):
     """ROMOCO_MOTOR_COMMAND (and ROMOCO_ESTOP) → the motors' command, damping when unsafe.
 
@@ -57,13 +65,18 @@ class CommandReceiver(LeafSystem):
     | joint_state   | in  | 2·nj     | measured joints (damping holds these)                 |
     | motor_command | out | 5·nu     | newest q_d, v_d, τ_ff, K_p, K_d for the station (or damping) |
     | torque        | out | nu       | that command as torque at the measured joints (torque drives) |
-    | stats         | out | 3        | rejected messages, stale events, E-stop engagements   |
+    | stats         | out | 5        | rejected messages, stale events, E-stop engagements, holds, dampings |
     """
 
-    def __init__(self, robot: RobotModel, config: LinkConfig):
+    def __init__(self, robot: RobotModel, config: LinkConfig, time_step: float = 0.001):
+        """``time_step``: the plant's, over which a torque drive's output is held."""
         super().__init__()
-        self.robot, self.config = robot, config
+        self.robot, self.config, self.time_step = robot, config, time_step
         nu = robot.nu
+        plant = robot.plant
+        nominal = plant.CreateDefaultContext()
+        plant.SetPositions(nominal, robot.nominal.q)
+        self._inertia = np.diag(plant.CalcMassMatrix(nominal))[robot.actuated_v_index]
         self._joint_of_actuator = np.array(
             [robot.joint_names.index(name) for name in robot.actuator_names], dtype=int)
 
@@ -75,41 +88,73 @@ class CommandReceiver(LeafSystem):
         self.estop = EstopLatch(self)
         self.estop_port = self.estop.port
         self.joint_state_port = self.DeclareVectorInputPort("joint_state", 2 * len(robot.joint_names))
-        self._link = self.DeclareDiscreteState(1)
-        self._stats = self.DeclareDiscreteState(3)
+        self._link = self.DeclareDiscreteState([float(_DAMPING)])
+        self._held = self.DeclareDiscreteState(5 * nu)  # the hold command, set when the stream is lost
+        self._stats = self.DeclareDiscreteState(5)
         self.motor_command_port = self.DeclareVectorOutputPort("motor_command", 5 * nu, self._motor_command)
         self.torque_port = self.DeclareVectorOutputPort("torque", nu, self._torque)
         self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.receive_rate_hz, 0.0, self._update)
 
     def _torque(self, context, out) -> None:
-        """The motor command as a drive's torque at the measured joints, within the effort limits."""
+        """The motor command as a drive's torque at the measured joints, within the effort limits.
+
+        A drive closes its PD loop far faster than the plant step, over which this torque is held.
+        Held as computed from the step's start, the YAML gains of light joints (G1's wrists:
+        K_d h / I ≈ 10 at h = 2 ms) diverge, which the drive's own loop never does. So the PD is
+        the stable (implicit) one of Tan, Liu and Turk (2011) for each joint's own inertia I
+        (the mass matrix diagonal at the nominal pose): the torque that, applied over the step,
+        meets the PD law at its end, τ = [K_p (q_d − q − h v) + K_d (v_d − v)] / (1 + K_d h / I).
+        """
         r = self.robot
         q_d, v_d, tau_ff, kp, kd = self.motor_command_port.Eval(context).reshape(5, r.nu)
         js = self.joint_state_port.Eval(context)
         nj = len(r.joint_names)
         q, v = js[self._joint_of_actuator], js[nj + self._joint_of_actuator]
-        tau = kp * (q_d - q) + kd * (v_d - v) + tau_ff
+        h = self.time_step
+        tau = (kp * (q_d - q - h * v) + kd * (v_d - v)) / (1.0 + kd * h / self._inertia) + tau_ff
         out.SetFromVector(np.clip(tau, -r.effort_limits, r.effort_limits))
 
     def _motor_command(self, context, out) -> None:
-        """The newest command while the stream is fresh and the E-stop is off, else damping."""
-        if context.get_discrete_state(self._link).GetAtIndex(0) and not self.estop.engaged(context):
-            out.SetFromVector(self.inbox.latest.Eval(context))
-        else:
+        """The newest command while the stream is fresh, the hold after a loss, else damping."""
+        stage = context.get_discrete_state(self._link).GetAtIndex(0)
+        if self.estop.engaged(context) or stage == _DAMPING:
             q = self.joint_state_port.Eval(context)[self._joint_of_actuator]
             out.SetFromVector(damping_command(self.robot, q))
+        elif stage == _HOLD:
+            out.SetFromVector(context.get_discrete_state(self._held).value())
+        else:
+            out.SetFromVector(self.inbox.latest.Eval(context))
+
+    def _hold(self, context) -> np.ndarray:
+        """Hold the last command's posture with its gains; where it had none (torque joints), the
+        measured posture with the YAML's gains."""
+        q_d, _, _, kp, kd = context.get_discrete_state(self.inbox.values).value().reshape(5, self.robot.nu)
+        torque_joint = (kp == 0.0) & (kd == 0.0)
+        q = self.joint_state_port.Eval(context)[self._joint_of_actuator]
+        return np.concatenate([np.where(torque_joint, q, q_d), np.zeros(2 * self.robot.nu),
+                               np.where(torque_joint, self.robot.kp, kp),
+                               np.where(torque_joint, self.robot.kd, kd)])
 
     def _update(self, context, state) -> None:
-        rejected, stale_events, estops = context.get_discrete_state(self._stats).value()
+        rejected, stale_events, estops, holds, dampings = context.get_discrete_state(self._stats).value()
         rejected += not self.inbox.take(context, state)
         engaged, bad = self.estop.take(context, state)
         estops, rejected = estops + engaged, rejected + bad
-        link = float(self.inbox.fresh(context, state, self.config.timeout_s))
-        stale_events += context.get_discrete_state(self._link).GetAtIndex(0) == 1.0 and link == 0.0
+        age, config = self.inbox.age(context, state), self.config
+        stage = (_FRESH if age <= config.timeout_s else _HOLD if age <= config.timeout_s + config.hold_s
+                 else _DAMPING)
+        was = context.get_discrete_state(self._link).GetAtIndex(0)
         discrete = state.get_mutable_discrete_state()
-        discrete.get_mutable_vector(int(self._link)).SetFromVector([link])
-        discrete.get_mutable_vector(int(self._stats)).SetFromVector([rejected, stale_events, estops])
+        if np.isfinite(age) and stage > was:  # a loss (before the first command nothing is lost)
+            stale_events += was == _FRESH
+            holds += stage == _HOLD
+            dampings += stage == _DAMPING
+            if stage == _HOLD:
+                discrete.get_mutable_vector(int(self._held)).SetFromVector(self._hold(context))
+        discrete.get_mutable_vector(int(self._link)).SetFromVector([stage])
+        discrete.get_mutable_vector(int(self._stats)).SetFromVector([rejected, stale_events, estops, holds,
+                                                                     dampings])
 
 
 class MeasurementSender(LeafSystem):
@@ -162,7 +207,8 @@ def make_robot_sim(robot: RobotModel, lcm: DrakeLcmInterface, time_step: float =
                    sensors: SensorConfig | None = None, meshcat: Meshcat | None = None,
                    config: LinkConfig | None = None, publish_period: float = 0.001,
                    wait_for_commands_s: float = 0.0, motor_pd: bool = True,
-                   disturbances: list[Disturbance] | None = None) -> Diagram:
+                   disturbances: list[Disturbance] | None = None,
+                   dropouts: list[Dropout] | None = None) -> Diagram:
     """The simulated robot behind LCM (module docstring); no exported ports.
 
     Measurements are published every ``publish_period`` s (the robot's own rate). With
@@ -175,14 +221,15 @@ def make_robot_sim(robot: RobotModel, lcm: DrakeLcmInterface, time_step: float =
     the plant step, as a torque-controlled drive does (for torque controllers: with K_p = K_d = 0
     the implicit loop still acts as a damper, K_p⁰·h, and an inertia, K_d⁰·h, at every joint,
     and G1 walked 8 % fast and kept stepping after the stop over LCM).
-    ``disturbances`` push the simulated robot (:func:`~romoco_drake.interfaces.station.make_station`).
+    ``disturbances`` push the simulated robot (:func:`~romoco_drake.interfaces.station.make_station`);
+    ``dropouts`` lose the measurements it sends (:mod:`~romoco_drake.interfaces.dropout`).
     """
     config = config or LinkConfig()
     builder = DiagramBuilder()
     builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
     station = builder.AddNamedSystem("station", make_station(
         robot, time_step, meshcat, motor_pd, sensors, disturbances=disturbances))
-    receiver = builder.AddNamedSystem("receiver", CommandReceiver(robot, config))
+    receiver = builder.AddNamedSystem("receiver", CommandReceiver(robot, config, time_step))
     sender = builder.AddNamedSystem("sender", MeasurementSender(robot))
     subscribe(builder, lcm, MOTOR_COMMAND_CHANNEL, receiver.GetInputPort("command"), wait_for_commands_s)
     subscribe(builder, lcm, ESTOP_CHANNEL, receiver.estop_port)
@@ -197,7 +244,7 @@ def make_robot_sim(robot: RobotModel, lcm: DrakeLcmInterface, time_step: float =
         builder.Connect(station.GetOutputPort(name), sender.GetInputPort(name))
     builder.Connect(receiver.motor_command_port, sender.GetInputPort("motor_command"))
     for channel, port in ((PROPRIOCEPTION_CHANNEL, "proprioception"), (BASE_STATE_CHANNEL, "base_state")):
-        publish(builder, lcm, channel, sender.GetOutputPort(port), publish_period, PUBLISH_DELAY)
+        publish(builder, lcm, channel, sender.GetOutputPort(port), publish_period, PUBLISH_DELAY, dropouts)
     diagram = builder.Build()
     diagram.set_name(f"{robot.name}_robot_sim")
     return diagram
@@ -206,5 +253,6 @@ def make_robot_sim(robot: RobotModel, lcm: DrakeLcmInterface, time_step: float =
 def robot_summary(robot_sim: Diagram, context) -> dict:
     """The robot side's safety counters (``context``: the root context)."""
     receiver = robot_sim.GetSubsystemByName("receiver")
-    rejected, stale, estops = receiver.stats_port.Eval(receiver.GetMyContextFromRoot(context))
-    return {"stale_events": int(stale), "rejected_messages": int(rejected), "estop": int(estops)}
+    rejected, stale, estops, holds, dampings = receiver.stats_port.Eval(receiver.GetMyContextFromRoot(context))
+    return {"stale_events": int(stale), "hold_events": int(holds), "damping_events": int(dampings),
+            "rejected_messages": int(rejected), "estop": int(estops)}

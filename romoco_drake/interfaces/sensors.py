@@ -87,6 +87,12 @@ def perturb_quaternion(q_WB: np.ndarray, theta_B: np.ndarray) -> np.ndarray:
     return Quaternion(wxyz=q_WB).multiply(Quaternion(wxyz=dq)).wxyz()
 
 
+def _unit(q: np.ndarray) -> np.ndarray | None:
+    """``q`` normalised, or None when it is not finite or has no length (a diverged state)."""
+    norm = np.linalg.norm(q)
+    return q / norm if np.isfinite(norm) and norm > 1e-9 else None
+
+
 def foot_normal_forces(contacts: ContactResults, foot_bodies: Sequence[BodyIndex]) -> np.ndarray:
     """Total normal force (N, ≥ 0 when pressing) of the point contacts on each of ``foot_bodies``.
 
@@ -217,7 +223,10 @@ class SimulatedSensors(LeafSystem):
     def _imu(self, context, out) -> None:
         theta, gyro_noise, accel_noise = self._noise(context, 2, self._imu_std).reshape(3, 3)
         x = self.plant_state_input.Eval(context)
-        q_WB = x[self._base_q:self._base_q + 4] / np.linalg.norm(x[self._base_q:self._base_q + 4])
+        q_WB = _unit(x[self._base_q:self._base_q + 4])
+        if q_WB is None:  # a diverged simulation (after a fall): a malformed reading, not an exception
+            out.SetFromVector(np.full(10, np.nan))
+            return
         R_WB = RotationMatrix(Quaternion(wxyz=q_WB)).matrix()
         w_WB_W = x[self._base_v:self._base_v + 3]
         a_WBo_W = self.accelerations_input.Eval(context)[self._base].translational()
@@ -231,7 +240,8 @@ class SimulatedSensors(LeafSystem):
         """The base pose with its quaternion normalised: the plant's drifts off unit norm as it is
         integrated (past the 1e-3 an LCM receiver accepts, after about 6 s of G1 walking)."""
         pose = self.plant_state_input.Eval(context)[self._base_q:self._base_q + 7].copy()
-        pose[:4] /= np.linalg.norm(pose[:4])
+        q_WB = _unit(pose[:4])
+        pose[:4] = np.nan if q_WB is None else q_WB
         out.SetFromVector(pose)
 
     def _foot_contact(self, context, out) -> None:

@@ -23,6 +23,9 @@ from romoco_drake.rom.types import (
 )
 from romoco_drake.values import SharedValue
 
+# The station's LinkStage.STAND: measurements lost past the ride-through (interfaces import
+# planners, not the other way round, so the value is repeated here; a test checks it).
+BLIND_STAGE = 2
 # A command component below these counts as zero (m/s, m/s, rad/s).
 _ZERO_COMMAND = (1e-3, 1e-3, 1e-3)
 
@@ -40,6 +43,8 @@ class GaitSchedule(SharedValue):
     safe_mode_entries: int
     fall_reason: str
     air_since: float = math.nan  # since when neither foot switch has reported contact (s)
+    recovering: bool = False  # a blind link paused walking: step to a stop
+    paused: bool = False  # the step clock is stopped while the link is blind
 
 
 def is_zero(cmd: WalkCommand) -> bool:
@@ -67,6 +72,11 @@ class GaitStateMachine(LeafSystem):
       ``touchdown_height``). A sole that landed on its heel (H1's line-modelled feet land
       1-2 cm toe-up) gets up to ``settle_time`` in double support to roll flat; if it does not,
       the robot keeps stepping in place.
+    - while the link to the robot is past its ride-through (``link_stage`` ≥ STAND: the station
+      holds the robot's predicted posture blind) the step clock stops with it and nothing
+      starts. When measurements resume the step goes on from where it stopped, or, if the
+      held swing foot came down meanwhile, the support switches at once; then the robot steps
+      to a stop as under a zero command, and walks on from standing when the command asks.
     - any mode → damping (latched) on a non-finite state, the base below ``fall_height`` of its
       nominal height, or a base tilt above ``fall_tilt`` rad; counted in ``safe_mode_entries``.
 
@@ -75,6 +85,7 @@ class GaitStateMachine(LeafSystem):
     | ``kinematics`` | in | abstract | :class:`~romoco_drake.robots.kinematics.RobotKinematics` of the state |
     | ``command`` | in | 6 | :class:`WalkCommand` vector |
     | ``foot_contact`` | in | 2 | contact switches [left, right], 1.0 in contact |
+    | ``link_stage`` | in | 1 | the station's :class:`~romoco_drake.interfaces.hardware.LinkStage` (0: fresh) |
     | ``planner_output`` | in | abstract | optional :class:`PlannerOutput`: an adapted step time |
     | ``mode`` | out | abstract | :class:`~romoco_drake.modes.Mode` |
     | ``gait_phase`` | out | 2 | stance (+1 left, −1 right), time in step [s] |
@@ -86,7 +97,7 @@ class GaitStateMachine(LeafSystem):
                  touchdown_height: float = 0.01, settle_time: float = 0.2, lift_time: float = 0.01,
                  offset: float = 0.0):
         super().__init__()
-        self.robot, self.t_ds = robot, t_ds
+        self.robot, self.t_ds, self.period = robot, t_ds, period
         self.balance_speed, self.stop_steps = balance_speed, stop_steps
         self.touchdown_height, self.settle_time, self.lift_time = touchdown_height, settle_time, lift_time
         self._min_base_z = fall_height * robot.nominal.base_height
@@ -94,6 +105,7 @@ class GaitStateMachine(LeafSystem):
         self.kinematics_port = self.DeclareAbstractInputPort("kinematics", kinematics_model_value(robot))
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
         self.foot_contact_port = self.DeclareVectorInputPort("foot_contact", 2)
+        self.link_stage_port = self.DeclareVectorInputPort("link_stage", 1)
         self.planner_output_port = self.DeclareAbstractInputPort(
             "planner_output", AbstractValue.Make(PlannerOutput.placeholder()))
         initial = GaitSchedule(Mode.STANDING, "left", 0.0, robot.config.walking.t_ss, 0, 0, 0, "")
@@ -120,9 +132,11 @@ class GaitStateMachine(LeafSystem):
         out.SetFromVector([1.0 if s.side == "left" else -1.0, tau])
 
     def next_schedule(self, s: GaitSchedule, t: float, kin: RobotKinematics, cmd: WalkCommand,
-                      contact: np.ndarray, plan: PlannerOutput | None = None) -> GaitSchedule:
-        """One tick of the state machine at time t (the periodic update calls this); ``plan`` is the
-        planner's output when connected."""
+                      contact: np.ndarray, blind: bool = False, plan: PlannerOutput | None = None
+                      ) -> GaitSchedule:
+        """One tick of the state machine at time t (the periodic update calls this); ``blind``:
+        the link is past its ride-through (class docstring); ``plan``: the planner's output when
+        connected."""
         if cmd.problem() is not None:
             cmd = WalkCommand(step_width=cmd.step_width, com_height=cmd.com_height, step_time=s.t_ss)
         if s.mode != Mode.DAMPING:
@@ -136,6 +150,18 @@ class GaitStateMachine(LeafSystem):
                 s = replace(s, air_since=math.nan)
         elif math.isnan(s.air_since):
             s = replace(s, air_since=t)
+        if blind:
+            if s.mode == Mode.WALKING:  # the step clock stops with the robot's posture
+                s = replace(s, step_start=s.step_start + self.period, idle_steps=0, recovering=True, paused=True)
+            return s
+        if s.recovering:
+            cmd = WalkCommand(step_width=cmd.step_width, com_height=cmd.com_height, step_time=cmd.step_time)
+        if s.paused:
+            s = replace(s, paused=False)
+            if s.mode == Mode.WALKING and (on[1] if s.side == "left" else on[0]):
+                # The held swing foot came down while the robot was blind: that was its touchdown.
+                return replace(s, side=other_side(s.side), step_start=t, t_ss=cmd.step_time,
+                               steps=s.steps + 1, idle_steps=s.idle_steps + 1)
         if s.mode == Mode.STANDING and t - s.air_since >= self.lift_time - 1e-9:
             s = replace(s, mode=Mode.IN_AIR)
         elif s.mode == Mode.IN_AIR and on.all():
@@ -151,7 +177,7 @@ class GaitStateMachine(LeafSystem):
             # A stop holds the step in double support for up to settle_time while a sole rolls flat.
             settling = stopping and t - s.step_start < s.t_ss + self.t_ds + self.settle_time
             if stopping and self._feet_down(kin):
-                s = replace(s, mode=Mode.STANDING, idle_steps=0, steps=s.steps + 1)
+                s = replace(s, mode=Mode.STANDING, idle_steps=0, steps=s.steps + 1, recovering=False)
             elif not settling:
                 s = replace(s, side=other_side(s.side), step_start=t, t_ss=cmd.step_time, steps=s.steps + 1,
                             idle_steps=idle)
@@ -168,7 +194,8 @@ class GaitStateMachine(LeafSystem):
         plan = self.planner_output_port.Eval(context) if self.planner_output_port.HasValue(context) else None
         s = self.next_schedule(self.schedule(context), context.get_time(), self.kinematics_port.Eval(context),
                                WalkCommand.from_vector(self.command_port.Eval(context)),
-                               self.foot_contact_port.Eval(context), plan)
+                               self.foot_contact_port.Eval(context),
+                               self.link_stage_port.Eval(context)[0] >= BLIND_STAGE, plan)
         state.get_mutable_abstract_state(int(self._schedule)).set_value(s)
 
     def _feet_down(self, kin: RobotKinematics) -> bool:
