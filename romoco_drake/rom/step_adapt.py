@@ -103,14 +103,19 @@ class StepAdapter:
         dcm0 = ((p_x + l_y / mk) * decay, (p_y - l_x / mk) * decay)
         if not all(map(math.isfinite, dcm0)):
             return plan
+        sigma_n = math.exp(lam * plan.t_ss)
+        u_n = (float(plan.swing_target[0]), float(plan.swing_target[1]))
+        implied = tuple(d * sigma_n - u for d, u in zip(dcm0, u_n, strict=True))
+        offset_n = self.viable_offset(implied, plan.stance_side, sigma_n)
+        box = b.box(plan.stance_side)
+        if (offset_n == implied and all(lo <= u <= hi for u, (lo, hi) in zip(u_n, box, strict=True))
+                and b.t_ss_min <= plan.t_ss <= b.t_ss_max):
+            # The law's own step is reachable and viable: the QP's minimum (zero), at any phase.
+            return replace(plan, timing_adapted=True)
         # The step may not end before it is committed (SWING_COMMIT_FRACTION of it passed).
         t_lo = max(b.t_ss_min, t_in_step / SWING_COMMIT_FRACTION)
         t_hi = max(b.t_ss_max, t_lo)
-        sigma_n = math.exp(lam * plan.t_ss)
-        u_n = (float(plan.swing_target[0]), float(plan.swing_target[1]))
-        offset_n = self.viable_offset(tuple(d * sigma_n - u for d, u in zip(dcm0, u_n, strict=True)),
-                                      plan.stance_side, sigma_n)
-        sigma, u = solve_step_qp(u_n, sigma_n, offset_n, dcm0, b.box(plan.stance_side),
+        sigma, u = solve_step_qp(u_n, sigma_n, offset_n, dcm0, box,
                                  (math.exp(lam * t_lo), math.exp(lam * t_hi)), self.weights)
         t_ss = math.log(sigma) / lam
         target = np.array([u[0], u[1], float(plan.swing_target[2])])
