@@ -29,8 +29,12 @@ def run_sweep(variants: Sequence[Variant], stop_after_fall: float | None = None,
     :func:`~romoco_drake.runner.run_scenario`)."""
     rows = []
     for i, variant in enumerate(variants):
+        label = f"[sweep {i + 1}/{len(variants)}] {variant.scenario.name} " + " ".join(
+            f"{k}={v}" for k, v in variant.params.items())
         if progress is not None:
-            label = " ".join(f"{k}={v}" for k, v in variant.params.items())
-            progress(f"[sweep {i + 1}/{len(variants)}] {variant.scenario.name} {label}")
+            progress(label)
         rows.append(variant.params | run_scenario(variant.scenario, stop_after_fall=stop_after_fall))
+        if progress is not None:
+            fall = rows[-1]["fall_time_s"]
+            progress(f"{label}: {'fell at %.2f s' % fall if rows[-1]['fell'] else 'stayed up'}")
     return rows
