@@ -35,6 +35,6 @@ def run_sweep(variants: Sequence[Variant], stop_after_fall: float | None = None,
             progress(label)
         rows.append(variant.params | run_scenario(variant.scenario, stop_after_fall=stop_after_fall))
         if progress is not None:
-            fall = rows[-1]["fall_time_s"]
-            progress(f"{label}: {'fell at %.2f s' % fall if rows[-1]['fell'] else 'stayed up'}")
+            outcome = f"fell at {rows[-1]['fall_time_s']:.2f} s" if rows[-1]["fell"] else "stayed up"
+            progress(f"{label}: {outcome}")
     return rows
