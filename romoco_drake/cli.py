@@ -278,7 +278,10 @@ def _cmd_bench_push(args) -> int:
         raise RomocoError(f"--impulses must be in (0, 500] N·s, got {args.impulses}")
     if not all(0.0 <= ph < 1.0 for ph in phases):
         raise RomocoError(f"--phases must be in [0, 1), got {args.phases}")
+    if not (0.0 <= args.ankle_gain <= 10.0 and 0.0 <= args.angular_momentum_weight <= 1e4):
+        raise RomocoError("--ankle-gain must be in [0, 10] and --angular-momentum-weight in [0, 1e4]")
     result = bench_push(args.robot, impulses, phases, directions, adapt=not args.no_adapt,
+                        ankle_gain=args.ankle_gain, angular_momentum_weight=args.angular_momentum_weight,
                         progress=stderr_progress)
     if args.json:
         print(json.dumps(result))
@@ -476,6 +479,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--directions", help="comma-separated (default: forward,backward,left,right)")
     p.add_argument("--no-adapt", action="store_true",
                    help="without step adaptation (the planner's own steps)")
+    p.add_argument("--ankle-gain", type=float, default=0.0, help="TSC-QP ankle strategy (0: off)")
+    p.add_argument("--angular-momentum-weight", type=float, default=0.0,
+                   help="TSC-QP angular-momentum damping task (0: off)")
     p.add_argument("--json", action="store_true", help="print one JSON object (last line)")
     p.set_defaults(func=_cmd_bench_push)
     p = bench.add_parser("tick", help="per-component controller tick time on a running closed loop")

@@ -102,9 +102,10 @@ class ControllerConfig:
     solver: Literal["daqp", "clarabel"] = "daqp"
     # The TSC-QP's balance terms beyond foot placement (control/tscqp.py): the hip strategy's
     # centroidal angular-momentum damping task (weight per (N·m)², rate 1/s) and the ankle
-    # strategy's CoP shift per metre of DCM error. Off by default: on G1's plane feet (1.0 and 0.1,
-    # diagrams/g1_walk.yaml) they also tracked velocity better, on the line feet of H1 and Cassie
-    # worse (H1 vx rms error 0.035 → 0.064 m/s).
+    # strategy's CoP shift per metre of DCM error. Off by default: on G1's plane feet (1.0 and 0.1)
+    # they tracked g1_walk's velocities better but the angular-momentum task made G1 fall on
+    # starting to walk after a 10 cm drop and the ankle made it fall in the 0 → 1 m/s step; on the
+    # line feet of H1 and Cassie both tracked worse (H1 vx rms error 0.035 → 0.064 m/s).
     angular_momentum_weight: float = 0.0
     angular_momentum_damping: float = 10.0
     ankle_gain: float = 0.0
@@ -118,12 +119,13 @@ declare_ranges(ControllerConfig, rate_hz=RATE_HZ, angular_momentum_weight=Range(
 
 @dataclass
 class StepAdaptationConfig:
-    """Step location and timing adaptation over the planner's steps (rom/step_adapt.py): on for a
-    foot-placement law when the robot has ``walking.step_reach``. The weights are the QP's on the
-    foothold, on σ = e^{λT} and on the DCM offset; only their ratios matter, and only when a step
-    would leave the robot's reach (a push)."""
+    """Step location and timing adaptation over the planner's steps (rom/step_adapt.py), for a
+    foot-placement law when the robot has ``walking.step_reach``. Off by default: on G1 it made
+    the 0 → 1 m/s velocity step fall (its steps reach the forward bound) and did not yet raise
+    the push it survives (README). The weights are the QP's on the foothold, on σ = e^{λT} and on
+    the DCM offset; only their ratios matter, and only when a step would leave the reach."""
 
-    enabled: bool = True
+    enabled: bool = False
     step_weight: float = 1.0
     timing_weight: float = 0.01
     offset_weight: float = 10.0

@@ -68,11 +68,10 @@ def test_contradictory_step_reach_is_a_one_line_error(tmp_path):
 
 @pytest.mark.parametrize("adapt", [True, False])
 def test_g1_survives_a_lateral_push_only_with_step_adaptation(adapt):
-    """G1 at 0.4 m/s with the ankle and hip strategy (g1_walk's ankle gain, angular-momentum weight
-    0.1), 20 N·s to its right late in a right stance: with step adaptation it is still up 2 s
+    """G1 at 0.4 m/s with the ankle and hip strategy (ankle gain 1, angular-momentum weight 0.1),
+    20 N·s to its right late in a right stance: with step adaptation it is still up 2 s
     later; with the planner's own steps it falls within 1 s."""
-    scenario = pushed(walking_scenario("g1", adapt), 4.0011, 20.0, "right")
-    controller = dataclasses.replace(scenario.controller, angular_momentum_weight=0.1)
-    summary = run_scenario(dataclasses.replace(scenario, duration_s=6.0, controller=controller),
-                           stop_after_fall=0.1)
+    scenario = pushed(walking_scenario("g1", adapt, ankle_gain=1.0, angular_momentum_weight=0.1), 4.0011,
+                      20.0, "right")
+    summary = run_scenario(dataclasses.replace(scenario, duration_s=6.0), stop_after_fall=0.1)
     assert summary["fell"] is not adapt

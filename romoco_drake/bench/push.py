@@ -37,13 +37,17 @@ HOLD_S = 3.0  # survival window after the push start
 CRITERION = f"no fall within {HOLD_S:g} s of the push start (base tilt, base height or body contact)"
 
 
-def walking_scenario(robot: str, adapt: bool = True) -> Scenario:
-    """``diagrams/<robot>_walk.yaml`` walking forward at SPEED from START_S, step adaptation on or off."""
+def walking_scenario(robot: str, adapt: bool = True, ankle_gain: float = 0.0,
+                     angular_momentum_weight: float = 0.0) -> Scenario:
+    """``diagrams/<robot>_walk.yaml`` walking forward at SPEED from START_S, step adaptation on or
+    off, with the TSC-QP's ankle gain and angular-momentum weight (control/tscqp.py)."""
     base = load_scenario(f"{robot}_walk")
     planner = dataclasses.replace(base.planner, step_adaptation=dataclasses.replace(
         base.planner.step_adaptation, enabled=adapt))
-    return dataclasses.replace(base, name=f"{robot}_push", planner=planner, disturbances=[],
-                               command=[CommandPoint(0.0), CommandPoint(START_S, SPEED)])
+    controller = dataclasses.replace(base.controller, ankle_gain=ankle_gain,
+                                     angular_momentum_weight=angular_momentum_weight)
+    return dataclasses.replace(base, name=f"{robot}_push", planner=planner, controller=controller,
+                               disturbances=[], command=[CommandPoint(0.0), CommandPoint(START_S, SPEED)])
 
 
 def step_clock(scenario: Scenario) -> tuple[float, float]:
@@ -70,10 +74,11 @@ def pushed(scenario: Scenario, t: float, impulse: float, direction: str) -> Scen
 
 
 def bench_push(robot: str = "g1", impulses=IMPULSES, phases=PHASES, directions=tuple(DIRECTIONS),
-               adapt: bool = True, progress=None) -> dict:
+               adapt: bool = True, ankle_gain: float = 0.0, angular_momentum_weight: float = 0.0,
+               progress=None) -> dict:
     """The push table (module docstring): per cell the largest impulse survived, and per direction
     the smallest of those over the phases."""
-    scenario = walking_scenario(robot, adapt)
+    scenario = walking_scenario(robot, adapt, ankle_gain, angular_momentum_weight)
     start, step = step_clock(scenario)
     cells = {(d, ph): {"direction": d, "phase": ph, "push_time_s": round(start + ph * step, 4),
                        "survived": 0.0, "fell_at": None, "fall_time_s": None}
@@ -92,6 +97,7 @@ def bench_push(robot: str = "g1", impulses=IMPULSES, phases=PHASES, directions=t
         if not alive:
             break
     per_direction = {d: min(cells[(d, ph)]["survived"] for ph in phases) for d in directions}
-    return {"robot": robot, "step_adaptation": adapt, "speed_mps": SPEED, "push_s": PUSH_S,
+    return {"robot": robot, "step_adaptation": adapt, "ankle_gain": ankle_gain,
+            "angular_momentum_weight": angular_momentum_weight, "speed_mps": SPEED, "push_s": PUSH_S,
             "impulses": sorted(impulses), "step_s": round(step, 4), "criterion": CRITERION,
             "per_direction": per_direction, "cells": list(cells.values())}
