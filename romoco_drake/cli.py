@@ -317,6 +317,48 @@ def _cmd_bench_dropout(args) -> int:
                                  f"{r['end_vx']:6.3f}")
 
 
+def _cmd_bench_push(args) -> int:
+    from romoco_drake.bench.push import DIRECTIONS, bench_push
+    from romoco_drake.robots.model import robot_names
+    from romoco_drake.runner import stderr_progress
+
+    if args.robot not in robot_names():
+        raise RomocoError(f"unknown robot '{args.robot}' (known: {', '.join(robot_names())})")
+    directions = _names(args.directions, tuple(DIRECTIONS), "direction", tuple(DIRECTIONS))
+    impulses, phases = _numbers(args.impulses, "--impulses"), _numbers(args.phases, "--phases")
+    if not all(0.0 < j <= 500.0 for j in impulses):
+        raise RomocoError(f"--impulses must be in (0, 500] N·s, got {args.impulses}")
+    if not all(0.0 <= ph < 1.0 for ph in phases):
+        raise RomocoError(f"--phases must be in [0, 1), got {args.phases}")
+    if not (0.0 <= args.ankle_gain <= 10.0 and 0.0 <= args.angular_momentum_weight <= 1e4):
+        raise RomocoError("--ankle-gain must be in [0, 10] and --angular-momentum-weight in [0, 1e4]")
+    result = bench_push(args.robot, impulses, phases, directions, adapt=not args.no_adapt,
+                        ankle_gain=args.ankle_gain, angular_momentum_weight=args.angular_momentum_weight,
+                        progress=stderr_progress)
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    adapt = "on" if result["step_adaptation"] else "off"
+    print(f"{result['robot']}: largest impulse survived (N·s), walking {result['speed_mps']} m/s, "
+          f"{result['push_s']} s pushes on the base, step adaptation {adapt}")
+    print(f"survival: {result['criterion']}; phase: fraction of the {result['step_s']} s step")
+    print("direction  " + "".join(f"phase {ph:<5g}" for ph in phases) + "  min")
+    for d in directions:
+        row = [c for c in result["cells"] if c["direction"] == d]
+        cells = "".join(f"{c['survived']:>10g} " for c in row)
+        print(f"{d:10s} {cells}{result['per_direction'][d]:>5g}")
+    return 0
+
+
+def _numbers(text: str, flag: str) -> tuple[float, ...]:
+    """A comma-separated list of numbers, or one line saying what is wrong."""
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise RomocoError(f"{flag}: '{text}' is not a comma-separated list of numbers") from None
+    return values
+
+
 def _cmd_bench_tick(args) -> int:
     from romoco_drake.bench.walking import bench_tick
     from romoco_drake.scenario import load_scenario, with_overrides
@@ -492,6 +534,19 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--stream", default="proprioception", help="proprioception, commands or all")
     p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
     p.set_defaults(func=_cmd_bench_dropout)
+    p = bench.add_parser("push", help="largest push survived while walking, per direction and gait phase")
+    p.add_argument("--robot", default="g1")
+    p.add_argument("--impulses", default="10,15,20,25,30",
+                   help="N·s, comma-separated, tried in increasing order")
+    p.add_argument("--phases", default="0,0.25,0.5,0.75", help="push start as fractions of the step")
+    p.add_argument("--directions", help="comma-separated (default: forward,backward,left,right)")
+    p.add_argument("--no-adapt", action="store_true",
+                   help="without step adaptation (the planner's own steps)")
+    p.add_argument("--ankle-gain", type=float, default=0.0, help="TSC-QP ankle strategy (0: off)")
+    p.add_argument("--angular-momentum-weight", type=float, default=0.0,
+                   help="TSC-QP angular-momentum damping task (0: off)")
+    p.add_argument("--json", action="store_true", help="print one JSON object (last line)")
+    p.set_defaults(func=_cmd_bench_push)
     p = bench.add_parser("tick", help="per-component controller tick time on a running closed loop")
     p.add_argument("--scenario", default="g1_walk")
     p.add_argument("--planner")

@@ -66,6 +66,7 @@ from romoco_drake.robots.kinematics import RobotKinematicsSystem
 from romoco_drake.robots.model import RobotModel, load_robot, robot_names
 from romoco_drake.robots.source import DIAGRAMS_DIR
 from romoco_drake.rom.planners import PLANNERS, FootPlacementLaw, PlannerParams, make_planner
+from romoco_drake.rom.step_adapt import StepAdapter, StepAdaptWeights, StepBounds
 from romoco_drake.rom.types import WalkCommand
 
 STATE_LOG_PERIOD = 0.01  # s, the state samples summaries and plots are computed from
@@ -100,18 +101,51 @@ class ControllerConfig:
     name: str = "standing"
     rate_hz: float = 1000.0
     solver: Literal["daqp", "clarabel"] = "daqp"
+    # The TSC-QP's balance terms beyond foot placement (control/tscqp.py): the hip strategy's
+    # centroidal angular-momentum damping task (weight per (N·m)², rate 1/s) and the ankle
+    # strategy's CoP shift per metre of DCM error. Off by default: on G1's plane feet (1.0 and 0.1)
+    # they tracked g1_walk's velocities better but the angular-momentum task made G1 fall on
+    # starting to walk after a 10 cm drop and the ankle made it fall in the 0 → 1 m/s step; on the
+    # line feet of H1 and Cassie both tracked worse (H1 vx rms error 0.035 → 0.064 m/s).
+    angular_momentum_weight: float = 0.0
+    angular_momentum_damping: float = 10.0
+    ankle_gain: float = 0.0
 
 
-declare_ranges(ControllerConfig, rate_hz=RATE_HZ)
+# Task weights are O(1-10); 1e4 would override every task. Damping above 1e3/s outruns any
+# controller tick; a CoP shift 10× the DCM error is a bang-bang ankle.
+declare_ranges(ControllerConfig, rate_hz=RATE_HZ, angular_momentum_weight=Range(0.0, 1e4),
+               angular_momentum_damping=Range(0.0, 1e3, "1/s"), ankle_gain=Range(0.0, 10.0))
+
+
+@dataclass
+class StepAdaptationConfig:
+    """Step location and timing adaptation over the planner's steps (rom/step_adapt.py), for a
+    foot-placement law when the robot has ``walking.step_reach``. Off by default: on G1 it made
+    the 0 → 1 m/s velocity step fall (its steps reach the forward bound) and did not yet raise
+    the push it survives (README). The weights are the QP's on the foothold, on σ = e^{λT} and on
+    the DCM offset; only their ratios matter, and only when a step would leave the reach."""
+
+    enabled: bool = False
+    step_weight: float = 1.0
+    timing_weight: float = 0.01
+    offset_weight: float = 10.0
+
+
+# Positive weights (a zero one makes the QP's minimiser non-unique); 1e6 apart is already a
+# hard priority.
+declare_ranges(StepAdaptationConfig, step_weight=Range(1e-6, 1e6),
+               timing_weight=Range(1e-6, 1e6), offset_weight=Range(1e-6, 1e6))
 
 
 @dataclass
 class PlannerConfig:
-    """A foot-placement planner (see ``romoco list``) and its feedback gain."""
+    """A foot-placement planner (see ``romoco list``), its feedback gain and step adaptation."""
 
     name: str = "hlip"
     gain: Literal["deadbeat", "converging", "lqr"] = "deadbeat"
     alpha: float = 0.5
+    step_adaptation: StepAdaptationConfig = dataclasses.field(default_factory=StepAdaptationConfig)
 
 
 # The converging gain's contraction factor per step (0: deadbeat; 1 would never converge).
@@ -546,6 +580,17 @@ def _add_estimator(builder: DiagramBuilder, scenario: Scenario, robot: RobotMode
     return estimator
 
 
+def step_adapter(scenario: Scenario, robot: RobotModel) -> StepAdapter | None:
+    """The scenario's step adapter for ``robot`` (None when off or the robot has no step reach)."""
+    cfg, reach = scenario.planner.step_adaptation, robot.config.walking.step_reach
+    if not cfg.enabled or reach is None:
+        return None
+    bounds = StepBounds(reach.forward, reach.backward, reach.lateral_min, reach.lateral_max, reach.t_ss_min,
+                        reach.t_ss_max)
+    return StepAdapter(bounds, robot.total_mass,
+                       StepAdaptWeights(cfg.step_weight, cfg.timing_weight, cfg.offset_weight))
+
+
 def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, state,
                       kinematics: RobotKinematicsSystem, command: CommandSource, station, period: float,
                       offset: float, law: FootPlacementLaw | None, estop=None) -> WalkingLoop:
@@ -572,8 +617,11 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
         builder.Connect(kinematics.kinematics_port, planner.kinematics_port)
         builder.Connect(machine.mode_port, planner.mode_port)
     else:
-        planner = builder.AddNamedSystem("planner", FootPlacementPlanner(law))
+        adapter = step_adapter(scenario, robot)
+        planner = builder.AddNamedSystem("planner", FootPlacementPlanner(law, adapter))
         builder.Connect(rom_state.rom_state_port, planner.rom_state_port)
+        if adapter is not None:
+            builder.Connect(planner.planner_output_port, machine.planner_output_port)
     embedding = builder.AddNamedSystem("embedding", OutputEmbedding(robot, period, core, offset))
     solver = CONTROLLERS[scenario.controller.name].factory(robot, core.contact, period, scenario.controller)
     controller = builder.AddNamedSystem("controller",

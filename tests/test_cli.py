@@ -84,6 +84,11 @@ def test_run_text_summary():
         (["run", "g1_walk", "--teleop"], "--teleop needs --meshcat"),
         (["run", "g1_walk", "--meshcat", "--teleop", "--command", "0:0.1,0,0"], "exclude each other"),
         (["run", "g1_stand", "--meshcat", "--teleop"], "needs a walking controller"),
+        (["bench", "push", "--robot", "atlas"], "unknown robot 'atlas'"),
+        (["bench", "push", "--impulses", "10,x"], "not a comma-separated list"),
+        (["bench", "push", "--impulses", "-5"], "--impulses must be in"),
+        (["bench", "push", "--phases", "1.5"], "--phases must be in [0, 1)"),
+        (["bench", "push", "--directions", "up"], "unknown direction 'up'"),
     ],
 )
 def test_bad_input_is_one_line_exit_2(args, words):

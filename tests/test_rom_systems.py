@@ -174,3 +174,14 @@ def test_command_source_rejects_bad_profiles():
                             ([a, b, CommandSegment(0.5, WalkCommand())], "time order")):
         with pytest.raises(RomocoError, match=match):
             CommandSource(segments)
+
+
+def test_template_ends_a_step_at_an_adapted_step_time():
+    """A plan with adapted timing (step adaptation) lands the foot at its own T_SS, not the command's."""
+    template = _template("none", z0=0.7, t_ss=0.3)
+    context = template.CreateDefaultContext()
+    plan = make_planner("alip", PlannerParams(mass=MASS)).plan(np.zeros(6), "right", 0.0, BASE)
+    template.planner_output_port.FixValue(context, dataclasses.replace(plan, t_ss=0.22, timing_adapted=True))
+    template.command_port.FixValue(context, WalkCommand(com_height=0.7, step_time=0.3).to_vector())
+    Simulator(template, context).AdvanceTo(0.22 + 1e-3)
+    assert template.gait(context).steps == 4

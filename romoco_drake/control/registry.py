@@ -24,7 +24,10 @@ CONTROLLERS = Registry("controller")
 CONTROLLERS.add("standing", lambda robot, period, offset: StandingController(robot, period, offset),
                 "joint PD about the nominal pose plus gravity compensation (stands only)",
                 walking=False, motor_command=False)
-CONTROLLERS.add("tscqp", lambda robot, contact, period, config: TscQp(robot, contact, solver=config.solver),
+CONTROLLERS.add("tscqp", lambda robot, contact, period, config: TscQp(
+                    robot, contact, solver=config.solver,
+                    angular_momentum_weight=config.angular_momentum_weight,
+                    angular_momentum_damping=config.angular_momentum_damping, ankle_gain=config.ankle_gain),
                 "task-space QP over v̇ and contact forces (RoMoCo §V-A)", walking=True, motor_command=False,
               qp_solver=True)
 CONTROLLERS.add("id", lambda robot, contact, period, config: InverseDynamics(robot, contact),

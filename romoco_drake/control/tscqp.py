@@ -29,6 +29,7 @@ from pydrake.solvers import ClarabelSolver, MathematicalProgram, SolverOptions
 from romoco_drake.control.controller import SolverResult, torque_command
 from romoco_drake.control.tasks import (
     DEFAULT_TASK_GAINS,
+    GRAVITY,
     TaskStack,
     load_split_target,
     pivot_moment_map,
@@ -157,6 +158,20 @@ class TscQp:
     double-support ZMP ramp, then overshot every speed by about 25 % (vx rms error 0.13 m/s;
     0.07 with the split). Zero gives the plain QP (exact tracking of feasible tasks).
 
+    Balance beyond foot placement (push recovery), each off at zero:
+
+    - hip strategy: ``angular_momentum_weight`` (per (N·m)²) on the centroidal angular-momentum
+      rate task k̇_G = −``angular_momentum_damping`` k_G (A_G v̇ + Ȧ_G v on its angular rows), in
+      every domain with a contact. Pelvis and swing tasks still set the posture; this damps the
+      whole-body spin a push on the base leaves, which the pelvis tasks alone trade against
+      the legs.
+    - ankle strategy: in walking's single support the pivot-moment target is no longer zero but
+      the moment of the stance force with its centre of pressure moved by ``ankle_gain`` × the
+      DCM's horizontal error from the step's ALIP plan (``TaskReferences.com_plan``), toward the
+      error: the capture-point control law (Englsberger et al. 2011) inside the sole (the CoP
+      rows bound it). Planners plan with the pivot at the sole centre; they replan every tick
+      from the measured state, so what the ankle adds is taken into account at once.
+
     τ is not a decision variable: every actuator drives one joint (B selects rows), so the
     actuated rows of the dynamics give τ = (M v̇ + C − J_hᵀ λ)_a explicitly. What is left are
     the unactuated rows as equalities and the torque limits as inequalities on (v̇, λ), which
@@ -167,7 +182,8 @@ class TscQp:
                  gains=DEFAULT_TASK_GAINS, regularization: tuple[float, float, float] = (1e-5, 1e-7, 1e-7),
                  constraint_damping: float = 20.0,
                  pivot_moment_weight: float = 1.0, load_split_weight: float = 1e-4,
-                 clarabel_tolerance: float = 1e-6):
+                 clarabel_tolerance: float = 1e-6, angular_momentum_weight: float = 0.0,
+                 angular_momentum_damping: float = 10.0, ankle_gain: float = 0.0):
         if solver not in QP_SOLVERS:
             raise RomocoError(f"unknown QP solver '{solver}' (known: {', '.join(QP_SOLVERS)})")
         self.robot, self.contact, self.solver_name = robot, contact, solver
@@ -180,6 +196,9 @@ class TscQp:
         self._eps_vdot = np.full(robot.nv, eps_vdot)
         self._sqrt_eps_tau = math.sqrt(self._eps_tau)
         self.w_pivot = pivot_moment_weight
+        self.w_k, self.d_k, self.ankle_gain = angular_momentum_weight, angular_momentum_damping, ankle_gain
+        if not (self.w_k >= 0.0 and self.d_k >= 0.0 and self.ankle_gain >= 0.0):
+            raise RomocoError("angular momentum weight and damping and the ankle gain must be non-negative")
         self._workspaces: dict[Domain, _ClarabelProgram | _DaqpWorkspace] = {}
         self._diagonals: dict[int, np.ndarray] = {}
         self._tasks = TaskStack(robot, gains)
@@ -259,19 +278,43 @@ class TscQp:
     def _extra_cost(self, kin: RobotKinematics, refs: TaskReferences, a_cmd: np.ndarray, n: int
                     ) -> tuple[np.ndarray, np.ndarray]:
         """Cost rows (S, s) on x = [v̇; λ] beyond the tasks and torques, weights folded in: the
-        pivot moment in single support, the load split in double support (class docstring)."""
+        pivot moment in single support, the load split in double support, the angular-momentum
+        damping with any contact (class docstring)."""
         nv, n_f = self.robot.nv, refs.num_contact_forces
         f = slice(nv, nv + n_f)
+        blocks = []
         if refs.domain.single_support and self.w_pivot > 0.0:
             S = np.zeros((2, n))
             S[:, f] = math.sqrt(self.w_pivot) * pivot_moment_map(self.contact, kin, refs)
-            return S, np.zeros(2)
-        if refs.domain == Domain.DOUBLE and self.w_split > 0.0:
+            blocks.append((S, math.sqrt(self.w_pivot) * self._ankle_moment(kin, refs)))
+        elif refs.domain == Domain.DOUBLE and self.w_split > 0.0:
             root = math.sqrt(self.w_split)
             S = np.zeros((n_f, n))
             S[:, f] = root * np.eye(n_f)
-            return S, root * load_split_target(self.robot, kin, refs, a_cmd)
-        return np.zeros((0, n)), np.zeros(0)
+            blocks.append((S, root * load_split_target(self.robot, kin, refs, a_cmd)))
+        if n_f and self.w_k > 0.0:
+            A_G, Adot_v = kin.centroidal_momentum_matrix()
+            root = math.sqrt(self.w_k)
+            S = np.zeros((3, n))
+            S[:, :nv] = root * A_G[:3]
+            blocks.append((S, root * (-self.d_k * (A_G[:3] @ kin.v) - Adot_v[:3])))
+        if not blocks:
+            return np.zeros((0, n)), np.zeros(0)
+        return np.vstack([S for S, _ in blocks]), np.concatenate([s for _, s in blocks])
+
+    def _ankle_moment(self, kin: RobotKinematics, refs: TaskReferences) -> np.ndarray:
+        """The pivot-moment target (N·m, world x, y): zero, or with the ankle strategy the moment
+        of the weight with the CoP moved by ankle_gain × the DCM error (class docstring)."""
+        plan = refs.com_plan if self.ankle_gain > 0.0 else None
+        if plan is None:
+            return np.zeros(2)
+        p, v = kin.p_com, kin.v_com
+        height = max(p[2] - self.contact.sole_center(kin, refs.stance_side)[2], 1e-3)
+        lam = math.sqrt(GRAVITY / height)
+        error = (p[:2] + v[:2] / lam) - (plan[0] + plan[1] / lam)
+        shift = self.ankle_gain * error
+        weight = self.robot.total_mass * GRAVITY
+        return np.array([shift[1] * weight, -shift[0] * weight])
 
     def _regularization(self, n: int) -> np.ndarray:
         """2 diag(ε) of an n-variable QP: ε_v on v̇, ε_λ on the multipliers (made once per size)."""

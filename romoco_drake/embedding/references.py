@@ -173,10 +173,12 @@ class EmbeddingCore:
 
     def update_swing(self, swing: SwingState, tau: float, plan: PlannerOutput) -> SwingState:
         """Replans the swing toward the plan's latest target, from the trajectory's own state at
-        ``tau`` seconds into the step."""
-        if swing.trajectory is None or tau >= self.swing_freeze * plan.t_ss:
+        ``tau`` seconds into the step, and re-times it to the plan's step time when that was
+        adapted; both stay as they are once the robot's ``swing_target_freeze`` of the swing has passed."""
+        if swing.trajectory is None or tau >= self.swing_freeze * swing.trajectory.duration:
             return swing
-        trajectory = swing.trajectory.replan(tau, self._target(plan))
+        duration = plan.t_ss if plan.timing_adapted and plan.t_ss > tau else swing.trajectory.duration
+        trajectory = swing.trajectory.replan(tau, self._target(plan), duration)
         return replace(swing, trajectory=trajectory)
 
     @staticmethod
@@ -209,14 +211,16 @@ class EmbeddingCore:
                  ) -> TaskReferences:
         stance = swing.stance_side
         out = self.walking.evaluate(kin, stance)
-        single = tau < plan.t_ss
+        # The step's single-support time is the swing's (latched at lift-off, re-timed until committed).
+        t_ss = swing.trajectory.duration if swing.trajectory is not None else plan.t_ss
+        single = tau < t_ss
         k = len(out.names)
         y_d, yd_d, ydd_d = np.zeros(k), np.zeros(k), np.zeros(k)
         y_d[0], yd_d[0], ydd_d[0] = _blend(swing.liftoff_com_height, plan.com_height, tau, HEIGHT_BLEND_S)
         # The swing sole turns to the planned yaw relative to the stance sole; the pelvis turns
         # half of it on the stance leg.
-        s = min(max(tau / plan.t_ss, 0.0), 1.0)
-        rate = 0.0 if not single else 1.0 / plan.t_ss
+        s = min(max(tau / t_ss, 0.0), 1.0)
+        rate = 0.0 if not single else 1.0 / t_ss
         st0, sw0 = swing.liftoff_yaw
         st_goal = -self._hip_yaw_sign[stance] * 0.5 * plan.swing_yaw
         sw_goal = plan.swing_yaw

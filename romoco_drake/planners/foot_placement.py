@@ -6,6 +6,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.rom.planners import FootPlacementLaw, PlannerParams, make_planner
+from romoco_drake.rom.step_adapt import StepAdapter
 from romoco_drake.rom.types import (
     COMMAND_SIZE,
     GAIT_PHASE_SIZE,
@@ -19,7 +20,9 @@ from romoco_drake.rom.types import (
 class FootPlacementPlanner(LeafSystem):
     """Plans the swing foot's touchdown from the ROM state, every time its output is evaluated.
 
-    Stateless: the output is a function of the inputs (cached by Drake until they change).
+    Stateless: the output is a function of the inputs (cached by Drake until they change). With an
+    ``adapter`` (:class:`~romoco_drake.rom.step_adapt.StepAdapter`) the law's plan is then bounded
+    to the robot's reach and its step time adapted to the current swing (push recovery).
 
     | port | kind | size | meaning |
     |---|---|---|---|
@@ -29,9 +32,9 @@ class FootPlacementPlanner(LeafSystem):
     | ``planner_output`` | out | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` |
     """
 
-    def __init__(self, law: FootPlacementLaw):
+    def __init__(self, law: FootPlacementLaw, adapter: StepAdapter | None = None):
         super().__init__()
-        self.law = law
+        self.law, self.adapter = law, adapter
         self.rom_state_port = self.DeclareVectorInputPort("rom_state", ROM_STATE_SIZE)
         self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
@@ -47,8 +50,11 @@ class FootPlacementPlanner(LeafSystem):
     def _calc_plan(self, context, value) -> None:
         sign, t_in_step = self.gait_phase_port.Eval(context).tolist()
         cmd = WalkCommand.from_vector(self.command_port.Eval(context))
-        value.set_value(self.law.plan(self.rom_state_port.Eval(context).tolist(), side_from_sign(sign),
-                                      t_in_step, cmd))
+        rom_state = self.rom_state_port.Eval(context).tolist()
+        plan = self.law.plan(rom_state, side_from_sign(sign), t_in_step, cmd)
+        if self.adapter is not None:
+            plan = self.adapter.adapt(plan, rom_state, t_in_step)
+        value.set_value(plan)
 
 
 def make_foot_placement_planner(name: str, params: PlannerParams) -> FootPlacementPlanner:

@@ -13,7 +13,14 @@ from romoco_drake.modes import Mode
 from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_value
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.robots.posture import base_fault
-from romoco_drake.rom.types import COMMAND_SIZE, GAIT_PHASE_SIZE, WalkCommand, other_side
+from romoco_drake.rom.types import (
+    COMMAND_SIZE,
+    GAIT_PHASE_SIZE,
+    SWING_COMMIT_FRACTION,
+    PlannerOutput,
+    WalkCommand,
+    other_side,
+)
 from romoco_drake.values import SharedValue
 
 # The station's LinkStage.STAND: measurements lost past the ride-through (interfaces import
@@ -57,7 +64,9 @@ class GaitStateMachine(LeafSystem):
     - standing → walking when the command is non-zero and the CoM is nearly still
       (|v_CoM| < ``balance_speed``); the first stance is the foot away from the lateral command.
     - walking: each step is T_SS (from the command, latched at the step start) plus ``t_ds``;
-      then the stance switches.
+      then the stance switches. A plan whose timing was adapted (``planner_output``, optional)
+      sets this step's T_SS each tick until the step is committed (``SWING_COMMIT_FRACTION`` of
+      it passed): a pushed robot may put its foot down early, or late.
     - walking → standing after ``stop_steps`` steps in a row under a zero command, at a support
       switch where both soles are flat on the ground (every sole point below
       ``touchdown_height``). A sole that landed on its heel (H1's line-modelled feet land
@@ -77,6 +86,7 @@ class GaitStateMachine(LeafSystem):
     | ``command`` | in | 6 | :class:`WalkCommand` vector |
     | ``foot_contact`` | in | 2 | contact switches [left, right], 1.0 in contact |
     | ``link_stage`` | in | 1 | the station's :class:`~romoco_drake.interfaces.hardware.LinkStage` (0: fresh) |
+    | ``planner_output`` | in | abstract | optional :class:`PlannerOutput`: an adapted step time |
     | ``mode`` | out | abstract | :class:`~romoco_drake.modes.Mode` |
     | ``gait_phase`` | out | 2 | stance (+1 left, −1 right), time in step [s] |
     | ``schedule`` | out | abstract | :class:`GaitSchedule` |
@@ -96,6 +106,8 @@ class GaitStateMachine(LeafSystem):
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
         self.foot_contact_port = self.DeclareVectorInputPort("foot_contact", 2)
         self.link_stage_port = self.DeclareVectorInputPort("link_stage", 1)
+        self.planner_output_port = self.DeclareAbstractInputPort(
+            "planner_output", AbstractValue.Make(PlannerOutput.placeholder()))
         initial = GaitSchedule(Mode.STANDING, "left", 0.0, robot.config.walking.t_ss, 0, 0, 0, "")
         self._schedule = self.DeclareAbstractState(AbstractValue.Make(initial))
         self.mode_port = self.DeclareAbstractOutputPort(
@@ -120,9 +132,11 @@ class GaitStateMachine(LeafSystem):
         out.SetFromVector([1.0 if s.side == "left" else -1.0, tau])
 
     def next_schedule(self, s: GaitSchedule, t: float, kin: RobotKinematics, cmd: WalkCommand,
-                      contact: np.ndarray, blind: bool = False) -> GaitSchedule:
+                      contact: np.ndarray, blind: bool = False, plan: PlannerOutput | None = None
+                      ) -> GaitSchedule:
         """One tick of the state machine at time t (the periodic update calls this); ``blind``:
-        the link is past its ride-through (class docstring)."""
+        the link is past its ride-through (class docstring); ``plan``: the planner's output when
+        connected."""
         if cmd.problem() is not None:
             cmd = WalkCommand(step_width=cmd.step_width, com_height=cmd.com_height, step_time=s.t_ss)
         if s.mode != Mode.DAMPING:
@@ -155,7 +169,9 @@ class GaitStateMachine(LeafSystem):
         elif s.mode == Mode.STANDING and not is_zero(cmd) and self._balanced(kin):
             side = "right" if cmd.vy > 0.0 else "left"
             s = replace(s, mode=Mode.WALKING, side=side, step_start=t, t_ss=cmd.step_time, idle_steps=0)
-        elif s.mode == Mode.WALKING and t - s.step_start >= s.t_ss + self.t_ds - 1e-9:
+        elif s.mode == Mode.WALKING and self._retime(s, t, plan):
+            s = replace(s, t_ss=plan.t_ss)
+        if s.mode == Mode.WALKING and t - s.step_start >= s.t_ss + self.t_ds - 1e-9:
             idle = s.idle_steps + 1 if is_zero(cmd) else 0
             stopping = idle >= self.stop_steps
             # A stop holds the step in double support for up to settle_time while a sole rolls flat.
@@ -167,11 +183,19 @@ class GaitStateMachine(LeafSystem):
                             idle_steps=idle)
         return s
 
+    @staticmethod
+    def _retime(s: GaitSchedule, t: float, plan: PlannerOutput | None) -> bool:
+        """Whether ``plan`` sets a new T_SS for the current, not yet committed, step."""
+        tau = t - s.step_start
+        return (plan is not None and plan.timing_adapted and plan.valid and plan.stance_side == s.side
+                and tau < SWING_COMMIT_FRACTION * s.t_ss and plan.t_ss > tau and plan.t_ss != s.t_ss)
+
     def _update(self, context, state) -> None:
+        plan = self.planner_output_port.Eval(context) if self.planner_output_port.HasValue(context) else None
         s = self.next_schedule(self.schedule(context), context.get_time(), self.kinematics_port.Eval(context),
                                WalkCommand.from_vector(self.command_port.Eval(context)),
                                self.foot_contact_port.Eval(context),
-                               self.link_stage_port.Eval(context)[0] >= BLIND_STAGE)
+                               self.link_stage_port.Eval(context)[0] >= BLIND_STAGE, plan)
         state.get_mutable_abstract_state(int(self._schedule)).set_value(s)
 
     def _feet_down(self, kin: RobotKinematics) -> bool:

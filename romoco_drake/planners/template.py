@@ -15,6 +15,7 @@ from romoco_drake.rom.types import (
     COMMAND_SIZE,
     GAIT_PHASE_SIZE,
     ROM_STATE_SIZE,
+    SWING_COMMIT_FRACTION,
     PlannerOutput,
     WalkCommand,
     other_side,
@@ -49,7 +50,9 @@ class HybridLipTemplate(LeafSystem):
     ``hold_velocity`` (H-LIP: ZMP under the CoM, c̈ = 0) or ``zmp_ramp`` (MLIP/DCM: the ZMP rolls
     linearly from the stance pivot to the new foot). T_SS and z0 are taken from ``command`` at the
     start of each step, T_DS from the planner. Phase switches happen on a ``tick`` grid; pick T_SS
-    and T_DS as multiples of it.
+    and T_DS as multiples of it. A plan whose timing was adapted (``PlannerOutput.timing_adapted``)
+    sets the current step's T_SS each tick until the step is committed, as in the robot's state
+    machine.
 
     | port | kind | size | meaning |
     |---|---|---|---|
@@ -108,6 +111,10 @@ class HybridLipTemplate(LeafSystem):
     def _switch(self, context, state) -> None:
         gait = self.gait(context)
         tau = context.get_time() - gait.step_start
+        if gait.landed is None and tau < SWING_COMMIT_FRACTION * gait.t_ss:
+            plan: PlannerOutput = self.planner_output_port.Eval(context)
+            if plan.timing_adapted and plan.valid and plan.t_ss > tau:
+                gait = replace(gait, t_ss=plan.t_ss)
         if gait.landed is None and tau >= gait.t_ss - _TIME_SLACK:
             plan: PlannerOutput = self.planner_output_port.Eval(context)
             c, s = math.cos(gait.heading), math.sin(gait.heading)

@@ -17,6 +17,10 @@ ROM_STATE_SIZE = 6
 GAIT_PHASE_SIZE = 2
 COMMAND_SIZE = 6
 SIDES = ("left", "right")
+# A step's timing and foothold are committed once this fraction of its single support has passed:
+# the state machine stops taking a new step time, the output embedding stops moving the swing
+# target (late moves would need large swing accelerations just before touchdown).
+SWING_COMMIT_FRACTION = 0.85
 
 
 def side_from_sign(sign: float) -> str:
@@ -107,6 +111,9 @@ class PlannerOutput(SharedValue):
     nominal_step: np.ndarray  # (2,) the orbit's step u* for this stance side
     valid: bool = True
     mpc: MpcReference | None = None  # set by a wrench MPC planner (VI-MPC)
+    # t_ss is this step's own (adapted) single-support time, which the state machine and the
+    # output embedding follow until the step is committed (rom/step_adapt.py); else the command's.
+    timing_adapted: bool = False
 
     @classmethod
     def placeholder(cls) -> PlannerOutput:

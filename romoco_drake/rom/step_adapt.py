@@ -1,0 +1,195 @@
+"""Step location and timing adaptation over any foot-placement law's plan (numpy only).
+
+Method: the DCM step adjustment of Khadiv, Herzog, Moosavian and Righetti, "Walking Control
+Based on Step Timing Adaptation", IEEE T-RO 36(3), 2020 (first as "Step timing adjustment: a step
+toward generating robust gaits", Humanoids 2016). In single support over a point foot the
+divergent component of motion ξ = p + ṗ/λ (relative to the stance pivot) runs away as
+ξ(T) = ξ(t) e^{λ(T − t)}, which is linear in σ = e^{λT}. Choosing the touchdown point u, σ and the
+DCM offset b = ξ(T) − u together is then a small convex QP:
+
+    min  w_u ‖u − u_n‖² + w_t (σ − σ_n)² + w_b ‖ξ(t) e^{−λt} σ − u − b_n‖²
+    s.t. u in the reachable box of the swing foot, σ in [e^{λ T_lo}, e^{λ T_hi}]
+
+(b eliminated through its equality). Unlike the paper, the nominal values come from the law
+being adapted, not from a fixed gait: u_n is the law's foothold, σ_n its single-support time
+T_n, and b_n = ξ(T_n) − u_n the DCM offset that foothold implies, clipped to offsets the next
+steps can catch (:meth:`StepAdapter.viable_offset`). Whenever the law's step is reachable and
+its offset viable, the unique minimum is its own plan (cost zero), so adaptation changes
+nothing in normal walking; when a push asks for a step beyond reach, the foothold stops at the
+bound and the step time moves so that the DCM reaches the offset wanted: earlier when the DCM
+runs away from the bound, later when it comes back.
+
+The reachable box is in the stance yaw frame: forward/backward, and a lateral band on the swing
+foot's own side of the stance foot (at least ``lateral_min`` away), so a crossing step is never
+asked for. The solution is exact: the QP is a convex piecewise quadratic in σ alone once u is
+minimised out per axis, minimised interval by interval.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from romoco_drake.errors import RomocoError
+from romoco_drake.rom.lip import GRAVITY
+from romoco_drake.rom.types import SWING_COMMIT_FRACTION, PlannerOutput
+
+
+@dataclass(frozen=True)
+class StepBounds:
+    """The swing foot's reachable touchdown box and single-support times (stance yaw frame).
+
+    ``forward``, ``backward``: how far ahead of / behind the stance contact the foot may land (m);
+    ``lateral_min``, ``lateral_max``: its lateral distance from the stance contact, on its own side
+    (m); ``t_ss_min``, ``t_ss_max``: the single-support times a step may take (s).
+    """
+
+    forward: float
+    backward: float
+    lateral_min: float
+    lateral_max: float
+    t_ss_min: float
+    t_ss_max: float
+
+    def __post_init__(self):
+        if not (self.forward > -self.backward and 0.0 <= self.lateral_min < self.lateral_max
+                and 0.0 < self.t_ss_min <= self.t_ss_max):
+            raise RomocoError(f"step bounds need forward > -backward, 0 <= lateral_min < lateral_max and "
+                              f"0 < t_ss_min <= t_ss_max, got {self}")
+
+    def box(self, stance_side: str) -> tuple[tuple[float, float], tuple[float, float]]:
+        """((x_lo, x_hi), (y_lo, y_hi)) of the swing foot when ``stance_side`` supports."""
+        if stance_side == "left":  # the right foot swings: it lands to the right
+            return (-self.backward, self.forward), (-self.lateral_max, -self.lateral_min)
+        return (-self.backward, self.forward), (self.lateral_min, self.lateral_max)
+
+
+@dataclass(frozen=True)
+class StepAdaptWeights:
+    """Weights of the QP (module docstring): foothold (per m²), σ = e^{λT} (dimensionless), DCM
+    offset (per m²). Only their ratios matter, and only once a bound is active."""
+
+    step: float = 1.0
+    timing: float = 0.01
+    offset: float = 10.0
+
+
+class StepAdapter:
+    """Adapts a :class:`PlannerOutput` to the robot's reach and the current swing (module docstring)."""
+
+    def __init__(self, bounds: StepBounds, mass: float, weights: StepAdaptWeights = StepAdaptWeights(),
+                 g: float = GRAVITY):
+        if not (weights.step > 0.0 and weights.timing > 0.0 and weights.offset > 0.0):
+            raise RomocoError(f"step adaptation weights must be positive, got {weights}")
+        if not mass > 0.0:
+            raise RomocoError(f"mass must be positive, got {mass}")
+        self.bounds, self.mass, self.weights, self.g = bounds, mass, weights, g
+
+    def adapt(self, plan: PlannerOutput, rom_state: Sequence[float], t_in_step: float) -> PlannerOutput:
+        """``plan`` with its foothold and single-support time adapted; ``rom_state`` is the six numbers
+        of the ``rom_state`` port (stance yaw frame, momentum about the stance contact)."""
+        if not plan.valid or not math.isfinite(t_in_step):
+            return plan
+        b = self.bounds
+        lam = math.sqrt(self.g / plan.com_height)
+        mk = self.mass * plan.com_height * lam
+        p_x, p_y, _, l_x, l_y, _ = rom_state
+        # DCM ξ = p + L/(m z0 λ) per plane, L signed as in the planners (sagittal L_y, lateral
+        # −L_x); its value at time T in the step is dcm0 σ with σ = e^{λT}.
+        decay = math.exp(-lam * t_in_step)
+        dcm0 = ((p_x + l_y / mk) * decay, (p_y - l_x / mk) * decay)
+        if not all(map(math.isfinite, dcm0)):
+            return plan
+        sigma_n = math.exp(lam * plan.t_ss)
+        u_n = (float(plan.swing_target[0]), float(plan.swing_target[1]))
+        implied = tuple(d * sigma_n - u for d, u in zip(dcm0, u_n, strict=True))
+        offset_n = self.viable_offset(implied, plan.stance_side, sigma_n)
+        box = b.box(plan.stance_side)
+        if (offset_n == implied and all(lo <= u <= hi for u, (lo, hi) in zip(u_n, box, strict=True))
+                and b.t_ss_min <= plan.t_ss <= b.t_ss_max):
+            # The law's own step is reachable and viable: the QP's minimum (zero), at any phase.
+            return replace(plan, timing_adapted=True)
+        # The step may not end before it is committed (SWING_COMMIT_FRACTION of it passed).
+        t_lo = max(b.t_ss_min, t_in_step / SWING_COMMIT_FRACTION)
+        t_hi = max(b.t_ss_max, t_lo)
+        sigma, u = solve_step_qp(u_n, sigma_n, offset_n, dcm0, box,
+                                 (math.exp(lam * t_lo), math.exp(lam * t_hi)), self.weights)
+        t_ss = math.log(sigma) / lam
+        target = np.array([u[0], u[1], float(plan.swing_target[2])])
+        return replace(plan, swing_target=target, t_ss=t_ss, time_to_touchdown=max(t_ss - t_in_step, 0.0),
+                       timing_adapted=True)
+
+
+    def viable_offset(self, offset: tuple[float, float], stance_side: str, sigma_n: float
+                      ) -> tuple[float, float]:
+        """The law's DCM offset at touchdown, clipped to what the following steps can catch.
+
+        The law plans over its own horizon (H-LIP deadbeat: two steps) without the reach, so after
+        a push it may aim the DCM outside the new stance foot, where only a crossing step would
+        catch it. Sagittally, the offset stays within that of a periodic gait of the longest
+        steps, [−backward, forward]/(σ_n − 1); laterally it points inward, from the new stance
+        foot toward the other foot (0 to ``lateral_max``/(σ_n − 1)). Normal walking's offsets lie
+        well inside.
+        """
+        b = self.bounds
+        scale = 1.0 / max(sigma_n - 1.0, 1e-6)
+        b_x = min(max(offset[0], -b.backward * scale), b.forward * scale)
+        inward = 1.0 if stance_side == "left" else -1.0  # the right foot lands: inward is +y
+        b_y = inward * min(max(inward * offset[1], 0.0), b.lateral_max * scale)
+        return b_x, b_y
+
+
+def solve_step_qp(u_n: tuple[float, float], sigma_n: float, offset_n: tuple[float, float],
+                  dcm0: tuple[float, float], box, sigma_box: tuple[float, float],
+                  w: StepAdaptWeights) -> tuple[float, tuple[float, float]]:
+    """(σ, (u_x, u_y)) minimising the module docstring's QP exactly.
+
+    For fixed σ each axis' best u is the clipped minimiser of w_u (u − u_n)² + w_b (c − u)² with
+    c = dcm0 σ − b_n; what is left is convex and quadratic in σ between the σ where some axis' u
+    meets a bound, so the minimum is the best of the per-interval minimisers.
+    """
+    w_u, w_t, w_b = w.step, w.timing, w.offset
+    free = w_u * w_b / (w_u + w_b)
+    lo_s, hi_s = sigma_box
+
+    def best_u(axis: int, sigma: float) -> float:
+        c = dcm0[axis] * sigma - offset_n[axis]
+        lo, hi = box[axis]
+        return min(max((w_u * u_n[axis] + w_b * c) / (w_u + w_b), lo), hi)
+
+    def cost(sigma: float) -> float:
+        total = w_t * (sigma - sigma_n) ** 2
+        for axis in (0, 1):
+            u = best_u(axis, sigma)
+            total += w_u * (u - u_n[axis]) ** 2 + w_b * (dcm0[axis] * sigma - offset_n[axis] - u) ** 2
+        return total
+
+    # σ where an axis' unclipped u reaches a bound: (w_u u_n + w_b (dcm0 σ − b_n)) = (w_u + w_b) bound.
+    knots = [lo_s, hi_s]
+    for axis in (0, 1):
+        if abs(dcm0[axis]) > 1e-12:
+            for bound in box[axis]:
+                s = ((bound * (w_u + w_b) - w_u * u_n[axis]) / w_b + offset_n[axis]) / dcm0[axis]
+                if lo_s < s < hi_s:
+                    knots.append(s)
+    knots.sort()
+    candidates = []
+    for a, z in zip(knots[:-1], knots[1:], strict=True):
+        mid = 0.5 * (a + z)
+        # On this interval each axis' term is coef (dcm0 σ − r)² + const; set the σ-derivative to 0.
+        num, den = w_t * sigma_n, w_t
+        for axis in (0, 1):
+            lo, hi = box[axis]
+            u_mid = best_u(axis, mid)
+            if lo < u_mid < hi:
+                coef, r = free, offset_n[axis] + u_n[axis]
+            else:
+                coef, r = w_b, offset_n[axis] + u_mid
+            num += coef * dcm0[axis] * r
+            den += coef * dcm0[axis] ** 2
+        candidates.append(min(max(num / den, a), z))
+    sigma = min(candidates, key=cost)
+    return sigma, (best_u(0, sigma), best_u(1, sigma))
