@@ -254,7 +254,8 @@ def _cmd_bench_matrix(args) -> int:
     def line(r: dict) -> str:
         fell = f"{r['fall_time_s']:.1f} s" if r["fell"] else "no"
         return (f"{r['robot']:7s} {r['planner']:13s} {r['controller']:11s} {fell:6s} "
-                f"{r['velocity_rms_error']!s:26s} {r['realtime_factor']:8.2f}  {r['controller_tick_ms']['median']}")
+                f"{r['velocity_rms_error']!s:26s} {r['realtime_factor']:8.2f}  "
+                f"{r['controller_tick_ms']['median']}")
 
     return _print_rows(args.json, rows, "robot   planner       controller  fell   vel rms err (vx, vy, wz)   "
                        "realtime  tick ms", line)
@@ -291,8 +292,9 @@ def _cmd_bench_agility(args) -> int:
     rows = bench_agility(args.robot, modes, motions, args.rate, args.top, progress=stderr_progress)
     return _print_rows(args.json, rows,
                        "motion     inertia   tracked   settled   paper (case 3 / cases 1-2)   ended",
-                       lambda r: f"{r['motion']:10s} {r['inertia']:9s} {r['tracked']:7.2f}   {r['settled']:7.2f}   "
-                                 f"{PAPER[r['motion']][0]:.1f} / {PAPER[r['motion']][1]:.1f}{'':18s} {r['ended']}")
+                       lambda r: f"{r['motion']:10s} {r['inertia']:9s} {r['tracked']:7.2f}   "
+                                 f"{r['settled']:7.2f}   {PAPER[r['motion']][0]:.1f} / "
+                                 f"{PAPER[r['motion']][1]:.1f}{'':18s} {r['ended']}")
 
 
 def _cmd_bench_dropout(args) -> int:
@@ -305,15 +307,18 @@ def _cmd_bench_dropout(args) -> int:
     try:
         durations = [float(d) for d in args.durations.split(",")]
     except ValueError:
-        raise RomocoError(f"--durations: '{args.durations}' is not a comma-separated list of seconds") from None
+        raise RomocoError(f"--durations: '{args.durations}' is not a comma-separated list of seconds") \
+            from None
     if not all(0.0 < d <= 10.0 for d in durations) or not 1 <= args.phases <= 20:
         raise RomocoError("--durations must be in (0, 10] s and --phases in [1, 20]")
     rows = bench_dropout(args.robot, durations, args.phases, args.stream, progress=stderr_progress)
     return _print_rows(args.json, rows,
-                       "dropout  start   phase  fell  ride-through  stand  damping  robot holds  end vx (m/s)",
+                       "dropout  start   phase  fell  ride-through  stand  damping  robot holds  "
+                       "end vx (m/s)",
                        lambda r: f"{r['duration_s']:5.2f} s {r['t']:6.3f}  {r['phase']:5.2f}  "
                                  f"{'yes' if r['fell'] else 'no':4s}  {r['ride_through_events']:12d}  "
-                                 f"{r['stand_events']:5d}  {r['damping_events']:7d}  {r['robot_hold_events']:11d}  "
+                                 f"{r['stand_events']:5d}  {r['damping_events']:7d}  "
+                                 f"{r['robot_hold_events']:11d}  "
                                  f"{r['end_vx']:6.3f}")
 
 

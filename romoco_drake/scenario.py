@@ -406,7 +406,8 @@ def parse_dropout(text: str) -> Dropout:
             raise ValueError
         dropout = Dropout(float(t), float(duration), *rest)
     except ValueError:
-        raise RomocoError(f"--dropout: '{text}' is not t:duration[:stream] (e.g. '3:0.3:proprioception')") from None
+        raise RomocoError(f"--dropout: '{text}' is not t:duration[:stream] (e.g. '3:0.3:proprioception')") \
+            from None
     if dropout.stream not in STREAM_CHANNELS:
         raise RomocoError(f"--dropout: '{text}': stream must be one of: {', '.join(STREAM_CHANNELS)}")
     for key in ("t", "duration"):
@@ -486,7 +487,8 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
                           "disturbances need a simulated plant (not the hardware link)")
     if link != "via_lcm" and scenario.dropouts:
         raise ConfigError(f"<scenario {scenario.name or scenario.robot}>", "dropouts",
-                          "dropouts lose LCM messages between a simulated robot and the controller: use --via-lcm")
+                          "dropouts lose LCM messages between a simulated robot and the controller: "
+                          "use --via-lcm")
     if teleop and meshcat is None:
         raise RomocoError("--teleop needs --meshcat (the page is the command source)")
     if teleop and not CONTROLLERS[scenario.controller.name].facts["walking"]:

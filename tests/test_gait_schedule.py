@@ -116,8 +116,9 @@ def test_hip_predicted_at_the_measured_velocity_steps_closer_when_slow():
     t_rem, v = 0.17, np.array([0.5, 0.0])
     on_speed, _ = _foothold(v, v, t_rem=t_rem)
     commanded, _ = _foothold(v, (0.8, 0.0), t_rem=t_rem)
-    measured, _ = raibert_foothold(np.array([1.0, 2.0, H]), np.array([*v, 0.0]), np.array([0.8, 0.0]), 0.0, 0.0,
-                                   "right", t_rem, stance_duration(T_SS, T_DS), H, W, 0.1, 1.0, 1.0, v_body_hip=v)
+    measured, _ = raibert_foothold(np.array([1.0, 2.0, H]), np.array([*v, 0.0]), np.array([0.8, 0.0]), 0.0,
+                                   0.0, "right", t_rem, stance_duration(T_SS, T_DS), H, W, 0.1, 1.0, 1.0,
+                                   v_body_hip=v)
     assert commanded[0] - on_speed[0] == pytest.approx(0.3 * t_rem - 0.1 * 0.3)
     assert measured[0] - on_speed[0] == pytest.approx(-0.1 * 0.3)
     assert measured[1] == pytest.approx(on_speed[1])

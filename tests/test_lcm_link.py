@@ -28,7 +28,8 @@ from romoco_drake.scenario import build_diagram, initial_positions, load_scenari
 TICK = 0.001  # s: the robot's publish period and the link's default receive period
 NO_FAULTS = {"stale_events": 0, "ride_through_events": 0, "stand_events": 0, "damping_events": 0,
              "rejected_messages": 0, "clamped_commands": 0, "estop": 0}
-ROBOT_NO_FAULTS = {"stale_events": 0, "hold_events": 0, "damping_events": 0, "rejected_messages": 0, "estop": 0}
+ROBOT_NO_FAULTS = {"stale_events": 0, "hold_events": 0, "damping_events": 0, "rejected_messages": 0,
+                   "estop": 0}
 
 
 @pytest.fixture(scope="module")
@@ -565,7 +566,8 @@ def test_robot_side_holds_then_damps_a_stalled_or_rejected_command_stream(g1):
 
     side.advance(config.timeout_s + 0.005)  # hold: the last posture and gains, no feed-forward
     held = side.applied()
-    for key, value in (("q_d", posture[0]), ("v_d", 0.0), ("tau_ff", 0.0), ("kp", posture[3]), ("kd", posture[4])):
+    expected = (("q_d", posture[0]), ("v_d", 0.0), ("tau_ff", 0.0), ("kp", posture[3]), ("kd", posture[4]))
+    for key, value in expected:
         np.testing.assert_allclose(held[key], value, err_msg=key)
     assert side.summary() == ROBOT_NO_FAULTS | {"stale_events": 1, "hold_events": 1}
 
@@ -581,7 +583,8 @@ def test_robot_side_holds_then_damps_a_stalled_or_rejected_command_stream(g1):
     nan_posture = [x.copy() for x in posture]
     nan_posture[0][0] = np.nan
     ticks = round((config.timeout_s + config.hold_s + 0.01) / TICK)
-    side.advance(ticks * TICK, lambda utime: codec.encode_motor_command(codec.MotorCommand(utime, *nan_posture)))
+    side.advance(ticks * TICK,
+                 lambda utime: codec.encode_motor_command(codec.MotorCommand(utime, *nan_posture)))
     side.advance(0.003)  # the last ones are taken
     _assert_damping(g1, side.applied(), side.measured_q(), atol=0.02)
     assert side.summary() == {"stale_events": 2, "hold_events": 2, "damping_events": 2,

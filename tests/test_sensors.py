@@ -201,7 +201,8 @@ def test_config_loads_from_yaml_data_and_rejects_bad_values():
         load_typed("sensors.yaml", SensorConfig, {"gyro_noise": 0.1})
 
 
-@pytest.mark.parametrize("quaternion", [[np.nan, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 0.0], [np.inf, 1.0, 0.0, 0.0]])
+@pytest.mark.parametrize("quaternion", [[np.nan, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 0.0],
+                                        [np.inf, 1.0, 0.0, 0.0]])
 def test_a_diverged_state_reads_as_malformed_measurements_not_an_exception(quaternion):
     """After a fall the plant's state can blow up; the IMU and motion capture then read NaN
     (which the estimators reject and count) instead of raising "Quaternion is not normalized"

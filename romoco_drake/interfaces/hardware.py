@@ -121,7 +121,8 @@ def link_stage(age: float, config: LinkConfig) -> LinkStage:
         return LinkStage.FRESH
     if age <= config.timeout_s + config.ride_through_s:
         return LinkStage.RIDE_THROUGH
-    return LinkStage.STAND if age <= config.timeout_s + config.ride_through_s + config.stand_s else LinkStage.DAMPING
+    stand_until = config.timeout_s + config.ride_through_s + config.stand_s
+    return LinkStage.STAND if age <= stand_until else LinkStage.DAMPING
 
 
 def predict_proprioception(values: np.ndarray, num_joints: int, dt: float) -> np.ndarray:
@@ -292,9 +293,9 @@ class MeasurementReceiver(LeafSystem):
     |-----------------|-----|----------|------------------------------------------------------|
     | proprioception  | in  | abstract | raw bytes of ROMOCO_PROPRIOCEPTION                    |
     | base_state      | in  | abstract | raw bytes of ROMOCO_BASE_STATE                        |
-    | joint_state, imu, foot_contact, base_pose, base_velocity | out | as the station | newest good values, or their prediction |
+    | joint_state, imu, …, base_velocity | out | as the station | newest good values, or predicted |
     | link            | out | 1        | the :class:`LinkStage` of the needed streams          |
-    | stats           | out | 5        | rejected messages, stale events, then entries to ride-through, stand and damping |
+    | stats           | out | 5        | rejected, stale events, entries to ride-through, stand, damping |
 
     While the needed streams are stale (no message for ``timeout_s``) the outputs are predicted
     from the last good values (:func:`predict_proprioception`, :func:`predict_base_state`) up to
@@ -381,9 +382,10 @@ class CommandSender(LeafSystem):
     | stats         | out | 3        | rejected (non-finite) commands, clamped commands, E-stop engagements |
 
     The command is computed from the current inputs: the controller's command, clamped (module
-    docstring), while measurements are fresh or ridden through; in the STAND stage a joint PD hold
-    of the (predicted) measured posture; damping after that, before the first measurement, or
-    while the E-stop is engaged (:class:`EstopLatch`). It is published ``PUBLISH_DELAY`` after each controller tick, because a publish
+    docstring), while measurements are fresh; in the RIDE_THROUGH and STAND stages a joint PD hold
+    of the measured posture, i.e. the prediction (moving during ride-through, stopped in STAND);
+    damping after that, before the first measurement, or while the E-stop is engaged
+    (:class:`EstopLatch`). It is published ``PUBLISH_DELAY`` after each controller tick, because a publish
     at the tick's own instant sees the state from before that tick's updates, i.e. the previous
     tick's command. The periodic update (every ``period``) latches the E-stop and counts.
     """
@@ -507,7 +509,8 @@ def link_summary(station: Diagram, context) -> dict:
     receiver, sender = station.GetSubsystemByName("receiver"), station.GetSubsystemByName("sender")
     rejected_in, stale, *entries = receiver.stats_port.Eval(receiver.GetMyContextFromRoot(context))
     rejected_out, clamped, estops = sender.stats_port.Eval(sender.GetMyContextFromRoot(context))
-    stages = dict(zip(("ride_through_events", "stand_events", "damping_events"), map(int, entries), strict=True))
+    names = ("ride_through_events", "stand_events", "damping_events")
+    stages = dict(zip(names, map(int, entries), strict=True))
     return {"stale_events": int(stale), **stages, "rejected_messages": int(rejected_in + rejected_out),
             "clamped_commands": int(clamped), "estop": int(estops)}
 

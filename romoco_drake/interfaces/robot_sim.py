@@ -50,7 +50,6 @@ from romoco_drake.interfaces.sensors import SensorConfig
 from romoco_drake.interfaces.station import make_station
 from romoco_drake.robots.model import RobotModel
 
-
 # The robot side's stages of a command stream: fresh, holding the last posture, damping.
 _FRESH, _HOLD, _DAMPING = 0.0, 1.0, 2.0
 
@@ -253,6 +252,7 @@ def make_robot_sim(robot: RobotModel, lcm: DrakeLcmInterface, time_step: float =
 def robot_summary(robot_sim: Diagram, context) -> dict:
     """The robot side's safety counters (``context``: the root context)."""
     receiver = robot_sim.GetSubsystemByName("receiver")
-    rejected, stale, estops, holds, dampings = receiver.stats_port.Eval(receiver.GetMyContextFromRoot(context))
+    stats = receiver.stats_port.Eval(receiver.GetMyContextFromRoot(context))
+    rejected, stale, estops, holds, dampings = stats
     return {"stale_events": int(stale), "hold_events": int(holds), "damping_events": int(dampings),
             "rejected_messages": int(rejected), "estop": int(estops)}

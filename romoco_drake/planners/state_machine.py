@@ -85,7 +85,7 @@ class GaitStateMachine(LeafSystem):
     | ``kinematics`` | in | abstract | :class:`~romoco_drake.robots.kinematics.RobotKinematics` of the state |
     | ``command`` | in | 6 | :class:`WalkCommand` vector |
     | ``foot_contact`` | in | 2 | contact switches [left, right], 1.0 in contact |
-    | ``link_stage`` | in | 1 | the station's :class:`~romoco_drake.interfaces.hardware.LinkStage` (0: fresh) |
+    | ``link_stage`` | in | 1 | the station's ``LinkStage`` (interfaces/hardware.py; 0: fresh) |
     | ``planner_output`` | in | abstract | optional :class:`PlannerOutput`: an adapted step time |
     | ``mode`` | out | abstract | :class:`~romoco_drake.modes.Mode` |
     | ``gait_phase`` | out | 2 | stance (+1 left, −1 right), time in step [s] |
@@ -152,7 +152,8 @@ class GaitStateMachine(LeafSystem):
             s = replace(s, air_since=t)
         if blind:
             if s.mode == Mode.WALKING:  # the step clock stops with the robot's posture
-                s = replace(s, step_start=s.step_start + self.period, idle_steps=0, recovering=True, paused=True)
+                s = replace(s, step_start=s.step_start + self.period, idle_steps=0, recovering=True,
+                            paused=True)
             return s
         if s.recovering:
             cmd = WalkCommand(step_width=cmd.step_width, com_height=cmd.com_height, step_time=cmd.step_time)

@@ -111,7 +111,8 @@ class VimpcPlanner(LeafSystem):
     def __init__(self, robot: RobotModel, contact: ContactModel, config: VimpcConfig, offset: float = 0.0):
         super().__init__()
         if config.hip_prediction not in ("command", "measured"):
-            raise ValueError(f"vimpc.hip_prediction must be 'command' or 'measured', got {config.hip_prediction!r}")
+            raise ValueError(f"vimpc.hip_prediction must be 'command' or 'measured', "
+                             f"got {config.hip_prediction!r}")
         if config.inertia not in INERTIA_MODES:
             raise ValueError(f"vimpc.inertia must be one of {INERTIA_MODES}, got {config.inertia!r}")
         self.robot, self.contact, self.config = robot, contact, config
