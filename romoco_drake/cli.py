@@ -397,6 +397,34 @@ def _cmd_bench_tick(args) -> int:
     return 0
 
 
+def _cmd_reproduce(args) -> int:
+    import time
+
+    from romoco_drake.bench.report import claim_table_md, write_report
+    from romoco_drake.bench.reproduce import PAPERS, QUICK_SHORTENS, reproduce
+    from romoco_drake.runner import stderr_progress
+
+    papers = list(PAPERS) if args.paper == "all" else [args.paper]
+    if papers[0] not in PAPERS:
+        raise RomocoError(f"unknown paper '{args.paper}' (known: {', '.join(PAPERS)}, all)")
+    sweep = _sweep(args)
+    t0 = time.perf_counter()
+    claims, rows = reproduce(papers, args.quick, sweep, progress=stderr_progress)
+    scored = [c for c in claims if c.holds is not None]
+    meta = {"papers": papers, "quick": args.quick, "quick_shortens": QUICK_SHORTENS, "runs": len(rows),
+            "workers": f"Ray cluster {args.ray_address}" if args.ray_address else f"{args.workers} worker(s)",
+            "wall_s": round(time.perf_counter() - t0, 1), "scored": len(scored),
+            "held": sum(c.holds for c in scored), "not_built": len(claims) - len(scored)}
+    paths = write_report(args.out, papers, claims, rows, meta)
+    if args.json:
+        print(json.dumps(meta | paths))
+    else:
+        print(claim_table_md(claims))
+        print(f"\n{meta['held']} of {meta['scored']} claims hold ({meta['not_built']} not built); "
+              f"{meta['runs']} runs in {meta['wall_s']} s; wrote {', '.join(paths.values())}")
+    return 0
+
+
 def _print_rom_summary(s: dict) -> None:
     cost = s["planner_cost"]
     print(f"{s['planner']} on the {s['robot']} template (z0 {s['com_height_m']} m, T_SS {s['t_ss_s']} s, "
@@ -580,6 +608,15 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--ticks", type=int, default=500)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_bench_tick)
+    p = sub.add_parser("reproduce", help="rerun a paper's claims and report them beside the paper's numbers")
+    p.add_argument("paper", help="romoco, xo, vimpc or all")
+    p.add_argument("--out", type=Path, default=Path("reproduce"), metavar="DIR",
+                   help="where report.md, report.html and results.json go (default: reproduce/)")
+    p.add_argument("--quick", action="store_true",
+                   help="shorter runs and fewer cells, for CI and a first look")
+    p.add_argument("--json", action="store_true", help="print the summary and the file paths as JSON")
+    _add_sweep_args(p)
+    p.set_defaults(func=_cmd_reproduce)
     # Centroidal inertia (issue 14): data generation, training and the horizon benchmark.
     p = sub.add_parser("inertia-data", help="IK samples of foot poses -> centroidal inertia (CCINN data)")
     p.add_argument("robot")
