@@ -81,12 +81,13 @@ def figures(rows: list[dict], out: Path) -> dict[str, Path]:
             path = out / f"{name}.png"
             path.write_bytes(base64.b64decode(png))
             made[f"XO: {name.removeprefix('xo_walk_').replace('_', ' ')}"] = path
-        if "inertia" in r:
+        if "inertia_probe" in r:
             from romoco_drake.inertia.ccinn import OUTPUTS
 
             title = f"Fig. 3: centroidal inertia along the DRACO {r['motion']} ramp (base frame)"
-            made[title] = plot_inertia_prediction(out / "fig3_inertia.png", title, r["inertia"]["t"],
-                                                  r["inertia"]["true"], r["inertia"]["predicted"], OUTPUTS)
+            probe = r["inertia_probe"]
+            made[title] = plot_inertia_prediction(out / "fig3_inertia.png", title, probe["t"], probe["true"],
+                                                  probe["predicted"], OUTPUTS)
     return made
 
 
@@ -96,7 +97,7 @@ def write_report(out: Path, papers: list[str], claims: list[Claim], rows: list[d
     try:
         out.mkdir(parents=True, exist_ok=True)
         made = figures(rows, out / "figures")
-        runs = [{k: v for k, v in r.items() if k not in ("trace", "figures", "inertia")} for r in rows]
+        runs = [{k: v for k, v in r.items() if k not in ("trace", "figures", "inertia_probe")} for r in rows]
         results = {"meta": meta, "claims": [dataclasses.asdict(c) for c in claims], "runs": runs}
         (out / "results.json").write_text(json.dumps(results, indent=1, default=_json_default))
         (out / "report.md").write_text(_markdown(papers, claims, made, meta, out))

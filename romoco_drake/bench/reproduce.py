@@ -159,7 +159,7 @@ def inertia_probe(built, context) -> dict:
         I_pred = predict_inertia_horizon(X_WB[None], X_WL[None], X_WR[None], model)[0]
         true.append(entries_from_inertia(R.T @ centroidal_inertia(plant, plant_context) @ R))
         predicted.append(entries_from_inertia(R.T @ I_pred @ R))
-    return {"inertia": {"t": times[keep].tolist(), "true": np.array(true).tolist(),
+    return {"inertia_probe": {"t": times[keep].tolist(), "true": np.array(true).tolist(),
                         "predicted": np.array(predicted).tolist()}}
 
 
@@ -244,7 +244,8 @@ def romoco_claims(rows: list[dict]) -> list[Claim]:
         return [*claims, not_built("romoco", "Fig. 8", "planner comparison", "a planner")]
     src = "Fig. 8 (Cassie, T_DS = 0)"
     alip, others = fig8["alip"], [fig8[p] for p in ("hlip", "mlip", "dcm")]
-    same = all(alip[k] == fig8["hlip"][k] for k in ("velocity_rms_error", "mean_velocity", "steps"))
+    keys = ("fell", "fall_time_s", "velocity_rms_error", "mean_velocity", "steps")
+    same = all(alip[k] == fig8["hlip"][k] for k in keys)
     claims.append(Claim("romoco", src, "ALIP loses stability under the aggressive command", "ALIP unstable",
                         _fall_text(alip), "", alip["fell"],
                         "ALIP's run equals H-LIP's to the last digit: at T_DS = 0 the deadbeat ALIP step "
@@ -257,7 +258,8 @@ def romoco_claims(rows: list[dict]) -> list[Claim]:
     claims.append(Claim("romoco", src, "H-LIP, MLIP and DCM track nearly identically (errors within 1.25×)",
                         "nearly identical",
                         ", ".join(f"{p} {_fmt(e)}" for p, e in zip(("hlip", "mlip", "dcm"), errors,
-                                                                    strict=True)) + " m/s", f"max/min {spread:.2f}", spread <= 1.25))
+                                                                    strict=True)) + " m/s",
+                        f"max/min {spread:.2f}", spread <= 1.25))
     return claims
 
 
@@ -337,7 +339,7 @@ def vimpc_claims(rows: list[dict]) -> list[Claim]:
                             f"mean {PAPER_SOLVE_MS} ms", f"median {ms['median']} ms, p99 {ms['p99']} ms",
                             f"{ms['median'] / PAPER_SOLVE_MS:.2f}×", ms["median"] < 2.0,
                             "QP build and solve only (bench tick), beside other simulations on this machine"))
-    probe = next((r for r in ramps if "inertia" in r), None)
+    probe = next((r for r in ramps if "inertia_probe" in r), None)
     if probe is not None:
         med, p95, n = inertia_error(probe)
         claims.append(Claim("vimpc", "Fig. 3", "the CCINN predicts the centroidal inertia along a forward "
@@ -351,10 +353,10 @@ def inertia_error(row: dict) -> tuple[float, float, int]:
     """Median and 95th percentile of ‖I_CCINN − I‖_F / ‖I‖_F over the probe's samples before a fall."""
     from romoco_drake.inertia.ccinn import inertia_from_entries
 
-    t = np.array(row["inertia"]["t"])
+    t = np.array(row["inertia_probe"]["t"])
     live = t <= (row["fall_time_s"] if row["fall_time_s"] is not None else math.inf)
-    true = inertia_from_entries(np.array(row["inertia"]["true"])[live])
-    pred = inertia_from_entries(np.array(row["inertia"]["predicted"])[live])
+    true = inertia_from_entries(np.array(row["inertia_probe"]["true"])[live])
+    pred = inertia_from_entries(np.array(row["inertia_probe"]["predicted"])[live])
     rel = np.linalg.norm(pred - true, axis=(1, 2)) / np.linalg.norm(true, axis=(1, 2))
     return float(np.median(rel)), float(np.percentile(rel, 95)), int(live.sum())
 

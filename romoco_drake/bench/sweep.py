@@ -158,6 +158,7 @@ class _Progress:
         left = self.total - self.count
         eta = elapsed / self.count * left
         bar = "#" * round(20 * self.count / self.total)
-        outcome = f"fell at {row['fall_time_s']:.2f} s" if row.get("fell") else "done"
+        fall = row.get("fall_time_s")
+        outcome = f"fell at {fall:.2f} s" if fall is not None else "done"
         self.out(f"[{bar:20s}] {self.count}/{self.total} done, {left} left, "
                  f"ETA {int(eta) // 60}m{int(eta) % 60:02d}s | {variant.label()}: {outcome}")
