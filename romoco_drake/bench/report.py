@@ -13,6 +13,8 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
+
 from romoco_drake.bench.reproduce import FIG7_CONTROLLERS, FIG8_PLANNERS, Claim, speed_error, tracking_error
 from romoco_drake.errors import RomocoError
 
@@ -84,10 +86,12 @@ def figures(rows: list[dict], out: Path) -> dict[str, Path]:
         if "inertia_probe" in r:
             from romoco_drake.inertia.ccinn import OUTPUTS
 
-            title = f"Fig. 3: centroidal inertia along the DRACO {r['motion']} ramp (base frame)"
+            title = f"Fig. 3: centroidal inertia along the DRACO {r['motion']} ramp (base frame, to a fall)"
             probe = r["inertia_probe"]
-            made[title] = plot_inertia_prediction(out / "fig3_inertia.png", title, probe["t"], probe["true"],
-                                                  probe["predicted"], OUTPUTS)
+            end = math.inf if r["fall_time_s"] is None else r["fall_time_s"]
+            n = int(np.searchsorted(probe["t"], end, side="right"))
+            made[title] = plot_inertia_prediction(out / "fig3_inertia.png", title, probe["t"][:n],
+                                                  probe["true"][:n], probe["predicted"][:n], OUTPUTS)
     return made
 
 
