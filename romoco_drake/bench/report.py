@@ -30,11 +30,15 @@ NOTES = {
         "λT → 0 limit, which walks 11 % slow on G1). At T_DS = 0 the H-LIP S2S map is the ALIP one, and "
         "ALIP's step sets the end-of-next-step momentum to the orbit's: its closed loop is "
         "[[0, −1/(z0 λ sinh λT)], [0, 0]], nilpotent, so it is the unique deadbeat gain of that 2-state, "
-        "1-input map — H-LIP's deadbeat gain. Same ROM state, same T, same foothold: the two runs are "
+        "1-input map — H-LIP's deadbeat gain (the Fig. 8 ALIP row gives the largest step difference over "
+        "random template states). Same ROM state, same T, same foothold: the two runs are "
         "identical to the last digit on every robot whose gait has no double support (G1, and Fig. 8's "
         "Cassie), as `romoco run g1_walk --planner alip` showed. No wiring bug: the registry builds AlipLaw "
         "(tests/test_rom_planners.py checks the equality). The paper's unstable ALIP cannot come from this "
-        "law; it points at something of their ALIP implementation outside the foot-placement formula.",
+        "law; it points at something of their ALIP implementation outside the foot-placement formula. "
+        "MLIP at T_DS = 0 (a zero-length ZMP roll) is H-LIP too; only DCM, which regulates the divergent "
+        "component alone, steps differently. No command can separate ALIP from H-LIP here, so a larger step "
+        "than Fig. 8's (which passes Cassie's 0.5 m/s² command limiter) would make both fall or neither.",
     ],
     "xo": ["The Table I walk of diagrams/xo_walk.yaml (general-foot ALIP + momentum HQP); the ratios are "
            "metrics.momentum_summary's; the figures are romoco run --plot's."],
