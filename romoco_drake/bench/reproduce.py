@@ -232,11 +232,11 @@ def romoco_claims(rows: list[dict]) -> list[Claim]:
                             "IK best swing-foot orientation",
                             ", ".join(f"{c} {_fmt(v)}" for c, v in tilt.items()) + " rad",
                             f"best: {best_tilt}", best_tilt in ("velik", "posik")))
-        worse = all(speed[c] > speed["tscqp"] and pelvis[c] > pelvis["tscqp"] for c in ("velik", "posik"))
-        claims.append(Claim("romoco", src, "IK tracks velocity and pelvis worse than QP (both IKs)",
-                            "IK worse velocity and pelvis",
-                            "pelvis rms " + ", ".join(f"{c} {_fmt(v)}" for c, v in pelvis.items()) + " rad",
-                            "IK > QP on both" if worse else "not on both", worse))
+        for what, values, unit in (("velocity", speed, "m/s"), ("pelvis orientation", pelvis, "rad")):
+            worse = [c for c in ("velik", "posik") if values[c] > values["tscqp"]]
+            claims.append(Claim("romoco", src, f"IK tracks {what} worse than QP (both IK controllers)",
+                                f"IK worse {what}", ", ".join(f"{c} {_fmt(v)}" for c, v in values.items())
+                                + f" {unit}", f"worse: {', '.join(worse) or 'neither'}", len(worse) == 2))
     fig8 = {r["planner"]: r for r in rows if r["part"] == "fig8"}
     if not fig8:
         return claims
