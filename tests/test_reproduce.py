@@ -8,6 +8,7 @@ import re
 import numpy as np
 import pytest
 
+from romoco_drake.bench import sweep
 from romoco_drake.bench.report import write_report
 from romoco_drake.bench.reproduce import (
     FIG7_CONTROLLERS,
@@ -122,8 +123,12 @@ def test_planner_t_ds_overrides_the_robots_double_support():
 
 def test_reproduce_all_quick_on_two_workers(tmp_path, capsys):
     """The issue's CI run: every paper at --quick on local Ray; the report states each claim."""
-    pytest.importorskip("ray")
-    assert main(["reproduce", "all", "--quick", "--workers", "2", "--out", str(tmp_path), "--json"]) == 0
+    ray = pytest.importorskip("ray")
+    try:
+        assert main(["reproduce", "all", "--quick", "--workers", "2", "--out", str(tmp_path), "--json"]) == 0
+    finally:
+        ray.shutdown()
+        sweep._started.clear()
     results = json.loads((tmp_path / "results.json").read_text())
     claims, runs = results["claims"], results["runs"]
     assert {c["paper"] for c in claims} == {"romoco", "xo", "vimpc"}

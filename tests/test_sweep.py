@@ -59,9 +59,16 @@ def test_cli_sweep_errors_exit_2_in_one_line(args):
     assert out.stderr.startswith("romoco: error: ") and len(out.stderr.strip().splitlines()) == 1
 
 
-def test_ray_matrix_equals_in_process_matrix():
+@pytest.fixture
+def local_ray():
+    ray = pytest.importorskip("ray")
+    yield ray
+    ray.shutdown()
+    sweep._started.clear()
+
+
+def test_ray_matrix_equals_in_process_matrix(local_ray):
     """The issue's test: a 4-run matrix on 2 local Ray workers gives the rows of --workers 1."""
-    pytest.importorskip("ray")
     cells = (["g1"], ["hlip", "dcm"], ["tscqp", "id"], 2.0)
     alone = bench_matrix(*cells)
     on_ray = bench_matrix(*cells, sweep=SweepOptions(workers=2))
@@ -70,3 +77,6 @@ def test_ray_matrix_equals_in_process_matrix():
     strip = [[{k: v for k, v in r.items() if k not in TIMING} for r in rows] for rows in (alone, on_ray)]
     assert strip[0] == strip[1]
     assert all(r["steps"] > 0 and not r["fell"] for r in alone)
+    # The instance started stays up for the next sweep with the same options (bench push's rounds).
+    assert sweep._started == [SweepOptions(workers=2)] and local_ray.is_initialized()
+    assert sweep._ray_for(SweepOptions(workers=2)) is local_ray and local_ray.cluster_resources()["CPU"] == 2

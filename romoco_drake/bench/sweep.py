@@ -104,44 +104,55 @@ def run_sweep(variants: Sequence[Variant], options: SweepOptions = IN_PROCESS,
     return _run_on_ray(variants, options, meter)
 
 
-def _run_on_ray(variants: Sequence[Variant], options: SweepOptions, meter: _Progress) -> list[dict]:
+_started: list[SweepOptions] = []  # the options of the Ray instance this process started, if any
+
+
+def _ray_for(options: SweepOptions):
+    """The ``ray`` module, initialised for ``options``. The instance this process starts stays up
+    for its later sweeps (bench push runs one per impulse) until other options ask for another;
+    Ray shuts it down at exit. A Ray the caller initialised is used as it is."""
     try:
         import ray
     except ImportError:
         raise RomocoError(NO_RAY) from None
-    started = not ray.is_initialized()
-    if started:
-        try:
-            if options.address is not None:
-                ray.init(address=options.address, logging_level="ERROR", log_to_driver=False)
-            else:
-                ray.init(num_cpus=options.workers, include_dashboard=False, logging_level="ERROR",
-                         log_to_driver=False)
-        except Exception as e:  # Ray raises ConnectionError, RuntimeError, ValueError, ...
-            where = options.address or f"a local instance with {options.workers} CPUs"
-            raise RomocoError(f"cannot start Ray on {where}: {str(e).splitlines()[0] if str(e) else e!r}") \
-                from None
+    if ray.is_initialized():
+        if not _started or _started[0] == options:
+            return ray
+        ray.shutdown()
+        _started.clear()
     try:
-        remote = ray.remote(num_cpus=1, max_retries=0)(_run)
-        pending = {remote.remote(v): i for i, v in enumerate(variants)}
-        rows: list[dict | None] = [None] * len(variants)
-        while pending:
-            ready, _ = ray.wait(list(pending), num_returns=1)
-            i = pending.pop(ready[0])
-            try:
-                rows[i] = ray.get(ready[0])
-            except ray.exceptions.RayTaskError as e:
-                cause = e.cause if isinstance(e.cause, Exception) else e
-                for ref in pending:
-                    ray.cancel(ref, force=True)
-                if isinstance(cause, RomocoError):
-                    raise cause from None
-                raise RuntimeError(f"sweep run '{variants[i].label()}' failed on Ray") from cause
-            meter.done(variants[i], rows[i])
-        return rows
-    finally:
-        if started:
-            ray.shutdown()
+        if options.address is not None:
+            ray.init(address=options.address, logging_level="ERROR", log_to_driver=False)
+        else:
+            ray.init(num_cpus=options.workers, include_dashboard=False, logging_level="ERROR",
+                     log_to_driver=False)
+    except Exception as e:  # Ray raises ConnectionError, RuntimeError, ValueError, ...
+        where = options.address or f"a local instance with {options.workers} CPUs"
+        raise RomocoError(f"cannot start Ray on {where}: {str(e).splitlines()[0] if str(e) else e!r}") \
+            from None
+    _started.append(options)
+    return ray
+
+
+def _run_on_ray(variants: Sequence[Variant], options: SweepOptions, meter: _Progress) -> list[dict]:
+    ray = _ray_for(options)
+    remote = ray.remote(num_cpus=1, max_retries=0)(_run)
+    pending = {remote.remote(v): i for i, v in enumerate(variants)}
+    rows: list[dict | None] = [None] * len(variants)
+    while pending:
+        ready, _ = ray.wait(list(pending), num_returns=1)
+        i = pending.pop(ready[0])
+        try:
+            rows[i] = ray.get(ready[0])
+        except ray.exceptions.RayTaskError as e:
+            cause = e.cause if isinstance(e.cause, Exception) else e
+            for ref in pending:
+                ray.cancel(ref, force=True)
+            if isinstance(cause, RomocoError):
+                raise cause from None
+            raise RuntimeError(f"sweep run '{variants[i].label()}' failed on Ray") from cause
+        meter.done(variants[i], rows[i])
+    return rows
 
 
 class _Progress:
