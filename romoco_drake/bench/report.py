@@ -15,7 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from romoco_drake.bench.reproduce import FIG7_CONTROLLERS, FIG8_PLANNERS, Claim, speed_error, tracking_error
+from romoco_drake.bench.reproduce import (
+    ERRORS,
+    FIG7_CONTROLLERS,
+    FIG8_PLANNERS,
+    Claim,
+    speed_error,
+    tracking_error,
+)
 from romoco_drake.errors import RomocoError
 
 NOTES = {
@@ -73,8 +80,8 @@ def figures(rows: list[dict], out: Path) -> dict[str, Path]:
         made[title] = plot_velocity_traces(out / f"fig7_{robot}_velocity.png", title,
                                            {c: by[c]["trace"] for c in FIG7_CONTROLLERS})
         metrics = {"‖velocity rms‖ [m/s]": {c: speed_error(by[c]) for c in FIG7_CONTROLLERS}}
-        for name in ("pelvis", "swing foot position", "swing foot tilt, hip yaw"):
-            metrics[f"{name} rms"] = {c: tracking_error(by[c], name) for c in FIG7_CONTROLLERS}
+        for name, unit in ERRORS.items():
+            metrics[f"{name} rms [{unit}]"] = {c: tracking_error(by[c], name) for c in FIG7_CONTROLLERS}
         title = f"Fig. 7 ({robot}): tracking errors"
         made[title] = plot_error_bars(out / f"fig7_{robot}_errors.png", title, metrics)
     fig8 = {r["planner"]: r for r in rows if r["part"] == "fig8"}

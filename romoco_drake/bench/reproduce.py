@@ -44,7 +44,8 @@ FIG8_PLANNERS = ("alip", "hlip", "mlip", "dcm")
 # Fig. 8: stand 1 s, then the corner of Cassie's command envelope (vx 1.0, vy 0.3 of its 1.0 / 0.4
 # m/s limits), then reverse; the robot's command limiter ramps each change at its 0.5 m/s².
 FIG8_COMMAND = "1:1.0,0.3,0;5:-0.5,-0.3,0"
-ERRORS = ("pelvis", "swing foot position", "swing foot tilt, hip yaw")  # embedding.system.ERROR_GROUPS
+# Fig. 7's output groups (embedding.system.ERROR_GROUPS) and their units.
+ERRORS = {"pelvis": "rad", "swing foot position": "m", "swing foot tilt, hip yaw": "rad"}
 TRACE_PERIOD_S = 0.1  # figure traces are thinned to this period
 PAPER_SOLVE_MS = 1.4969  # VI-MPC paper §IV-B, mean MPC solve time; "mostly below 2 ms" (Fig. 4)
 
