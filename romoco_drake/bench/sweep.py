@@ -48,6 +48,7 @@ class Variant:
     options: dict = field(default_factory=dict)
 
     def label(self) -> str:
+        """The scenario's name and the params, for progress lines."""
         return " ".join([self.scenario.name, *(f"{k}={v}" for k, v in self.params.items())])
 
 
