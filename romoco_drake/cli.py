@@ -178,6 +178,15 @@ def _fall_text(summary: dict) -> str:
     return f"FELL at {summary['fall_time_s']:.2f} s ({summary['fall_reason']})"
 
 
+def _cmd_diagram(args) -> int:
+    from romoco_drake.diagram_export import write_diagram
+    from romoco_drake.scenario import load_scenario
+
+    out = args.out or Path(f"{Path(args.scenario).stem}.svg")
+    print(f"wrote {write_diagram(load_scenario(args.scenario), out, args.depth)}")
+    return 0
+
+
 def _cmd_robot_sim(args) -> int:
     from romoco_drake.runner import run_robot_sim, stderr_progress
     from romoco_drake.scenario import load_scenario
@@ -486,6 +495,11 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--lcm-url", help="LCM URL for --via-lcm or --hardware")
     p.add_argument("--lcm-log", type=Path, metavar="FILE", help="record the LCM traffic (LCM log format)")
     p.set_defaults(func=_cmd_run)
+    p = sub.add_parser("diagram", help="draw a scenario's wired Drake diagram (every system and port)")
+    p.add_argument("scenario")
+    p.add_argument("--out", type=Path, metavar="FILE.svg|.png|.pdf|.dot", help="default: SCENARIO.svg")
+    p.add_argument("--depth", type=int, default=1, help="nested diagrams opened (1: the top level)")
+    p.set_defaults(func=_cmd_diagram)
     p = sub.add_parser("robot-sim", help="a simulated robot behind LCM, for `romoco run --hardware`")
     p.add_argument("scenario", help="scenario name or YAML path (robot, plant step, sensors, link)")
     p.add_argument("--lcm-url", help="LCM URL (default: Drake's UDP multicast)")
