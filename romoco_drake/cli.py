@@ -141,7 +141,10 @@ def _cmd_run(args) -> int:
                   f"QP failures {summary['qp_failures']}, safe-mode entries {summary['safe_mode_entries']}, "
                   f"controller tick {summary['controller_tick_ms']['median']} ms median")
         if "velocity_estimate_rms_error" in summary:
-            print(f"  kalman: base velocity estimate rms error {summary['velocity_estimate_rms_error']} m/s, "
+            print(f"  {summary['estimator']}: base velocity estimate rms error "
+                  f"{summary['velocity_estimate_rms_error']} m/s, "
+                  f"yaw drift {summary['yaw_drift_rad_per_min']} "
+                  f"rad/min, position drift {summary['position_drift_per_m']} per m walked, "
                   f"{summary['estimator_rejected_updates']} rejected updates")
         if link != "sim":
             print("  link: " + ", ".join(f"{k} {summary[k]}" for k in LINK_COUNTERS))
@@ -477,7 +480,8 @@ def make_parser() -> argparse.ArgumentParser:
                    help="with --via-lcm: lose the link's STREAM (proprioception, commands or all; default "
                         "proprioception) from time T (s) for DURATION (s); repeatable")
     p.add_argument("--plot", type=Path, metavar="DIR", help="write velocity and tracking-error PNGs")
-    p.add_argument("--estimator", help="override the scenario's estimator: ground_truth or kalman")
+    p.add_argument("--estimator",
+                   help="override the scenario's estimator: ground_truth, kalman or invariant_ekf")
     p.add_argument("--solver", help="override the TSC-QP's QP solver: daqp or clarabel (the reference)")
     p.add_argument("--via-lcm", action="store_true",
                    help="run the robot and the controller over LCM in this process (memq:// by default)")
