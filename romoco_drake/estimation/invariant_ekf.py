@@ -156,7 +156,8 @@ class InvariantEkf:
         std = np.concatenate([[p.initial_tilt_std] * 2, [p.initial_yaw_std], [p.initial_velocity_std] * 3,
                               [p.initial_position_std] * 3, np.ones(6), [p.initial_gyro_bias_std] * 3,
                               [p.initial_accel_bias_std] * 3])
-        return InekfState(np.array(R_WB, dtype=float), np.zeros(3), np.asarray(p_WB, float).copy(), np.zeros((2, 3)), np.zeros(3),
+        return InekfState(np.array(R_WB, dtype=float), np.zeros(3), np.asarray(p_WB, float).copy(),
+                          np.zeros((2, 3)), np.zeros(3),
                           np.zeros(3), np.zeros(2, bool), np.diag(std**2))
 
     def error_dynamics(self, s: InekfState) -> np.ndarray:

@@ -40,7 +40,8 @@ class InvariantEkfEstimator(LeafSystem):
     Start: the first update with valid inputs starts the filter at rest in the nominal pose (base
     at ``initial_base_position`` if given); roll and pitch then converge from gravity. (The first
     accelerometer readings of a simulation are no gravity reference: the plant reports no
-    acceleration before its first step, then the contact settling.) Malformed inputs (NaN/Inf): the update is skipped and counted (:meth:`rejected_updates`).
+    acceleration before its first step, then the contact settling.) Malformed inputs (NaN/Inf):
+    the update is skipped and counted (:meth:`rejected_updates`).
     """
 
     def __init__(self, robot: RobotModel, period: float = 0.002, params: InvariantEkfParams | None = None,
