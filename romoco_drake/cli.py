@@ -252,16 +252,27 @@ def _cmd_bench_matrix(args) -> int:
     robots = _names(args.robots, WALKING_ROBOTS, "robot", WALKING_ROBOTS)
     planners = _names(args.planners, ("hlip", "mlip", "dcm"), "planner", PLANNERS)
     controllers = _names(args.controllers, ("tscqp",), "walking controller", walking_controllers)
-    rows = bench_matrix(robots, planners, controllers, args.duration, progress=stderr_progress)
+    rows = bench_matrix(robots, planners, controllers, args.duration, progress=stderr_progress,
+                        estimator=args.estimator)
 
     def line(r: dict) -> str:
         fell = f"{r['fall_time_s']:.1f} s" if r["fell"] else "no"
         return (f"{r['robot']:7s} {r['planner']:13s} {r['controller']:11s} {fell:6s} "
                 f"{r['velocity_rms_error']!s:26s} {r['realtime_factor']:8.2f}  "
-                f"{r['controller_tick_ms']['median']}")
+                f"{r['controller_tick_ms']['median']}" + _estimate_columns(r))
 
-    return _print_rows(args.json, rows, "robot   planner       controller  fell   vel rms err (vx, vy, wz)   "
-                       "realtime  tick ms", line)
+    header = "robot   planner       controller  fell   vel rms err (vx, vy, wz)   realtime  tick ms"
+    if "velocity_estimate_rms_error" in (rows[0] if rows else {}):
+        header += "  est v rms  yaw drift rad/min  pos drift /m"
+    return _print_rows(args.json, rows, header, line)
+
+
+def _estimate_columns(r: dict) -> str:
+    """A matrix row's estimator errors against the truth (filtering estimators only)."""
+    if "velocity_estimate_rms_error" not in r:
+        return ""
+    return (f"  {r['velocity_estimate_rms_error']!s:9s}  {r['yaw_drift_rad_per_min']!s:17s}  "
+            f"{r['position_drift_per_m']}")
 
 
 def _print_rows(as_json: bool, rows: list[dict], header: str, line) -> int:
@@ -524,6 +535,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--planners", help="comma-separated (default: hlip,mlip,dcm)")
     p.add_argument("--controllers", help="comma-separated (default: tscqp)")
     p.add_argument("--duration", type=float, default=None, help="simulated seconds per run")
+    p.add_argument("--estimator", help="run every scenario on this estimator (default: each scenario's own)")
     p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
     p.set_defaults(func=_cmd_bench_matrix)
     p = bench.add_parser("agility", help="VI-MPC: largest speed tracked per inertia mode and motion "
