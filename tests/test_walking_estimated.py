@@ -10,9 +10,10 @@ from romoco_drake.planners.command import reach_times
 from romoco_drake.runner import log_samples, run_scenario
 from romoco_drake.scenario import load_scenario, with_overrides
 
-# Forward, sideways, turn in place: 2 s each, so each is scored over its last second.
-SEGMENTS = [(0.5, (0.3, 0.0, 0.0)), (2.5, (0.0, 0.2, 0.0)), (4.5, (0.0, 0.0, 0.3))]
-DURATION = 6.5
+# Forward, sideways, turn in place, 2.2 s each: the limiter's ramp (0.6 s at 0.5 m/s²) and the
+# 1 s settling leave each segment's last 0.6 s (three strides) scored.
+SEGMENTS = [(0.5, (0.3, 0.0, 0.0)), (2.7, (0.0, 0.2, 0.0)), (4.9, (0.0, 0.0, 0.3))]
+DURATION = 7.1
 SPEED_TOLERANCE = 0.05  # m/s per axis, rms of the 1 s averaged true velocity after settling
 YAW_RATE_TOLERANCE = 0.1  # rad/s
 
