@@ -89,6 +89,8 @@ def test_run_text_summary():
         (["bench", "push", "--impulses", "-5"], "--impulses must be in"),
         (["bench", "push", "--phases", "1.5"], "--phases must be in [0, 1)"),
         (["bench", "push", "--directions", "up"], "unknown direction 'up'"),
+        (["bench", "matrix", "--robots", "g1", "--planners", "hlip", "--estimator", "ekf"],
+         "unknown estimator 'ekf'"),
     ],
 )
 def test_bad_input_is_one_line_exit_2(args, words):

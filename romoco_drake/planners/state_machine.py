@@ -69,9 +69,9 @@ class GaitStateMachine(LeafSystem):
       it passed): a pushed robot may put its foot down early, or late.
     - walking → standing after ``stop_steps`` steps in a row under a zero command, at a support
       switch where both soles are flat on the ground (both contact switches on, and each sole's
-      points within ``touchdown_height`` of its lowest one). A sole that landed on its heel (H1's line-modelled feet land
-      1-2 cm toe-up) gets up to ``settle_time`` in double support to roll flat; if it does not,
-      the robot keeps stepping in place.
+      points within ``touchdown_height`` of its lowest one). A sole that landed on its heel (H1's
+      line-modelled feet land 1-2 cm toe-up) gets up to ``settle_time`` in double support to roll
+      flat; if it does not, the robot keeps stepping in place.
     - while the link to the robot is past its ride-through (``link_stage`` ≥ STAND: the station
       holds the robot's predicted posture blind) the step clock stops with it and nothing
       starts. When measurements resume the step goes on from where it stopped, or, if the
