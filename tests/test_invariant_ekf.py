@@ -152,3 +152,59 @@ def test_params_reject_non_positive_noise():
     with pytest.raises(ValueError, match="gyro_noise"):
         InvariantEkfParams(gyro_noise=-1.0)
     InvariantEkfParams(kinematic_velocity_noise=np.inf)
+
+
+# ------------------------------------------------------------------- the LeafSystem on G1
+def test_system_standing_still_stays_at_the_nominal_pose_and_rejects_bad_inputs():
+    from pydrake.systems.analysis import Simulator
+
+    from romoco_drake.estimation.invariant_estimator import InvariantEkfEstimator
+    from romoco_drake.robots.model import load_robot
+
+    robot = load_robot("g1")
+    system = InvariantEkfEstimator(robot, period=DT)
+    assert system.state_output.size() == robot.nq + robot.nv
+    context = system.CreateDefaultContext()
+    nj = len(robot.joint_names)
+    q0 = robot.nominal.q
+    system.joint_state_input.FixValue(context, np.concatenate([q0[robot.joint_q_index], np.zeros(nj)]))
+    # The IMU's own orientation (NaN: none) is not read; still in the nominal pose, it reads gravity.
+    R0 = Rotation.from_quat(q0[robot.base_q_start:robot.base_q_start + 4], scalar_first=True).as_matrix()
+    imu = np.concatenate([np.full(4, np.nan), np.zeros(3), R0.T @ -GRAVITY])
+    system.imu_input.FixValue(context, imu)
+    system.foot_contact_input.FixValue(context, [1.0, 1.0])
+    Simulator(system, context).AdvanceTo(0.5)
+    x = system.state_output.Eval(context)
+    b, bv = robot.base_q_start, robot.nq + robot.base_v_start
+    np.testing.assert_allclose(x[b:b + 7], robot.nominal.q[b:b + 7], atol=1e-6)
+    np.testing.assert_allclose(x[bv:bv + 6], 0.0, atol=1e-6)
+    assert system.filter_state(context).active.all() and system.rejected_updates(context) == 0
+    bad = imu.copy()
+    bad[8] = np.nan
+    system.imu_input.FixValue(context, bad)
+    before = system.filter_state(context).pack()
+    context.SetDiscreteState(system.EvalUniquePeriodicDiscreteUpdate(context))
+    assert system.rejected_updates(context) == 1
+    np.testing.assert_array_equal(system.filter_state(context).pack(), before)
+
+
+def test_run_summary_errors_against_the_truth():
+    """Yaw drift per minute and position drift per metre walked from state logs."""
+    from romoco_drake.robots.model import load_robot
+    from romoco_drake.runner import estimate_errors
+
+    robot = load_robot("g1")
+    times = np.linspace(0.0, 30.0, 301)
+    truth = np.tile(np.concatenate([robot.nominal.q, np.zeros(robot.nv)])[:, None], (1, times.size))
+    b, bv = robot.base_q_start, robot.nq + robot.base_v_start
+    truth[b + 4] = 0.5 * times  # 15 m forward at 0.5 m/s
+    truth[bv + 3] = 0.5
+    estimate = truth.copy()
+    yaw = 0.01 * times / 30.0  # 0.01 rad over half a minute
+    estimate[b:b + 4] = np.array([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)])
+    estimate[b + 5] += 0.003 * truth[b + 4]  # 3 mm sideways per metre
+    estimate[bv + 3] += 0.02
+    errors = estimate_errors(robot, times, truth, estimate)
+    assert errors["yaw_drift_rad_per_min"] == pytest.approx(0.02)
+    assert errors["position_drift_per_m"] == pytest.approx(0.003)
+    assert errors["velocity_estimate_rms_error"] == pytest.approx(0.02)
