@@ -18,7 +18,8 @@ ESTIMATORS.add("ground_truth", lambda robot, period, start, offset: GroundTruthE
                inputs=("joint_state", "base_pose", "base_velocity"))
 ESTIMATORS.add("kalman", lambda robot, period, start, offset: KalmanEstimator(
     robot, period, initial_base_position=start, offset=offset),
-    "contact-aided Kalman filter on encoders, IMU and contact switches",
+    "contact-aided linear Kalman filter on encoders, IMU (its on-board orientation as given) and contact "
+    "switches; flat ground",
     inputs=("joint_state", "imu", "foot_contact"))
 ESTIMATORS.add("invariant_ekf", lambda robot, period, start, offset: InvariantEkfEstimator(
     robot, period, offset=offset),
