@@ -15,12 +15,16 @@ propagation, integrated exactly for body rates held over the step. Derived here 
     ξ̇_R = −R̂ ζ_g            ξ̇_v = g^ ξ_R − v̂^ R̂ ζ_g − R̂ ζ_a
     ξ̇_p = ξ_v − p̂^ R̂ ζ_g    ξ̇_d = −d̂^ R̂ ζ_g
 
-(Hartley's eq. for the right-invariant filter with bias, same sign convention). A foot in
+(the structure of Hartley et al.'s right-invariant filter with bias; the signs are checked
+numerically in the tests, by propagating a perturbed estimate next to the truth). A foot in
 contact is measured by forward kinematics, h_B = R_WBᵀ(d − p_WB) + noise; its innovation
 R̂ h_B − (d̂ − p̂) equals ξ_p − ξ_d to first order, a Jacobian H independent of the state (the point
-of the invariant filter). Optionally the stance foot's velocity gives the base velocity in the base
-frame, v_B = −(ω_B × h_B + J_B q̇_j), with innovation R̂ v_B − v̂ = −ξ_v. The correction is
-X̂⁺ = exp(−K z) X̂, θ̂⁺ = θ̂ − K_θ z (the estimate moves against the estimated error).
+of the invariant filter). An addition to Hartley's filter (as the Cheetah-3 style ``kalman`` uses
+it): the stance foot's velocity gives the base velocity in the base frame,
+v_B = −(ω_B × h_B + J_B q̇_j), a measurement of the same invariant form, Y = X⁻¹ b, with innovation
+R̂ v_B − v̂ = −ξ_v (``kinematic_velocity_noise`` = inf turns it off). With K the Kalman gain of
+these innovations z = H ξ, ξ̂ = K z and the correction is X̂⁺ = exp(−ξ̂) X̂, θ̂⁺ = θ̂ − ξ̂_θ
+(X = exp(−ξ) X̂ by the definition of η; the paper writes the same with the innovation's sign flipped).
 
 A foot is added to the state on touchdown at d̂ = p̂ + R̂ h_B, whose error is ξ_p plus the
 kinematics noise, and dropped on lift-off. The foot slots are fixed in size (for Drake state);
