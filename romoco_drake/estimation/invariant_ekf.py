@@ -24,7 +24,7 @@ it): the stance foot's velocity gives the base velocity in the base frame,
 v_B = −(ω_B × h_B + J_B q̇_j), a measurement of the same invariant form, Y = X⁻¹ b, with innovation
 R̂ v_B − v̂ = −ξ_v (``kinematic_velocity_noise`` = inf turns it off). With K the Kalman gain of
 these innovations z = H ξ, ξ̂ = K z and the correction is X̂⁺ = exp(−ξ̂) X̂, θ̂⁺ = θ̂ − ξ̂_θ
-(X = exp(−ξ) X̂ by the definition of η; the paper writes the same with the innovation's sign flipped).
+(X = exp(−ξ) X̂ by the definition of η).
 
 A foot is added to the state on touchdown at d̂ = p̂ + R̂ h_B, whose error is ξ_p plus the
 kinematics noise, and dropped on lift-off. The foot slots are fixed in size (for Drake state);
