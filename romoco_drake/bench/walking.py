@@ -25,6 +25,7 @@ from romoco_drake.scenario import (
 )
 
 WALKING_ROBOTS = ("g1", "cassie", "h1")
+ESTIMATE_ERRORS = ("velocity_estimate_rms_error", "yaw_drift_rad_per_min", "position_drift_per_m")
 
 
 def walk_scenario(robot: str) -> Scenario:
@@ -35,24 +36,26 @@ def walk_scenario(robot: str) -> Scenario:
     return load_scenario(name)
 
 
-def bench_matrix(robots, planners, controllers, duration: float | None, progress=None) -> list[dict]:
-    """One closed-loop run per robot × planner × controller on the robot's default profile."""
+def bench_matrix(robots, planners, controllers, duration: float | None, progress=None,
+                 estimator: str | None = None) -> list[dict]:
+    """One closed-loop run per robot × planner × controller on the robot's default profile, on
+    ``estimator`` if given (a filter's rows add its errors against the truth)."""
     rows = []
     for robot in robots:
         base = walk_scenario(robot)
         for planner in planners:
             for controller in controllers:
-                scenario = with_overrides(base, planner=planner, controller=controller)
+                scenario = with_overrides(base, planner=planner, controller=controller, estimator=estimator)
                 if progress is not None:
-                    progress(f"[matrix] {robot} {planner} {controller}")
+                    progress(f"[matrix] {robot} {planner} {controller} {scenario.estimator.name}")
                 s = run_scenario(scenario, duration=duration)
                 rows.append({
                     "robot": robot, "planner": planner, "controller": controller,
                     "duration_s": s["duration_s"], "fell": s["fell"], "fall_time_s": s["fall_time_s"],
                     "velocity_rms_error": s["velocity_rms_error"], "realtime_factor": s["realtime_factor"],
                     "controller_tick_ms": s["controller_tick_ms"], "qp_failures": s["qp_failures"],
-                    "steps": s["steps"],
-                })
+                    "steps": s["steps"], "estimator": scenario.estimator.name,
+                } | {k: s[k] for k in ESTIMATE_ERRORS if k in s})
     return rows
 
 
