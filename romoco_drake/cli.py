@@ -141,7 +141,10 @@ def _cmd_run(args) -> int:
                   f"QP failures {summary['qp_failures']}, safe-mode entries {summary['safe_mode_entries']}, "
                   f"controller tick {summary['controller_tick_ms']['median']} ms median")
         if "velocity_estimate_rms_error" in summary:
-            print(f"  kalman: base velocity estimate rms error {summary['velocity_estimate_rms_error']} m/s, "
+            print(f"  {summary['estimator']}: base velocity estimate rms error "
+                  f"{summary['velocity_estimate_rms_error']} m/s, "
+                  f"yaw drift {summary['yaw_drift_rad_per_min']} "
+                  f"rad/min, position drift {summary['position_drift_per_m']} per m walked, "
                   f"{summary['estimator_rejected_updates']} rejected updates")
         if link != "sim":
             print("  link: " + ", ".join(f"{k} {summary[k]}" for k in LINK_COUNTERS))
@@ -176,6 +179,15 @@ def _fall_text(summary: dict) -> str:
     if not summary["fell"]:
         return "stayed up"
     return f"FELL at {summary['fall_time_s']:.2f} s ({summary['fall_reason']})"
+
+
+def _cmd_diagram(args) -> int:
+    from romoco_drake.diagram_export import write_diagram
+    from romoco_drake.scenario import load_scenario
+
+    out = args.out or Path(f"{Path(args.scenario).stem}.svg")
+    print(f"wrote {write_diagram(load_scenario(args.scenario), out, args.depth)}")
+    return 0
 
 
 def _cmd_robot_sim(args) -> int:
@@ -249,16 +261,27 @@ def _cmd_bench_matrix(args) -> int:
     robots = _names(args.robots, WALKING_ROBOTS, "robot", WALKING_ROBOTS)
     planners = _names(args.planners, ("hlip", "mlip", "dcm"), "planner", PLANNERS)
     controllers = _names(args.controllers, ("tscqp",), "walking controller", walking_controllers)
-    rows = bench_matrix(robots, planners, controllers, args.duration, _sweep(args), progress=stderr_progress)
+    rows = bench_matrix(robots, planners, controllers, args.duration, _sweep(args), progress=stderr_progress,
+                        estimator=args.estimator)
 
     def line(r: dict) -> str:
         fell = f"{r['fall_time_s']:.1f} s" if r["fell"] else "no"
         return (f"{r['robot']:7s} {r['planner']:13s} {r['controller']:11s} {fell:6s} "
                 f"{r['velocity_rms_error']!s:26s} {r['realtime_factor']:8.2f}  "
-                f"{r['controller_tick_ms']['median']}")
+                f"{r['controller_tick_ms']['median']}" + _estimate_columns(r))
 
-    return _print_rows(args.json, rows, "robot   planner       controller  fell   vel rms err (vx, vy, wz)   "
-                       "realtime  tick ms", line)
+    header = "robot   planner       controller  fell   vel rms err (vx, vy, wz)   realtime  tick ms"
+    if "velocity_estimate_rms_error" in (rows[0] if rows else {}):
+        header += "  est v rms  yaw drift rad/min  pos drift /m"
+    return _print_rows(args.json, rows, header, line)
+
+
+def _estimate_columns(r: dict) -> str:
+    """A matrix row's estimator errors against the truth (filtering estimators only)."""
+    if "velocity_estimate_rms_error" not in r:
+        return ""
+    return (f"  {r['velocity_estimate_rms_error']!s:9s}  {r['yaw_drift_rad_per_min']!s:17s}  "
+            f"{r['position_drift_per_m']}")
 
 
 def _print_rows(as_json: bool, rows: list[dict], header: str, line) -> int:
@@ -521,7 +544,8 @@ def make_parser() -> argparse.ArgumentParser:
                    help="with --via-lcm: lose the link's STREAM (proprioception, commands or all; default "
                         "proprioception) from time T (s) for DURATION (s); repeatable")
     p.add_argument("--plot", type=Path, metavar="DIR", help="write velocity and tracking-error PNGs")
-    p.add_argument("--estimator", help="override the scenario's estimator: ground_truth or kalman")
+    p.add_argument("--estimator",
+                   help="override the scenario's estimator: ground_truth, kalman or invariant_ekf")
     p.add_argument("--solver", help="override the TSC-QP's QP solver: daqp or clarabel (the reference)")
     p.add_argument("--via-lcm", action="store_true",
                    help="run the robot and the controller over LCM in this process (memq:// by default)")
@@ -530,6 +554,11 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--lcm-url", help="LCM URL for --via-lcm or --hardware")
     p.add_argument("--lcm-log", type=Path, metavar="FILE", help="record the LCM traffic (LCM log format)")
     p.set_defaults(func=_cmd_run)
+    p = sub.add_parser("diagram", help="draw a scenario's wired Drake diagram (every system and port)")
+    p.add_argument("scenario")
+    p.add_argument("--out", type=Path, metavar="FILE.svg|.png|.pdf|.dot", help="default: SCENARIO.svg")
+    p.add_argument("--depth", type=int, default=1, help="nested diagrams opened (1: the top level)")
+    p.set_defaults(func=_cmd_diagram)
     p = sub.add_parser("robot-sim", help="a simulated robot behind LCM, for `romoco run --hardware`")
     p.add_argument("scenario", help="scenario name or YAML path (robot, plant step, sensors, link)")
     p.add_argument("--lcm-url", help="LCM URL (default: Drake's UDP multicast)")
@@ -564,6 +593,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--planners", help="comma-separated (default: hlip,mlip,dcm)")
     p.add_argument("--controllers", help="comma-separated (default: tscqp)")
     p.add_argument("--duration", type=float, default=None, help="simulated seconds per run")
+    p.add_argument("--estimator", help="run every scenario on this estimator (default: each scenario's own)")
     p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
     _add_sweep_args(p)
     p.set_defaults(func=_cmd_bench_matrix)

@@ -14,12 +14,12 @@ from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.errors import RomocoError
-from romoco_drake.estimation.kalman_estimator import KalmanEstimator
 from romoco_drake.interfaces.hardware import link_summary
 from romoco_drake.interfaces.lcm_log import LcmLogRecorder
 from romoco_drake.interfaces.robot_sim import make_robot_sim, robot_summary
 from romoco_drake.metrics import finite_or_none, momentum_summary, velocity_tracking
 from romoco_drake.planners.command import CommandSource, segments_from_log
+from romoco_drake.planners.heading import base_yaw
 from romoco_drake.planners.vimpc import VimpcPlanner
 from romoco_drake.robots.model import load_robot
 from romoco_drake.scenario import (
@@ -38,6 +38,7 @@ SAP_DIVERGED = "The SAP solver failed to converge"
 # No robot's |q| or |v| (m, rad, m/s, rad/s) gets here; a blown-up simulation does within a
 # few steps, often without a solver noticing (then a controller trips on it).
 BLOWN_UP = 1e6
+MIN_WALKED_M = 0.1  # m: a shorter path gives no position drift per metre
 
 
 @contextlib.contextmanager
@@ -271,20 +272,39 @@ def log_samples(log, until: float | None) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _estimator_summary(built, context, until: float | None) -> dict:
-    """The Kalman estimator's health and, when the true state is known, its velocity error."""
-    if not isinstance(built.estimator, KalmanEstimator):
+    """A filtering estimator's health and, when the true state is known, its errors against it:
+    base velocity (rms of the error's norm, m/s), yaw drift (rad per minute, from the first to the
+    last sample) and horizontal position drift per metre walked (the error's change over the run
+    over the true path length; None when the robot walked under 0.1 m)."""
+    if not hasattr(built.estimator, "rejected_updates"):
         return {}
     out = {"estimator_rejected_updates": built.estimator.rejected_updates(
         built.estimator.GetMyContextFromRoot(context))}
     if built.plant_station is not None:
-        truth = log_samples(built.state_log.FindLog(context), until)[1]
+        times, truth = log_samples(built.state_log.FindLog(context), until)
         estimate = log_samples(built.estimate_log.FindLog(context), until)[1]
         n = min(truth.shape[1], estimate.shape[1])
-        j = built.robot.nq + built.robot.base_v_start + 3
-        error = np.linalg.norm(estimate[j:j + 3, :n] - truth[j:j + 3, :n], axis=0)
-        rms = float(np.sqrt(np.mean(error**2))) if n else np.nan  # no samples: nothing measured
-        out["velocity_estimate_rms_error"] = finite_or_none([round(rms, 4)])[0]
+        out.update(estimate_errors(built.robot, times[:n], truth[:, :n], estimate[:, :n]))
     return out
+
+
+def estimate_errors(robot, times: np.ndarray, truth: np.ndarray, estimate: np.ndarray) -> dict:
+    """Estimator errors against the truth, state samples one per column (see _estimator_summary)."""
+    if len(times) < 2:
+        return dict.fromkeys(("velocity_estimate_rms_error", "yaw_drift_rad_per_min", "position_drift_per_m"))
+    j = robot.nq + robot.base_v_start + 3
+    error = np.linalg.norm(estimate[j:j + 3] - truth[j:j + 3], axis=0)
+    yaw_error = np.unwrap(base_yaw(robot, estimate) - base_yaw(robot, truth))
+    minutes = (times[-1] - times[0]) / 60.0
+    b = robot.base_q_start + 4
+    p_error = estimate[b:b + 2] - truth[b:b + 2]
+    walked = float(np.sum(np.linalg.norm(np.diff(truth[b:b + 2], axis=1), axis=0)))
+    drift = np.linalg.norm(p_error[:, -1] - p_error[:, 0]) / walked if walked > MIN_WALKED_M else np.nan
+    return {
+        "velocity_estimate_rms_error": finite_or_none([round(float(np.sqrt(np.mean(error**2))), 4)])[0],
+        "yaw_drift_rad_per_min": finite_or_none([round(float(yaw_error[-1] - yaw_error[0]) / minutes, 5)])[0],
+        "position_drift_per_m": finite_or_none([round(float(drift), 4)])[0],
+    }
 
 
 def stderr_progress(message: str) -> None:

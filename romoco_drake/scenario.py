@@ -174,10 +174,13 @@ declare_ranges(CommandPoint, t=Range(0.0, MAX_DURATION_S, "s"), vx=Range(-10.0, 
 @dataclass
 class EstimatorConfig:
     """``ground_truth``: encoders plus the base pose/velocity ports (exact in simulation, motion
-    capture on hardware); ``kalman``: encoders, IMU and contact switches only."""
+    capture on hardware); ``kalman`` (linear, takes the IMU's on-board orientation as given, flat
+    ground) and ``invariant_ekf`` (estimates the orientation too, no flat-ground assumption):
+    encoders, IMU and contact switches only. The filters' yaw drifts; commands are in the
+    estimated heading frame (see ``HeadingHold``)."""
 
     name: str = "ground_truth"
-    rate_hz: float | None = None  # Kalman update rate; None: the controller's rate
+    rate_hz: float | None = None  # filter update rate; None: the controller's rate
 
 
 declare_ranges(EstimatorConfig, rate_hz=RATE_HZ)
@@ -291,6 +294,9 @@ def validate_scenario(scenario: Scenario, source: str | Path | None = None) -> N
         raise ConfigError(where, "vimpc.inertia", f"'{scenario.vimpc.inertia}' is not one of: "
                           f"{', '.join(INERTIA_MODES)}")
     check_ranges(scenario, where)
+    if scenario.estimator.name == "kalman" and not scenario.sensors.orientation_output:
+        raise ConfigError(where, "sensors.orientation_output", "the kalman estimator takes the IMU's "
+                          "orientation: set it true, or use the invariant_ekf estimator")
     times = [p.t for p in scenario.command]
     if times != sorted(times):
         raise ConfigError(where, "command", f"times must increase, got {times}")

@@ -89,6 +89,8 @@ def test_run_text_summary():
         (["bench", "push", "--impulses", "-5"], "--impulses must be in"),
         (["bench", "push", "--phases", "1.5"], "--phases must be in [0, 1)"),
         (["bench", "push", "--directions", "up"], "unknown direction 'up'"),
+        (["bench", "matrix", "--robots", "g1", "--planners", "hlip", "--estimator", "ekf"],
+         "unknown estimator 'ekf'"),
     ],
 )
 def test_bad_input_is_one_line_exit_2(args, words):
@@ -129,7 +131,10 @@ def test_run_walking_overrides_json_and_plots(tmp_path):
     s = json.loads(out.stdout.strip().splitlines()[-1])
     assert (s["planner"], s["controller"]) == ("dcm", "id")
     assert not s["fell"] and s["steps"] >= 4 and s["qp_failures"] == 0
-    assert len(s["velocity_rms_error"]) == 3 and s["controller_tick_ms"]["median"] > 0
+    # Scored from 2 s (a second after the command) to 3 s: 0.3 m/s forward, no sideways, no turn.
+    vx, vy, wz = s["velocity_rms_error"]
+    assert vx < 0.05 and vy < 0.05 and wz < 0.1, s["velocity_rms_error"]
+    assert s["controller_tick_ms"]["median"] > 0
     assert {p.rsplit("/", 1)[-1] for p in s["plots"]} == {"g1_walk_velocity.png", "g1_walk_tracking.png"}
 
 

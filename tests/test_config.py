@@ -43,6 +43,10 @@ def _scenario(**overrides):
         (_scenario(planner={"name": "lipm"}), "planner.name", "unknown planner 'lipm' (known: alip, hlip"),
         (_scenario(planner={"name": "alip_general", "gain": "lqr"}), "planner.gain", "supports gains"),
         (_scenario(estimator={"name": "ekf"}), "estimator.name", "unknown estimator 'ekf'"),
+        (_scenario(estimator={"name": "kalman"}, sensors={"orientation_output": False}),
+         "sensors.orientation_output", "the kalman estimator takes the IMU's orientation"),
+        (_scenario(sensors={"contact_debounce_s": -0.001}), "sensors.contact_debounce_s", "must be in"),
+        (_scenario(sensors={"gyro_bias_walk": -1.0}), "sensors.gyro_bias_walk", "must be in"),
         (_scenario(controller={"name": "tscqp", "solver": "osqp"}), "controller.solver", "not one of: daqp"),
         (_scenario(controller={"name": "id", "solver": "clarabel"}), "controller.solver", "solves no QP"),
         (_scenario(duration_s="long"), "duration_s", "expected a number"),
@@ -72,7 +76,7 @@ def test_scenario_built_in_python_is_validated_like_yaml():
 def test_every_registered_component_is_listed_and_buildable():
     """romoco list, the overrides and validation read one registry per kind."""
     assert list(CONTROLLERS) == ["standing", "tscqp", "id", "velik", "posik", "momentum", "wbc"]
-    assert list(ESTIMATORS) == ["ground_truth", "kalman"]
+    assert list(ESTIMATORS) == ["ground_truth", "kalman", "invariant_ekf"]
     for name in CONTROLLERS:
         validate_scenario(with_overrides(Scenario(robot="g1"), controller=name))
     with pytest.raises(RomocoError, match="unknown controller 'mpc'"):

@@ -1,5 +1,6 @@
 """Simulated sensors on the G1 sim plant: exact values, frames, noise statistics, determinism."""
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,7 +21,9 @@ from romoco_drake.robots.model import RobotModel, load_robot
 
 TIME_STEP = 0.002
 EXACT = SensorConfig(gyro_noise_std=0.0, gyro_bias_std=0.0, accel_noise_std=0.0, accel_bias_std=0.0,
-                     orientation_noise_std=0.0, encoder_noise_std=0.0, joint_velocity_noise_std=0.0)
+                     orientation_noise_std=0.0, encoder_noise_std=0.0, joint_velocity_noise_std=0.0,
+                     gyro_bias_walk=0.0, accel_bias_walk=0.0, contact_force_noise_std=0.0,
+                     contact_debounce_s=0.0)
 NOISY = SensorConfig(gyro_noise_std=0.01, gyro_bias=[0.02, -0.03, 0.01], accel_noise_std=0.05,
                      accel_bias=[-0.1, 0.05, 0.2], orientation_noise_std=0.01, encoder_noise_std=1e-3,
                      joint_velocity_noise_std=0.02, seed=7)
@@ -144,7 +147,8 @@ def test_noise_statistics_match_the_config():
     nj = len(load_robot("g1").joint_names)
     joint_error = noisy["joint_state"] - exact["joint_state"]
     cases = [(gyro, NOISY.gyro_noise_std, NOISY.gyro_bias), (accel, NOISY.accel_noise_std, NOISY.accel_bias),
-             (theta, NOISY.orientation_noise_std, np.zeros(3)),
+             # roll and pitch: the yaw also drifts with the gyro bias (the next tests)
+             (theta[:, :2], NOISY.orientation_noise_std, np.zeros(2)),
              (joint_error[:, :nj].reshape(-1, 1), NOISY.encoder_noise_std, [0.0]),
              (joint_error[:, nj:].reshape(-1, 1), NOISY.joint_velocity_noise_std, [0.0])]
     for error, std, bias in cases:
@@ -225,3 +229,56 @@ def test_a_diverged_state_reads_as_malformed_measurements_not_an_exception(quate
     assert np.isnan(imu).all()
     assert np.isnan(pose[:4]).all() and np.allclose(pose[4:], robot.nominal.q[robot.base_q_start + 4:
                                                                                 robot.base_q_start + 7])
+
+
+def test_biases_walk_and_the_onboard_yaw_drifts_with_the_vertical_gyro_error():
+    """Standing (base nearly upright): the on-board orientation's yaw error grows as the integral of
+    the vertical gyro bias, roll and pitch stay exact; each sample's bias step has the walk's std."""
+    walk = 1e-3
+    config = dataclasses.replace(EXACT, gyro_bias=[0.0, 0.0, 0.02], gyro_bias_walk=walk, accel_bias_walk=walk)
+    run = simulate(config, standing=True)
+    context = lambda: run.sensors.GetMyContextFromRoot(run.simulator.get_context())  # noqa: E731
+    steps = []
+    for k in range(1, 401):
+        run.simulator.AdvanceTo((k + 0.5) * run.period)
+        steps.append(np.concatenate(run.sensors.imu_biases(context())))
+    increments = np.diff(np.array(steps), axis=0)
+    np.testing.assert_allclose(increments.std(axis=0), walk * np.sqrt(run.period), rtol=0.25)
+    t = run.simulator.get_context().get_time()
+    yaw_error = run.sensors.orientation_yaw_error(context())
+    mean_bias_z = np.mean(np.array(steps)[:, 2])
+    assert yaw_error == pytest.approx(mean_bias_z * t, rel=0.05)
+    R_WB, _ = run.base_truth()
+    R_imu = RotationMatrix(Quaternion(wxyz=run.outputs()["imu"][:4])).matrix()
+    np.testing.assert_allclose(RollPitchYaw(RotationMatrix(R_imu @ R_WB.T)).vector(), [0, 0, yaw_error],
+                               atol=1e-9)
+    no_orientation = simulate(dataclasses.replace(config, orientation_output=False), standing=True)
+    no_orientation.simulator.AdvanceTo(0.01)
+    imu = no_orientation.outputs()["imu"]
+    assert np.isnan(imu[:4]).all() and np.isfinite(imu[4:]).all()
+
+
+def test_contact_switch_debounces_a_noisy_force():
+    """A foot's switch changes only after its thresholded, noisy force has disagreed with it for the
+    debounce time: a load under the threshold by less than the noise flickers raw but not debounced."""
+    from pydrake.common.value import AbstractValue
+    from pydrake.multibody.math import SpatialAcceleration
+    from pydrake.multibody.plant import ContactResults
+
+    config = SensorConfig(contact_debounce_s=0.003, contact_force_noise_std=0.0)
+    run = simulate(config, standing=False)
+    sensors, robot = run.sensors, run.robot
+    context = sensors.CreateDefaultContext()
+    sensors.plant_state_input.FixValue(context, np.concatenate([robot.nominal.q, np.zeros(robot.nv)]))
+    sensors.accelerations_input.FixValue(
+        context, AbstractValue.Make([SpatialAcceleration()] * run.plant.num_bodies()))
+    sensors.contact_results_input.FixValue(context, AbstractValue.Make(ContactResults()))
+    state = context.get_mutable_discrete_state(0)
+    state.SetAtIndex(7, 1.0)  # both switches on, the feet unloaded
+    state.SetAtIndex(8, 1.0)
+    switches = []
+    for k in range(6):
+        context.SetTime(k * 1e-3)
+        context.SetDiscreteState(sensors.EvalUniquePeriodicDiscreteUpdate(context))
+        switches.append(sensors.foot_contact_output.Eval(context).copy())
+    np.testing.assert_array_equal(np.array(switches)[:, 0], [1, 1, 0, 0, 0, 0])  # off after 3 samples (3 ms)

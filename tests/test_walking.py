@@ -231,8 +231,17 @@ def test_dropped_robot_lands_stands_and_walks(scenario):
     assert schedule.mode == "walking" and schedule.steps >= 6 and schedule.safe_mode_entries == 0
     controller = built.walking.controller
     assert controller.stats_port.Eval(controller.GetMyContextFromRoot(root))[0] == 0  # no QP failure
-    base = plant.GetPositions(plant.GetMyContextFromRoot(root))[built.robot.base_q_start + 4]
-    assert base > 0.3  # walked forward at about 0.3 m/s for most of 3 s
+    from romoco_drake.metrics import heading_velocity
+
+    log = built.state_log.FindLog(root)
+    times = log.sample_times()
+    v = heading_velocity(built.robot, times, log.data())[times > 2.5].mean(axis=0)
+    assert abs(v[0] - 0.3) < 0.05 and abs(v[1]) < 0.05, v  # walking at the command after landing
+    q = plant.GetPositions(plant.GetMyContextFromRoot(root))
+    x, y = q[built.robot.base_q_start + 4:built.robot.base_q_start + 6]
+    # The command's 0.8 m less the landing and balancing before the first step (Cassie ~0.6 s).
+    expected = _commanded_distance(built, 4.0)[0]
+    assert 0.6 * expected < x < 1.1 * expected and abs(y) < 0.1, (x, y, expected)
 
 
 def test_state_machine_waits_for_balance_and_leads_with_the_lateral_foot(g1):
@@ -430,4 +439,22 @@ def test_g1_walks_sideways_and_keeps_its_heading():
     assert not built.monitor.summary(built.monitor.GetMyContextFromRoot(root))["fell"]
     x = plant.GetPositionsAndVelocities(plant.GetMyContextFromRoot(root))
     assert abs(float(base_yaw(built.robot, x))) < 0.05
-    assert x[built.robot.base_q_start + 5] > 0.4  # went left, about 0.2 m/s for 3 s
+    expected = _commanded_distance(built, 4.5)[1]  # 0.2 m/s from 1 s, less the ramp: ~0.66 m
+    forward, left = x[built.robot.base_q_start + 4:built.robot.base_q_start + 6]
+    assert abs(left - expected) < 0.15 * expected and abs(forward) < 0.1, (forward, left, expected)
+
+
+def _commanded_distance(built, t_end: float) -> np.ndarray:
+    """(x, y) the limited command walks by ``t_end`` (heading fixed): each segment's velocity from
+    its start, ramped linearly to when the limiter reaches it (a constant-velocity profile)."""
+    from romoco_drake.planners.command import reach_times
+
+    segments = built.command.segments
+    reached = reach_times(segments, built.robot.config.walking.command_limits)
+    distance, previous = np.zeros(2), np.zeros(2)
+    for i, (seg, reach) in enumerate(zip(segments, reached, strict=True)):
+        end = segments[i + 1].start if i + 1 < len(segments) else t_end
+        v = seg.command.to_vector()[:2]
+        distance += 0.5 * (previous + v) * (reach - seg.start) + v * (end - reach)
+        previous = v
+    return distance

@@ -26,6 +26,7 @@ from romoco_drake.scenario import (
 )
 
 WALKING_ROBOTS = ("g1", "cassie", "h1")
+ESTIMATE_ERRORS = ("velocity_estimate_rms_error", "yaw_drift_rad_per_min", "position_drift_per_m")
 
 
 def walk_scenario(robot: str) -> Scenario:
@@ -41,15 +42,18 @@ MATRIX_KEYS = ("duration_s", "fell", "fall_time_s", "velocity_rms_error", "realt
 
 
 def matrix_job(scenario: Scenario, duration: float | None) -> dict:
-    """One matrix cell: the run summary's MATRIX_KEYS."""
+    """One matrix cell: the run summary's MATRIX_KEYS, its estimator and a filter's errors."""
     s = run_scenario(scenario, duration=duration)
-    return {key: s[key] for key in MATRIX_KEYS}
+    return ({key: s[key] for key in MATRIX_KEYS} | {"estimator": scenario.estimator.name}
+            | {k: s[k] for k in ESTIMATE_ERRORS if k in s})
 
 
-def bench_matrix(robots, planners, controllers, duration: float | None,
-                 sweep: SweepOptions = IN_PROCESS, progress=None) -> list[dict]:
-    """One closed-loop run per robot × planner × controller on the robot's default profile."""
-    variants = [Variant(with_overrides(walk_scenario(robot), planner=planner, controller=controller),
+def bench_matrix(robots, planners, controllers, duration: float | None, sweep: SweepOptions = IN_PROCESS,
+                 progress=None, estimator: str | None = None) -> list[dict]:
+    """One closed-loop run per robot × planner × controller on the robot's default profile, on
+    ``estimator`` if given (a filter's rows add its errors against the truth)."""
+    variants = [Variant(with_overrides(walk_scenario(robot), planner=planner, controller=controller,
+                                       estimator=estimator),
                         {"robot": robot, "planner": planner, "controller": controller}, matrix_job,
                         {"duration": duration})
                 for robot in robots for planner in planners for controller in controllers]

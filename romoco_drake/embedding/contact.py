@@ -8,10 +8,10 @@ or 6 (plane) foot DoF; the rows are redundant (rank 5 of 6, rank 6 of 9), as in 
 The multipliers of those rows are point forces f (3 a point, expressed in world). They
 act on the robot only through their resultant wrench about the sole centroid,
 Σ J_iᵀ f_i = J_footᵀ [m; f], so the friction and CoP limits are imposed on that wrench
-(net friction pyramid, net normal force, CoP inside the whole sole polygon) and mapped
-back to the point forces: the split among the points (internal forces) is free, and the
-CoP may use the whole sole, not only the triangle of the representative points. There is
-no limit on the yaw moment (torsional friction).
+(net friction pyramid, net normal force, CoP inside the whole sole polygon, yaw moment
+within torsional friction) and mapped back to the point forces: the split among the points
+(internal forces) is free, and the CoP may use the whole sole, not only the triangle of the
+representative points.
 
 Limits are expressed in the foot's sole frame S (:func:`~romoco_drake.embedding.outputs.sole_frame`:
 origin at the sole-point centroid, z_S the sole normal, x_S forward), so they hold when the

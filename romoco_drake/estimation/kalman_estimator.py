@@ -38,7 +38,10 @@ class KalmanEstimator(LeafSystem):
 
     ``state``: joints, base quaternion and ω_WB = R_WB ω_B straight from the current inputs;
     p_WB and v_WB from the filter. A malformed orientation gives NaN base orientation and ω_WB
-    there, for downstream safe modes to see.
+    there, for downstream safe modes to see. The orientation is the IMU's on-board estimate,
+    taken as given: its yaw drifts (no heading sensor), and so does this estimate's; its gyro bias
+    is not estimated. :class:`~romoco_drake.estimation.invariant_estimator.InvariantEkfEstimator`
+    estimates the orientation and both biases itself.
 
     Rate: one update every ``period`` s; the filter (x, P), each foot's time in contact (for its
     contact confidence), a started flag and the rejection count are discrete state. The foot

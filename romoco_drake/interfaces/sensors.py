@@ -1,10 +1,14 @@
 """Simulated proprioception: joint encoders, a base IMU and foot contact switches.
 
 The simulation station measures the plant the way the robot's own sensors do, in the layout
-the LCM hardware station and the Kalman estimator use: ``joint_state`` [q_j; v_j],
+the LCM hardware station and the estimators use: ``joint_state`` [q_j; v_j],
 ``imu`` [q_WB (w x y z); ω_B; f_B] and ``foot_contact`` [left, right]. Each measurement is
-the exact plant quantity plus white noise (fresh every sample) and, for the IMU, a bias that
-is constant for the run.
+the exact plant quantity plus white noise (fresh every sample); the IMU's rates carry a bias
+that starts at a turn-on value and wanders as a random walk. The IMU's orientation is no free
+truth: it is the on-board estimate such units output, level from gravity but with a yaw
+integrated from the gyro, which drifts with the gyro's bias and noise about the vertical (or,
+with ``orientation_output: false``, NaN: rates only). The contact switches threshold a noisy
+foot force and are debounced.
 """
 
 from __future__ import annotations
@@ -38,6 +42,13 @@ class SensorConfig:
     quantisation std 2π/2¹⁷/√12, and the velocity std of differencing it at 1 kHz (√2·σ_q·1000).
     The orientation std is an assumption, 0.5°, a typical static roll/pitch accuracy of MEMS
     AHRS units; it is applied as white noise, rougher than a real filter's slowly varying error.
+    The orientation's yaw is the integral of the gyro's error about the world vertical (a
+    magnetometer-free unit's heading). The bias random walks are an assumption, the rate at which
+    a bias wanders by its bias instability in about 100 s (σ_walk = instability/√100 s).
+    The contact switches: a foot's normal force plus white noise (1 N, a load cell's or a
+    spring-deflection estimate's; an assumption) against the threshold, and a switch changes only
+    after the thresholded value has disagreed with it for ``contact_debounce_s`` (3 ms, an
+    assumption of a typical firmware debounce).
     """
 
     rate_hz: float = 1000.0  # noise sampling rate (Hz): noise is held between samples, values are not
@@ -47,15 +58,22 @@ class SensorConfig:
     accel_noise_std: float = 2.6e-2  # m/s² per sample (120 µg/√Hz · √500 Hz)
     accel_bias_std: float = 2.9e-4  # m/s² (0.03 mg); draws the bias when accel_bias is not given
     accel_bias: list[float] | None = None  # m/s² in the base frame, 3 values
+    gyro_bias_walk: float = 4.8e-6  # (rad/s)/√s: random walk of the gyro bias
+    accel_bias_walk: float = 2.9e-5  # (m/s²)/√s: random walk of the accelerometer bias
+    orientation_output: bool = True  # the IMU outputs its on-board orientation estimate; False: NaN
     orientation_noise_std: float = 8.7e-3  # rad per axis, small rotation in the base frame (0.5°)
     encoder_noise_std: float = 1.4e-5  # rad per joint (17-bit quantisation)
     joint_velocity_noise_std: float = 2.0e-2  # rad/s per joint
     contact_threshold_fraction: float = 0.02  # foot in contact above this fraction of the weight
+    contact_force_noise_std: float = 1.0  # N: white noise on the force the switch thresholds
+    contact_debounce_s: float = 0.003  # s: a switch changes after disagreeing this long
     seed: int = 0  # noise and drawn biases are a function of this seed alone
 
 
 # Noise: zero is an exact sensor; the upper ends are ~100× the defaults' MEMS/encoder figures,
-# past which a measurement is noise alone. Biases of 1 rad/s or 10 m/s² are a broken IMU.
+# past which a measurement is noise alone. Biases of 1 rad/s or 10 m/s² are a broken IMU, and so
+# are bias walks ~1000× the defaults'; a force noise of 1 kN drowns any humanoid's weight; a switch
+# debounced over 0.1 s misses whole steps.
 declare_ranges(
     SensorConfig,
     rate_hz=Range(1.0, 10000.0, "Hz"),
@@ -63,6 +81,8 @@ declare_ranges(
     gyro_bias=Range(-1.0, 1.0, "rad/s", size=3),
     accel_noise_std=Range(0.0, 10.0, "m/s²"), accel_bias_std=Range(0.0, 10.0, "m/s²"),
     accel_bias=Range(-10.0, 10.0, "m/s²", size=3),
+    gyro_bias_walk=Range(0.0, 0.01, "(rad/s)/√s"), accel_bias_walk=Range(0.0, 0.1, "(m/s²)/√s"),
+    contact_force_noise_std=Range(0.0, 1000.0, "N"), contact_debounce_s=Range(0.0, 0.1, "s"),
     orientation_noise_std=Range(0.0, 0.5, "rad"), encoder_noise_std=Range(0.0, 0.1, "rad"),
     joint_velocity_noise_std=Range(0.0, 10.0, "rad/s"),
     contact_threshold_fraction=Range(0.0, 1.0, lo_open=True, hi_open=True),
@@ -121,14 +141,14 @@ class SimulatedSensors(LeafSystem):
     | body_spatial_accelerations | in  | abstract   | the plant's A_WB of every body                |
     | contact_results            | in  | abstract   | the plant's ContactResults (point contact)    |
     | joint_state                | out | 2·nj       | [q_j (rad); v_j (rad/s)], joint_names order   |
-    | imu                        | out | 10         | q_WB (w x y z); ω_B (rad/s); f_B (m/s²)       |
-    | foot_contact               | out | 2          | [left, right], 1.0 above the force threshold  |
+    | imu                        | out | 10         | on-board q_WB (w x y z); ω̃_B (rad/s); f̃_B (m/s²) |
+    | foot_contact               | out | 2          | [left, right] debounced switches, 1.0 loaded  |
     | base_pose                  | out | 7          | exact [qw qx qy qz x y z] (motion capture)    |
     | base_velocity              | out | 6          | exact [ω_WB; v_WB] in world (motion capture)  |
 
     The IMU sits at the base frame origin Bo with its axes along B: ω_B = R_WBᵀ ω_WB and
-    f_B = R_WBᵀ (a_WBo − g_W) with the plant's gravity g_W. A foot is in contact when the normal
-    force on its body exceeds ``contact_threshold_fraction`` of the robot's weight. The discrete
+    f_B = R_WBᵀ (a_WBo − g_W) with the plant's gravity g_W. A foot's switch reads its normal force
+    plus noise against ``contact_threshold_fraction`` of the robot's weight, debounced. The discrete
     (SAP) plant reports the accelerations (Δv/h) and contact results of its most recent step
     (zero and none before the first).
 
@@ -139,9 +159,13 @@ class SimulatedSensors(LeafSystem):
     ``default_rng([seed, port, k // 1024])`` makes, so a measurement depends only on the state,
     the seed and k (deterministic, replayable, and constant within a sample period however
     often it is evaluated); one generator per 1024 samples, because making one costs more than
-    the rest of a sensor update. IMU biases come from
-    ``default_rng([seed, 1])`` when not given and are constant for the run (``gyro_bias``,
-    ``accel_bias``).
+    the rest of a sensor update. IMU turn-on biases come from
+    ``default_rng([seed, 1])`` when not given (``gyro_bias``, ``accel_bias``).
+
+    What accumulates lives in discrete state, updated every sample (1/rate_hz) from that sample's
+    draws: the biases (random walks), the on-board orientation's yaw error (ψ̇ = the world-vertical
+    component of the gyro's bias and noise, R_WB(b_g + n_g)·e_z), and the switches with their
+    debounce timers. Read it with :meth:`imu_biases` and :meth:`orientation_yaw_error`.
     """
 
     def __init__(self, robot: RobotModel, plant: MultibodyPlant, config: SensorConfig | None = None):
@@ -175,6 +199,15 @@ class SimulatedSensors(LeafSystem):
         # IMU noise vector layout: orientation θ_B, gyro, accel.
         self._imu_std = np.repeat([config.orientation_noise_std, config.gyro_noise_std,
                                    config.accel_noise_std], 3)
+        dt = 1.0 / config.rate_hz
+        self._dt, self._debounce = dt, config.contact_debounce_s
+        self._orientation_output = config.orientation_output
+        # Per-sample std of the bias walks (port 3) and of the switch force noise (port 4).
+        self._walk_std = math.sqrt(dt) * np.repeat([config.gyro_bias_walk, config.accel_bias_walk], 3)
+        self._force_std = np.full(2, config.contact_force_noise_std)
+        # [b_g (3), b_a (3), yaw error (1), switches (2), debounce timers (2)]
+        self._state_index = self.DeclareDiscreteState(
+            np.concatenate([self.gyro_bias, self.accel_bias, np.zeros(5)]))
 
         self.plant_state_input = self.DeclareVectorInputPort("plant_state", plant.num_multibody_states())
         self.accelerations_input = self.DeclareAbstractInputPort(
@@ -186,10 +219,11 @@ class SimulatedSensors(LeafSystem):
             "joint_state", 2 * nj, self._joint_state, prerequisites_of_calc={state, time})
         self.imu_output = self.DeclareVectorOutputPort(
             "imu", 10, self._imu, prerequisites_of_calc={
-                state, time, self.input_port_ticket(self.accelerations_input.get_index())})
+                state, time, self.xd_ticket(), self.input_port_ticket(self.accelerations_input.get_index())})
         self.foot_contact_output = self.DeclareVectorOutputPort(
-            "foot_contact", 2, self._foot_contact,
-            prerequisites_of_calc={self.input_port_ticket(self.contact_results_input.get_index())})
+            "foot_contact", 2, lambda c, out: out.SetFromVector(self._sensor_state(c)[7:9]),
+            prerequisites_of_calc={self.xd_ticket()})
+        self.DeclarePeriodicDiscreteUpdateEvent(dt, 0.0, self._sample)
         self.base_pose_output = self.DeclareVectorOutputPort(
             "base_pose", 7, self._base_pose, prerequisites_of_calc={state})
         self.base_velocity_output = self.DeclareVectorOutputPort(
@@ -204,7 +238,8 @@ class SimulatedSensors(LeafSystem):
         return bias
 
     def _noise(self, context, port: int, std: np.ndarray) -> np.ndarray:
-        """Sample ⌊t·rate⌋'s noise for ``port`` (0 encoders, 2 IMU): a function of (seed, port, k)."""
+        """Sample ⌊t·rate⌋'s noise for ``port`` (0 encoders, 2 IMU, 3 bias walks, 4 contact force):
+        a function of (seed, port, k)."""
         k = math.floor(context.get_time() * self._rate + 1e-6)
         block, row = divmod(k, _NOISE_BLOCK)
         return std * self._standard_normal(port, block, std.size)[row]
@@ -220,6 +255,36 @@ class SimulatedSensors(LeafSystem):
         x = self.plant_state_input.Eval(context)
         out.SetFromVector(x[self._joint_index] + self._noise(context, 0, self._joint_std))
 
+    def _sensor_state(self, context) -> np.ndarray:
+        return context.get_discrete_state(self._state_index).value()
+
+    def imu_biases(self, context) -> tuple[np.ndarray, np.ndarray]:
+        """The IMU's current (gyro, accelerometer) biases in the base frame."""
+        s = self._sensor_state(context)
+        return s[0:3].copy(), s[3:6].copy()
+
+    def orientation_yaw_error(self, context) -> float:
+        """Yaw (rad, about world z) of the on-board orientation estimate relative to the truth."""
+        return float(self._sensor_state(context)[6])
+
+    def _sample(self, context, discrete_state) -> None:
+        """One sample's walk of the biases and the yaw error, and the switches' debounce."""
+        s = self._sensor_state(context).copy()
+        x = self.plant_state_input.Eval(context)
+        q_WB = _unit(x[self._base_q:self._base_q + 4])
+        if q_WB is not None:
+            gyro_noise = self._noise(context, 2, self._imu_std)[3:6]
+            R_WB = RotationMatrix(Quaternion(wxyz=q_WB)).matrix()
+            s[6] += self._dt * float(R_WB[2] @ (s[0:3] + gyro_noise))
+        s[0:6] += self._noise(context, 3, self._walk_std)
+        forces = foot_normal_forces(self.contact_results_input.Eval(context), self._feet)
+        raw = (forces + self._noise(context, 4, self._force_std) > self._contact_threshold).astype(float)
+        switch, timer = s[7:9], s[9:11]
+        timer[:] = np.where(raw != switch, timer + self._dt, 0.0)
+        flip = timer >= self._debounce - 1e-9
+        switch[flip], timer[flip] = raw[flip], 0.0
+        discrete_state.get_mutable_vector(self._state_index).SetFromVector(s)
+
     def _imu(self, context, out) -> None:
         theta, gyro_noise, accel_noise = self._noise(context, 2, self._imu_std).reshape(3, 3)
         x = self.plant_state_input.Eval(context)
@@ -230,10 +295,17 @@ class SimulatedSensors(LeafSystem):
         R_WB = RotationMatrix(Quaternion(wxyz=q_WB)).matrix()
         w_WB_W = x[self._base_v:self._base_v + 3]
         a_WBo_W = self.accelerations_input.Eval(context)[self._base].translational()
+        s = self._sensor_state(context)
+        if self._orientation_output:
+            yaw = s[6]
+            q_yaw = Quaternion(wxyz=[math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
+            orientation = q_yaw.multiply(Quaternion(wxyz=perturb_quaternion(q_WB, theta))).wxyz()
+        else:
+            orientation = np.full(4, np.nan)
         out.SetFromVector(np.concatenate([
-            perturb_quaternion(q_WB, theta),
-            R_WB.T @ w_WB_W + self.gyro_bias + gyro_noise,
-            specific_force(R_WB, a_WBo_W, self._g_W) + self.accel_bias + accel_noise,
+            orientation,
+            R_WB.T @ w_WB_W + s[0:3] + gyro_noise,
+            specific_force(R_WB, a_WBo_W, self._g_W) + s[3:6] + accel_noise,
         ]))
 
     def _base_pose(self, context, out) -> None:
@@ -243,10 +315,6 @@ class SimulatedSensors(LeafSystem):
         q_WB = _unit(pose[:4])
         pose[:4] = np.nan if q_WB is None else q_WB
         out.SetFromVector(pose)
-
-    def _foot_contact(self, context, out) -> None:
-        forces = foot_normal_forces(self.contact_results_input.Eval(context), self._feet)
-        out.SetFromVector((forces > self._contact_threshold).astype(float))
 
 
 def add_sensors(

@@ -26,6 +26,12 @@ class HeadingHold(LeafSystem):
     loop, small yaw slips at each touchdown accumulate into a drift. ψ_d starts at the base
     heading at initialisation; the feedback term is limited to ``max_correction`` rad/s.
 
+    ψ is the heading of the ``state`` it is given, the estimate's: with a filtering estimator
+    (no heading sensor) that heading drifts slowly, and this loop holds the estimated one. The
+    walking command's (vx, vy) are in the estimated heading frame, i.e. relative to the robot's
+    own yaw, so tracking does not depend on the drift; only the direction walked in the world
+    turns with it (the run summary's ``yaw_drift_rad_per_min``).
+
     | port | kind | size | meaning |
     |---|---|---|---|
     | ``command_in`` | in | 6 | :class:`WalkCommand` vector from the user |

@@ -68,10 +68,10 @@ class GaitStateMachine(LeafSystem):
       sets this step's T_SS each tick until the step is committed (``SWING_COMMIT_FRACTION`` of
       it passed): a pushed robot may put its foot down early, or late.
     - walking → standing after ``stop_steps`` steps in a row under a zero command, at a support
-      switch where both soles are flat on the ground (every sole point below
-      ``touchdown_height``). A sole that landed on its heel (H1's line-modelled feet land
-      1-2 cm toe-up) gets up to ``settle_time`` in double support to roll flat; if it does not,
-      the robot keeps stepping in place.
+      switch where both soles are flat on the ground (both contact switches on, and each sole's
+      points within ``touchdown_height`` of its lowest one). A sole that landed on its heel (H1's
+      line-modelled feet land 1-2 cm toe-up) gets up to ``settle_time`` in double support to roll
+      flat; if it does not, the robot keeps stepping in place.
     - while the link to the robot is past its ride-through (``link_stage`` ≥ STAND: the station
       holds the robot's predicted posture blind) the step clock stops with it and nothing
       starts. When measurements resume the step goes on from where it stopped, or, if the
@@ -177,7 +177,7 @@ class GaitStateMachine(LeafSystem):
             stopping = idle >= self.stop_steps
             # A stop holds the step in double support for up to settle_time while a sole rolls flat.
             settling = stopping and t - s.step_start < s.t_ss + self.t_ds + self.settle_time
-            if stopping and self._feet_down(kin):
+            if stopping and self._feet_down(kin, on):
                 s = replace(s, mode=Mode.STANDING, idle_steps=0, steps=s.steps + 1, recovering=False)
             elif not settling:
                 s = replace(s, side=other_side(s.side), step_start=t, t_ss=cmd.step_time, steps=s.steps + 1,
@@ -199,10 +199,14 @@ class GaitStateMachine(LeafSystem):
                                self.link_stage_port.Eval(context)[0] >= BLIND_STAGE, plan)
         state.get_mutable_abstract_state(int(self._schedule)).set_value(s)
 
-    def _feet_down(self, kin: RobotKinematics) -> bool:
-        """Every sole point of both feet within ``touchdown_height`` of the ground (z = 0)."""
-        heights = [self.robot.sole_points_in_world(kin.context, side)[2] for side in ("left", "right")]
-        return float(np.max(np.concatenate(heights))) < self.touchdown_height
+    def _feet_down(self, kin: RobotKinematics, on: np.ndarray) -> bool:
+        """Both contact switches on and each sole flat: its points within ``touchdown_height`` of
+        its lowest one. No ground height is assumed: an estimator's height is relative to where it
+        started (and the ground need not be at z = 0); only a sole's tilt is read."""
+        if not on.all():
+            return False
+        spans = [np.ptp(self.robot.sole_points_in_world(kin.context, side)[2]) for side in ("left", "right")]
+        return float(max(spans)) < self.touchdown_height
 
     def _balanced(self, kin: RobotKinematics) -> bool:
         return float(np.linalg.norm(kin.v_com)) < self.balance_speed

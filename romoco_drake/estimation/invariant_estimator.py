@@ -1,0 +1,163 @@
+"""Invariant EKF estimator: encoders, IMU rates and contact switches into the controller plant's state."""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.common.eigen_geometry import Quaternion
+from pydrake.math import RotationMatrix
+from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+from romoco_drake.estimation.invariant_ekf import InekfState, InvariantEkf, InvariantEkfParams
+from romoco_drake.robots.kinematics import RobotKinematics, declare_kinematics_cache
+from romoco_drake.robots.model import RobotModel
+
+SIDES = ("left", "right")
+IMU_SIZE = 10
+
+
+class InvariantEkfEstimator(LeafSystem):
+    """Floating-base state from the contact-aided invariant EKF (:mod:`.invariant_ekf`); swaps in
+    for :class:`~romoco_drake.estimation.ground_truth.GroundTruthEstimator`.
+
+    | port         | dir | size    | meaning                                                        |
+    |--------------|-----|---------|----------------------------------------------------------------|
+    | joint_state  | in  | 2·nj    | encoders [q_j; v_j], ``robot.joint_names`` order               |
+    | imu          | in  | 10      | [4 ignored]; gyro ω̃_B (rad/s); specific force f̃_B (m/s²)       |
+    | foot_contact | in  | 2       | [left, right] contact switches, 1.0 in contact                 |
+    | state        | out | nq + nv | controller-plant state [q; v]                                  |
+
+    The IMU's own orientation estimate (the first four entries) is not read: orientation comes
+    from the filter. ``state``: joints from the encoders; base pose and linear velocity from the
+    filter; ω_WB = R̂ (ω̃_B − b̂_g). Yaw and horizontal position are in the frame the filter
+    started in (heading 0 at the nominal pose's position) and drift; the loop gives its commands in
+    the estimated heading frame, so tracking does not depend on them.
+
+    Rate: one update every ``period`` s (discrete state: the packed filter, each foot's time in
+    contact, a started flag and the rejection count). The foot's contact point is the mean of its
+    sole points. A foot joins the filter on its switch's rising edge and leaves on the falling one.
+
+    Start: the first update with valid inputs starts the filter at rest in the nominal pose (base
+    at ``initial_base_position`` if given); roll and pitch then converge from gravity. (The first
+    accelerometer readings of a simulation are no gravity reference: the plant reports no
+    acceleration before its first step, then the contact settling.) Malformed inputs (NaN/Inf):
+    the update is skipped and counted (:meth:`rejected_updates`).
+    """
+
+    def __init__(self, robot: RobotModel, period: float = 0.002, params: InvariantEkfParams | None = None,
+                 initial_base_position: np.ndarray | None = None, offset: float = 0.0):
+        super().__init__()
+        self._robot = robot
+        self._period = period
+        self._filter = InvariantEkf(params or InvariantEkfParams())
+        b = robot.base_q_start
+        self._p0 = (robot.nominal.q[b + 4:b + 7].copy() if initial_base_position is None
+                    else np.array(initial_base_position, dtype=float))
+        nj = len(robot.joint_names)
+        self.joint_state_input = self.DeclareVectorInputPort("joint_state", 2 * nj)
+        self.imu_input = self.DeclareVectorInputPort("imu", IMU_SIZE)
+        self.foot_contact_input = self.DeclareVectorInputPort("foot_contact", 2)
+        self._legs = declare_kinematics_cache(
+            self, robot, lambda c: self.leg_state(self.joint_state_input.Eval(c)),
+            {self.joint_state_input.ticket()})
+        q0 = robot.nominal.q[b:b + 4]
+        self._R0 = RotationMatrix(Quaternion(q0 / np.linalg.norm(q0))).matrix()
+        start = self._filter.initial(self._p0, self._R0)
+        self._filter_index = self.DeclareDiscreteState(start.pack())
+        self._started_index = self.DeclareDiscreteState(1)
+        self._contact_time_index = self.DeclareDiscreteState(2)
+        self._rejected_index = self.DeclareDiscreteState(1)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
+        self.state_output = self.DeclareVectorOutputPort("state", robot.nq + robot.nv, self._calc_state)
+
+    # ------------------------------------------------------------------ kinematics
+    def leg_state(self, joint_state: np.ndarray) -> np.ndarray:
+        """The plant state [q; v] of the measured joints with the base fixed at the world origin:
+        world quantities of it are base-frame quantities relative to the base."""
+        r = self._robot
+        nj = len(r.joint_names)
+        q, v = np.zeros(r.nq), np.zeros(r.nv)
+        q[r.joint_q_index] = joint_state[:nj]
+        q[r.base_q_start] = 1.0
+        v[r.joint_v_index] = joint_state[nj:]
+        return np.concatenate([q, v])
+
+    def foot_kinematics(self, kin: RobotKinematics) -> tuple[np.ndarray, np.ndarray]:
+        """Contact points relative to the base, h_B (2×3), and their velocity from the joints
+        alone, J_B q̇_j (2×3), in base axes."""
+        plant, world = self._robot.plant, self._robot.plant.world_frame()
+        h, v = np.zeros((2, 3)), np.zeros((2, 3))
+        for i, side in enumerate(SIDES):
+            frame, point = self._robot.foot_frames[side], self._robot.feet[side].points.mean(axis=1)
+            h[i] = plant.CalcPointsPositions(kin.context, frame, point, world).ravel()
+            J = plant.CalcJacobianTranslationalVelocity(kin.context, JacobianWrtVariable.kV, frame, point,
+                                                        world, world)
+            v[i] = J @ kin.v
+        return h, v
+
+    # ---------------------------------------------------------------------- events
+    def _valid_inputs(self, context):
+        js = self.joint_state_input.Eval(context)
+        imu = self.imu_input.Eval(context)
+        contact = self.foot_contact_input.Eval(context)
+        if not all(np.all(np.isfinite(u)) for u in (js, imu[4:], contact)):
+            return None
+        return imu[4:7], imu[7:10], contact > 0.5
+
+    def _update(self, context, discrete_state) -> None:
+        inputs = self._valid_inputs(context)
+        if inputs is None:
+            count = context.get_discrete_state(self._rejected_index).value()[0]
+            discrete_state.get_mutable_vector(self._rejected_index).SetFromVector([count + 1.0])
+            return
+        gyro, accel, contact = inputs
+        ekf = self._filter
+        h_B, v_joint_B = self.foot_kinematics(self._legs.Eval(context))
+        previous = context.get_discrete_state(self._contact_time_index).value()
+        if not context.get_discrete_state(self._started_index).value()[0]:
+            s = ekf.initial(self._p0, self._R0)
+            discrete_state.get_mutable_vector(self._started_index).SetFromVector([1.0])
+        else:
+            s = InekfState.unpack(context.get_discrete_state(self._filter_index).value())
+            s = ekf.propagate(s, gyro, accel, self._period, ekf.contact_confidence(previous))
+        contact_time = np.where(contact, previous + self._period, 0.0)
+        for i in range(2):
+            if contact[i] and not s.active[i]:
+                s = ekf.touchdown(s, i, h_B[i])
+            elif not contact[i] and s.active[i]:
+                s = ekf.liftoff(s, i)
+        v_rel_B = np.cross(gyro - s.gyro_bias, h_B) + v_joint_B
+        s = ekf.correct(s, h_B, v_rel_B, ekf.contact_confidence(contact_time))
+        discrete_state.get_mutable_vector(self._filter_index).SetFromVector(s.pack())
+        discrete_state.get_mutable_vector(self._contact_time_index).SetFromVector(contact_time)
+
+    # --------------------------------------------------------------------- outputs
+    def filter_state(self, context) -> InekfState:
+        return InekfState.unpack(context.get_discrete_state(self._filter_index).value())
+
+    def rejected_updates(self, context) -> int:
+        """How many updates were skipped for malformed inputs."""
+        return int(context.get_discrete_state(self._rejected_index).value()[0])
+
+    def _calc_state(self, context, output: BasicVector) -> None:
+        r = self._robot
+        nj = len(r.joint_names)
+        js = self.joint_state_input.Eval(context)
+        s = self.filter_state(context)
+        gyro = self.imu_input.Eval(context)[4:7]
+        x = np.zeros(r.nq + r.nv)
+        x[r.joint_q_index] = js[:nj]
+        x[r.nq + r.joint_v_index] = js[nj:]
+        b, bv = r.base_q_start, r.nq + r.base_v_start
+        x[b:b + 4] = RotationMatrix(_orthonormal(s.R)).ToQuaternion().wxyz()
+        x[b + 4:b + 7] = s.p
+        x[bv:bv + 3] = s.R @ (gyro - s.gyro_bias)
+        x[bv + 3:bv + 6] = s.v
+        output.SetFromVector(x)
+
+
+def _orthonormal(R: np.ndarray) -> np.ndarray:
+    """The rotation nearest ``R`` (products of exact rotations drift off by round-off)."""
+    U, _, Vt = np.linalg.svd(R)
+    return U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+
