@@ -261,7 +261,7 @@ def _cmd_bench_matrix(args) -> int:
     robots = _names(args.robots, WALKING_ROBOTS, "robot", WALKING_ROBOTS)
     planners = _names(args.planners, ("hlip", "mlip", "dcm"), "planner", PLANNERS)
     controllers = _names(args.controllers, ("tscqp",), "walking controller", walking_controllers)
-    rows = bench_matrix(robots, planners, controllers, args.duration, progress=stderr_progress,
+    rows = bench_matrix(robots, planners, controllers, args.duration, _sweep(args), progress=stderr_progress,
                         estimator=args.estimator)
 
     def line(r: dict) -> str:
@@ -295,6 +295,20 @@ def _print_rows(as_json: bool, rows: list[dict], header: str, line) -> int:
     return 0
 
 
+def _sweep(args):
+    """The sweep's workers or Ray cluster from --workers and --ray-address."""
+    from romoco_drake.bench.sweep import SweepOptions
+
+    return SweepOptions(args.workers, args.ray_address)
+
+
+def _add_sweep_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--workers", type=int, default=1,
+                   help="parallel runs: 1 (default) in this process, N on a local Ray instance with N CPUs")
+    p.add_argument("--ray-address", metavar="ADDR",
+                   help="run on the Ray cluster at ADDR (host:port or ray://host:port) instead")
+
+
 def _names(text: str | None, default, what: str, known) -> list[str]:
     names = list(default) if text is None else [n.strip() for n in text.split(",") if n.strip()]
     for n in names:
@@ -312,7 +326,8 @@ def _cmd_bench_agility(args) -> int:
     motions = _names(args.motions, tuple(MOTIONS), "motion", tuple(MOTIONS))
     if not args.rate > 0.0:
         raise RomocoError(f"--rate must be positive, got {args.rate}")
-    rows = bench_agility(args.robot, modes, motions, args.rate, args.top, progress=stderr_progress)
+    rows = bench_agility(args.robot, modes, motions, args.rate, args.top, _sweep(args),
+                         progress=stderr_progress)
     return _print_rows(args.json, rows,
                        "motion     inertia   tracked   settled   paper (case 3 / cases 1-2)   ended",
                        lambda r: f"{r['motion']:10s} {r['inertia']:9s} {r['tracked']:7.2f}   "
@@ -334,7 +349,8 @@ def _cmd_bench_dropout(args) -> int:
             from None
     if not all(0.0 < d <= 10.0 for d in durations) or not 1 <= args.phases <= 20:
         raise RomocoError("--durations must be in (0, 10] s and --phases in [1, 20]")
-    rows = bench_dropout(args.robot, durations, args.phases, args.stream, progress=stderr_progress)
+    rows = bench_dropout(args.robot, durations, args.phases, args.stream, _sweep(args),
+                         progress=stderr_progress)
     return _print_rows(args.json, rows,
                        "dropout  start   phase  fell  ride-through  stand  damping  robot holds  "
                        "end vx (m/s)",
@@ -362,7 +378,7 @@ def _cmd_bench_push(args) -> int:
         raise RomocoError("--ankle-gain must be in [0, 10] and --angular-momentum-weight in [0, 1e4]")
     result = bench_push(args.robot, impulses, phases, directions, adapt=not args.no_adapt,
                         ankle_gain=args.ankle_gain, angular_momentum_weight=args.angular_momentum_weight,
-                        progress=stderr_progress)
+                        sweep=_sweep(args), progress=stderr_progress)
     if args.json:
         print(json.dumps(result))
         return 0
@@ -401,6 +417,34 @@ def _cmd_bench_tick(args) -> int:
         for name, v in s["tick_ms"].items():
             print(f"  {name:14s} {v['median']:8.3f} ms median  {v['p99']:8.3f} ms p99")
         print(f"  total / plant step (medians): {s['controller_to_plant']}")
+    return 0
+
+
+def _cmd_reproduce(args) -> int:
+    import time
+
+    from romoco_drake.bench.report import claim_table_md, write_report
+    from romoco_drake.bench.reproduce import PAPERS, QUICK_SHORTENS, reproduce
+    from romoco_drake.runner import stderr_progress
+
+    papers = list(PAPERS) if args.paper == "all" else [args.paper]
+    if papers[0] not in PAPERS:
+        raise RomocoError(f"unknown paper '{args.paper}' (known: {', '.join(PAPERS)}, all)")
+    sweep = _sweep(args)
+    t0 = time.perf_counter()
+    claims, rows = reproduce(papers, args.quick, sweep, progress=stderr_progress)
+    scored = [c for c in claims if c.holds is not None]
+    meta = {"papers": papers, "quick": args.quick, "quick_shortens": QUICK_SHORTENS, "runs": len(rows),
+            "workers": f"Ray cluster {args.ray_address}" if args.ray_address else f"{args.workers} worker(s)",
+            "wall_s": round(time.perf_counter() - t0, 1), "scored": len(scored),
+            "held": sum(c.holds for c in scored), "not_built": len(claims) - len(scored)}
+    paths = write_report(args.out, papers, claims, rows, meta)
+    if args.json:
+        print(json.dumps(meta | paths))
+    else:
+        print(claim_table_md(claims))
+        print(f"\n{meta['held']} of {meta['scored']} claims hold ({meta['not_built']} not built); "
+              f"{meta['runs']} runs in {meta['wall_s']} s; wrote {', '.join(paths.values())}")
     return 0
 
 
@@ -551,6 +595,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, default=None, help="simulated seconds per run")
     p.add_argument("--estimator", help="run every scenario on this estimator (default: each scenario's own)")
     p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
+    _add_sweep_args(p)
     p.set_defaults(func=_cmd_bench_matrix)
     p = bench.add_parser("agility", help="VI-MPC: largest speed tracked per inertia mode and motion "
                          "(paper §IV-B)")
@@ -560,6 +605,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--rate", type=float, default=0.1, help="command ramp, (m/s or rad/s) per s")
     p.add_argument("--top", type=float, default=None, help="ramp ceiling (default: 1.5x the paper's best)")
     p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
+    _add_sweep_args(p)
     p.set_defaults(func=_cmd_bench_agility)
     p = bench.add_parser("dropout", help="walking at 0.4 m/s over LCM through link dropouts at several "
                          "gait phases")
@@ -568,6 +614,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--phases", type=int, default=4, help="start times spread over one step")
     p.add_argument("--stream", default="proprioception", help="proprioception, commands or all")
     p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
+    _add_sweep_args(p)
     p.set_defaults(func=_cmd_bench_dropout)
     p = bench.add_parser("push", help="largest push survived while walking, per direction and gait phase")
     p.add_argument("--robot", default="g1")
@@ -581,6 +628,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--angular-momentum-weight", type=float, default=0.0,
                    help="TSC-QP angular-momentum damping task (0: off)")
     p.add_argument("--json", action="store_true", help="print one JSON object (last line)")
+    _add_sweep_args(p)
     p.set_defaults(func=_cmd_bench_push)
     p = bench.add_parser("tick", help="per-component controller tick time on a running closed loop")
     p.add_argument("--scenario", default="g1_walk")
@@ -590,6 +638,15 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--ticks", type=int, default=500)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_bench_tick)
+    p = sub.add_parser("reproduce", help="rerun a paper's claims and report them beside the paper's numbers")
+    p.add_argument("paper", help="romoco, xo, vimpc or all")
+    p.add_argument("--out", type=Path, default=Path("reproduce"), metavar="DIR",
+                   help="where report.md, report.html and results.json go (default: reproduce/)")
+    p.add_argument("--quick", action="store_true",
+                   help="shorter runs and fewer cells, for CI and a first look")
+    p.add_argument("--json", action="store_true", help="print the summary and the file paths as JSON")
+    _add_sweep_args(p)
+    p.set_defaults(func=_cmd_reproduce)
     # Centroidal inertia (issue 14): data generation, training and the horizon benchmark.
     p = sub.add_parser("inertia-data", help="IK samples of foot poses -> centroidal inertia (CCINN data)")
     p.add_argument("robot")

@@ -230,3 +230,51 @@ def _save(fig, title: str, path: Path) -> Path:
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+def plot_velocity_traces(path: Path, title: str, traces: dict[str, dict]) -> Path:
+    """Forward and lateral 1 s averaged velocity of several runs of one command (``traces``: label →
+    {"t", "measured" (N, 3), "wanted" (N, 3)}), the command dashed black."""
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+    first = next(iter(traces.values()))
+    labels = ("forward velocity [m/s]", "lateral velocity [m/s]")
+    for i, (ax, label) in enumerate(zip(axes, labels, strict=True)):
+        ax.plot(first["t"], np.array(first["wanted"])[:, i], "k--", lw=1.2, label="command")
+        for name, trace in traces.items():
+            ax.plot(trace["t"], np.array(trace["measured"])[:, i], lw=1.1, label=name)
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    return _save(fig, title, path)
+
+
+def plot_error_bars(path: Path, title: str, metrics: dict[str, dict[str, float]]) -> Path:
+    """Grouped bars: per metric (an axis each) one bar per run; an infinite value (a fall) is marked."""
+    fig, axes = plt.subplots(1, len(metrics), figsize=(3.2 * len(metrics), 3.4))
+    for ax, (metric, values) in zip(np.atleast_1d(axes), metrics.items(), strict=True):
+        names = list(values)
+        heights = [v if np.isfinite(v) else 0.0 for v in values.values()]
+        ax.bar(names, heights, color=[f"C{i}" for i in range(len(names))])
+        for i, v in enumerate(values.values()):
+            if not np.isfinite(v):
+                ax.text(i, 0.0, "fell", ha="center", va="bottom", color="red")
+        ax.set_title(metric, fontsize=9)
+        ax.tick_params(axis="x", labelsize=8)
+        ax.grid(alpha=0.3, axis="y")
+    return _save(fig, title, path)
+
+
+def plot_inertia_prediction(path: Path, title: str, t, true, predicted, labels) -> Path:
+    """The six entries of the centroidal inertia over time: the plant's and a prediction's."""
+    true, predicted = np.array(true), np.array(predicted)
+    fig, axes = plt.subplots(2, 3, sharex=True, figsize=(11, 5))
+    for k, ax in enumerate(axes.flat):
+        ax.plot(t, true[:, k], "k", lw=1.2, label="plant")
+        ax.plot(t, predicted[:, k], "r--", lw=1.1, label="CCINN")
+        ax.set_title(f"{labels[k]} [kg·m²]", fontsize=9)
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=8)
+    for ax in axes[1]:
+        ax.set_xlabel("time [s]")
+    return _save(fig, title, path)

@@ -145,11 +145,14 @@ class PlannerConfig:
     name: str = "hlip"
     gain: Literal["deadbeat", "converging", "lqr"] = "deadbeat"
     alpha: float = 0.5
+    # Double-support time (s) of the laws whose ROM has one; None: the robot's walking.t_ds. The
+    # RoMoCo paper's planner comparison (Fig. 8) runs every law at 0, ALIP's only gait.
+    t_ds: float | None = None
     step_adaptation: StepAdaptationConfig = dataclasses.field(default_factory=StepAdaptationConfig)
 
 
 # The converging gain's contraction factor per step (0: deadbeat; 1 would never converge).
-declare_ranges(PlannerConfig, alpha=Range(0.0, 1.0, hi_open=True))
+declare_ranges(PlannerConfig, alpha=Range(0.0, 1.0, hi_open=True), t_ds=Range(0.0, 1.0, "s"))
 
 
 @dataclass
@@ -608,8 +611,9 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     mpc = law is None and not PLANNERS[scenario.planner.name].facts["law"]
     if law is None and not mpc:
         cfg = scenario.planner
-        law = make_planner(cfg.name, PlannerParams(mass=robot.total_mass, t_ds=robot.config.walking.t_ds,
-                                                   gain=cfg.gain, alpha=cfg.alpha))
+        t_ds = robot.config.walking.t_ds if cfg.t_ds is None else cfg.t_ds
+        law = make_planner(cfg.name, PlannerParams(mass=robot.total_mass, t_ds=t_ds, gain=cfg.gain,
+                                                   alpha=cfg.alpha))
     limiter = builder.AddNamedSystem("command_limiter", CommandLimiter(
         robot.config.walking.command_limits, period, offset))
     builder.Connect(command.command_port, limiter.command_in_port)

@@ -19,9 +19,11 @@ scored at a fall after walking at 0.55-0.67 m/s for 3 s), which ``settled`` does
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import numpy as np
 
+from romoco_drake.bench.sweep import IN_PROCESS, SweepOptions, Variant, run_sweep
 from romoco_drake.metrics import AVERAGE_WINDOW_S, heading_velocity, moving_average
 from romoco_drake.planners.vimpc import INERTIA_MODES
 from romoco_drake.runner import log_samples, run_scenario
@@ -85,36 +87,46 @@ def agility_scenario(robot: str, inertia: str, motion: str, rate: float, top: fl
                                vimpc=dataclasses.replace(base.vimpc, inertia=inertia))
 
 
+def agility_job(scenario: Scenario, motion: str, also: Callable | None = None) -> dict:
+    """One ramp's score (module docstring); ``also(built, context) -> dict`` (a module-level
+    function) adds what it reads from the finished run's diagram."""
+    logs = {}
+
+    def keep(built, context):
+        logs["built"] = built
+        logs["times"], logs["states"] = log_samples(built.state_log.FindLog(context), None)
+        if also is not None:
+            logs["also"] = also(built, context)
+
+    s = run_scenario(scenario, stop_after_fall=0.5, inspect=keep)
+    times, states, built = logs["times"], logs["states"], logs["built"]
+    measured = moving_average(times, heading_velocity(built.robot, times, states), AVERAGE_WINDOW_S)
+    starts = np.array([seg.start for seg in built.command.segments])
+    segment = np.searchsorted(starts, times, side="right") - 1
+    command = np.array([[c.vx, c.vy, c.wz] for c in (seg.command for seg in built.command.segments)])
+    wanted = moving_average(times, command[segment], AVERAGE_WINDOW_S)
+    fall = s["fall_time_s"]
+    speed, reason = tracked_speed(times, measured, wanted, MOTIONS[motion], fall)
+    settled = speed if fall is None else tracked_speed(times, measured, wanted, MOTIONS[motion],
+                                                       fall - AVERAGE_WINDOW_S)[0]
+    return {"tracked": round(speed, 3), "settled": round(settled, 3), "ended": reason,
+            "fall_time_s": s["fall_time_s"], "mpc_failures": s.get("mpc_failures"),
+            "realtime_factor": s["realtime_factor"]} | logs.get("also", {})
+
+
+def agility_variants(robot: str, modes, motions, rate: float, top: float | None, also: Callable | None = None
+                     ) -> list[Variant]:
+    """The ramps of :func:`bench_agility`, as sweep variants (``also`` as in :func:`agility_job`)."""
+    return [Variant(agility_scenario(robot, inertia, motion, rate,
+                                     top if top is not None else 1.5 * PAPER[motion][0]),
+                    {"robot": robot, "motion": motion, "inertia": inertia,
+                     "paper": PAPER[motion][0] if inertia == "network" else PAPER[motion][1]},
+                    agility_job, {"motion": motion, "also": also})
+            for motion in motions for inertia in modes]
+
+
 def bench_agility(robot: str = "draco", modes=INERTIA_MODES, motions=tuple(MOTIONS), rate: float = 0.1,
-                  top: float | None = None, progress=None) -> list[dict]:
+                  top: float | None = None, sweep: SweepOptions = IN_PROCESS, progress=None
+                  ) -> list[dict]:
     """One ramp per inertia mode × motion (module docstring); ``top`` defaults to 1.5× the paper's best."""
-    rows = []
-    for motion in motions:
-        ceiling = top if top is not None else 1.5 * PAPER[motion][0]
-        for inertia in modes:
-            scenario = agility_scenario(robot, inertia, motion, rate, ceiling)
-            if progress is not None:
-                progress(f"[agility] {robot} {motion} {inertia}")
-            logs = {}
-
-            def keep(built, context, logs=logs):
-                logs["built"], logs["context"] = built, context
-                logs["times"], logs["states"] = log_samples(built.state_log.FindLog(context), None)
-
-            s = run_scenario(scenario, stop_after_fall=0.5, inspect=keep)
-            times, states, built = logs["times"], logs["states"], logs["built"]
-            measured = moving_average(times, heading_velocity(built.robot, times, states), AVERAGE_WINDOW_S)
-            starts = np.array([seg.start for seg in built.command.segments])
-            segment = np.searchsorted(starts, times, side="right") - 1
-            command = np.array([[c.vx, c.vy, c.wz] for c in (seg.command for seg in built.command.segments)])
-            wanted = moving_average(times, command[segment], AVERAGE_WINDOW_S)
-            fall = s["fall_time_s"]
-            speed, reason = tracked_speed(times, measured, wanted, MOTIONS[motion], fall)
-            settled = speed if fall is None else tracked_speed(times, measured, wanted, MOTIONS[motion],
-                                                               fall - AVERAGE_WINDOW_S)[0]
-            rows.append({"robot": robot, "motion": motion, "inertia": inertia, "tracked": round(speed, 3),
-                         "settled": round(settled, 3), "ended": reason,
-                         "paper": PAPER[motion][0] if inertia == "network" else PAPER[motion][1],
-                         "fall_time_s": s["fall_time_s"], "mpc_failures": s.get("mpc_failures"),
-                         "realtime_factor": s["realtime_factor"]})
-    return rows
+    return run_sweep(agility_variants(robot, modes, motions, rate, top), sweep, progress)

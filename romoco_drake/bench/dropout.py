@@ -14,6 +14,7 @@ import dataclasses
 
 import numpy as np
 
+from romoco_drake.bench.sweep import IN_PROCESS, SweepOptions, Variant, run_sweep
 from romoco_drake.interfaces.dropout import Dropout
 from romoco_drake.metrics import heading_velocity
 from romoco_drake.robots.model import load_robot
@@ -35,29 +36,31 @@ def dropout_scenario(robot: str, t: float, duration: float, stream: str) -> Scen
         dropouts=[Dropout(t, duration, stream)])
 
 
+def dropout_job(scenario: Scenario) -> dict:
+    """One dropout run over the in-process LCM link: the module docstring's numbers."""
+    tail = {}
+
+    def end_speed(built, context):
+        times, states = log_samples(built.state_log.FindLog(context), None)
+        last = times >= times[-1] - TAIL_S
+        tail["vx"] = float(np.mean(heading_velocity(built.robot, times[last], states[:, last])[:, 0]))
+
+    s = run_scenario(scenario, link="via_lcm", inspect=end_speed)
+    return {"fell": s["fell"], "fall_reason": s["fall_reason"],
+            "ride_through_events": s["ride_through_events"], "stand_events": s["stand_events"],
+            "damping_events": s["damping_events"], "robot_hold_events": s["robot_link"]["hold_events"],
+            "end_vx": round(tail["vx"], 3),
+            "steps": s.get("steps")}
+
+
 def bench_dropout(robot: str = "g1", durations=(0.1, 0.3), phases: int = 4, stream: str = "proprioception",
-                  progress=None) -> list[dict]:
+                  sweep: SweepOptions = IN_PROCESS, progress=None) -> list[dict]:
     """One row per (dropout length, start time); see the module docstring."""
     walking = load_robot(robot).config.walking
     step = walking.t_ss + walking.t_ds
-    rows = []
-    for duration in durations:
-        for k in range(phases):
-            t = START_S + k * step / phases
-            if progress is not None:
-                progress(f"[bench dropout] {robot}: {duration:g} s of {stream} from t = {t:.3f} s")
-            tail = {}
-
-            def end_speed(built, context, tail=tail):
-                times, states = log_samples(built.state_log.FindLog(context), None)
-                last = times >= times[-1] - TAIL_S
-                tail["vx"] = float(np.mean(heading_velocity(built.robot, times[last], states[:, last])[:, 0]))
-
-            s = run_scenario(dropout_scenario(robot, t, duration, stream), link="via_lcm", inspect=end_speed)
-            rows.append({
-                "robot": robot, "stream": stream, "duration_s": duration, "t": round(t, 4),
-                "phase": round(k / phases, 3), "fell": s["fell"], "fall_reason": s["fall_reason"],
-                "ride_through_events": s["ride_through_events"], "stand_events": s["stand_events"],
-                "damping_events": s["damping_events"], "robot_hold_events": s["robot_link"]["hold_events"],
-                "end_vx": round(tail["vx"], 3), "steps": s.get("steps")})
-    return rows
+    starts = [(duration, k, START_S + k * step / phases) for duration in durations for k in range(phases)]
+    variants = [Variant(dropout_scenario(robot, t, duration, stream),
+                        {"robot": robot, "stream": stream, "duration_s": duration, "t": round(t, 4),
+                         "phase": round(k / phases, 3)}, dropout_job)
+                for duration, k, t in starts]
+    return run_sweep(variants, sweep, progress)

@@ -16,7 +16,7 @@ import dataclasses
 
 from pydrake.systems.analysis import Simulator
 
-from romoco_drake.bench.sweep import Variant, run_sweep
+from romoco_drake.bench.sweep import IN_PROCESS, SweepOptions, Variant, run_sweep
 from romoco_drake.interfaces.disturbance import Disturbance
 from romoco_drake.scenario import (
     CommandPoint,
@@ -75,7 +75,7 @@ def pushed(scenario: Scenario, t: float, impulse: float, direction: str) -> Scen
 
 def bench_push(robot: str = "g1", impulses=IMPULSES, phases=PHASES, directions=tuple(DIRECTIONS),
                adapt: bool = True, ankle_gain: float = 0.0, angular_momentum_weight: float = 0.0,
-               progress=None) -> dict:
+               sweep: SweepOptions = IN_PROCESS, progress=None) -> dict:
     """The push table (module docstring): per cell the largest impulse survived, and per direction
     the smallest of those over the phases."""
     scenario = walking_scenario(robot, adapt, ankle_gain, angular_momentum_weight)
@@ -86,8 +86,9 @@ def bench_push(robot: str = "g1", impulses=IMPULSES, phases=PHASES, directions=t
     alive = list(cells)
     for impulse in sorted(impulses):
         variants = [Variant(pushed(scenario, cells[c]["push_time_s"], impulse, c[0]),
-                            {"direction": c[0], "phase": c[1], "impulse": impulse}) for c in alive]
-        rows = run_sweep(variants, stop_after_fall=0.1, progress=progress)
+                            {"direction": c[0], "phase": c[1], "impulse": impulse},
+                            options={"stop_after_fall": 0.1}) for c in alive]
+        rows = run_sweep(variants, sweep, progress)
         for cell, row in zip(alive, rows, strict=True):
             if row["fell"]:
                 cells[cell].update(fell_at=impulse, fall_time_s=row["fall_time_s"])

@@ -8,6 +8,7 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.bench.rom import percentiles
+from romoco_drake.bench.sweep import IN_PROCESS, SweepOptions, Variant, run_sweep
 from romoco_drake.control.gravity import contact_gravity_compensation
 from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces.station import make_station
@@ -36,27 +37,27 @@ def walk_scenario(robot: str) -> Scenario:
     return load_scenario(name)
 
 
-def bench_matrix(robots, planners, controllers, duration: float | None, progress=None,
-                 estimator: str | None = None) -> list[dict]:
+MATRIX_KEYS = ("duration_s", "fell", "fall_time_s", "velocity_rms_error", "realtime_factor",
+               "controller_tick_ms", "qp_failures", "steps")
+
+
+def matrix_job(scenario: Scenario, duration: float | None) -> dict:
+    """One matrix cell: the run summary's MATRIX_KEYS, its estimator and a filter's errors."""
+    s = run_scenario(scenario, duration=duration)
+    return ({key: s[key] for key in MATRIX_KEYS} | {"estimator": scenario.estimator.name}
+            | {k: s[k] for k in ESTIMATE_ERRORS if k in s})
+
+
+def bench_matrix(robots, planners, controllers, duration: float | None, sweep: SweepOptions = IN_PROCESS,
+                 progress=None, estimator: str | None = None) -> list[dict]:
     """One closed-loop run per robot × planner × controller on the robot's default profile, on
     ``estimator`` if given (a filter's rows add its errors against the truth)."""
-    rows = []
-    for robot in robots:
-        base = walk_scenario(robot)
-        for planner in planners:
-            for controller in controllers:
-                scenario = with_overrides(base, planner=planner, controller=controller, estimator=estimator)
-                if progress is not None:
-                    progress(f"[matrix] {robot} {planner} {controller} {scenario.estimator.name}")
-                s = run_scenario(scenario, duration=duration)
-                rows.append({
-                    "robot": robot, "planner": planner, "controller": controller,
-                    "duration_s": s["duration_s"], "fell": s["fell"], "fall_time_s": s["fall_time_s"],
-                    "velocity_rms_error": s["velocity_rms_error"], "realtime_factor": s["realtime_factor"],
-                    "controller_tick_ms": s["controller_tick_ms"], "qp_failures": s["qp_failures"],
-                    "steps": s["steps"], "estimator": scenario.estimator.name,
-                } | {k: s[k] for k in ESTIMATE_ERRORS if k in s})
-    return rows
+    variants = [Variant(with_overrides(walk_scenario(robot), planner=planner, controller=controller,
+                                       estimator=estimator),
+                        {"robot": robot, "planner": planner, "controller": controller}, matrix_job,
+                        {"duration": duration})
+                for robot in robots for planner in planners for controller in controllers]
+    return run_sweep(variants, sweep, progress)
 
 
 def bench_tick(scenario: Scenario, warmup: float = 2.0, ticks: int = 500) -> dict:

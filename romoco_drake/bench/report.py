@@ -1,0 +1,168 @@
+"""The report of ``romoco reproduce``: report.md, a self-contained report.html, results.json.
+
+Figures are written to ``DIR/figures/`` (the Markdown links them) and embedded in the HTML as
+base64 PNG, so the HTML file alone is the whole report.
+"""
+
+from __future__ import annotations
+
+import base64
+import dataclasses
+import html
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from romoco_drake.bench.reproduce import (
+    ERRORS,
+    FIG7_CONTROLLERS,
+    FIG8_PLANNERS,
+    Claim,
+    speed_error,
+    tracking_error,
+)
+from romoco_drake.errors import RomocoError
+
+NOTES = {
+    "romoco": [
+        "Fig. 7: each robot's default walking profile (diagrams/<robot>_walk.yaml) with H-LIP; errors are "
+        "RMS over the walking part of the run (the paper integrates them over t = 28-30 s). Velocity: the "
+        "1 s averaged base velocity against the command (romoco run's velocity_rms_error).",
+        "Fig. 8: Cassie with the TSC-QP, every planner at T_DS = 0 (planner.t_ds), command "
+        "`1:1.0,0.3,0;5:-0.5,-0.3,0` through Cassie's command limiter (0.5 m/s²).",
+        "ALIP vs H-LIP: our ALIP is the paper's §III-A law, with the momentum target taken on the exact "
+        "period-1 orbit (L⁻ = z0 λ (vT/2)(1 + cosh λT)/sinh λT) instead of the printed L_des = z0 v (its "
+        "λT → 0 limit, which walks 11 % slow on G1). At T_DS = 0 the H-LIP S2S map is the ALIP one, and "
+        "ALIP's step sets the end-of-next-step momentum to the orbit's: its closed loop is "
+        "[[0, −1/(z0 λ sinh λT)], [0, 0]], nilpotent, so it is the unique deadbeat gain of that 2-state, "
+        "1-input map — H-LIP's deadbeat gain (the Fig. 8 ALIP row gives the largest step difference over "
+        "random template states). Same ROM state, same T, same foothold: the two runs are "
+        "identical to the last digit on every robot whose gait has no double support (G1, and Fig. 8's "
+        "Cassie), as `romoco run g1_walk --planner alip` showed. No wiring bug: the registry builds AlipLaw "
+        "(tests/test_rom_planners.py checks the equality). The paper's unstable ALIP cannot come from this "
+        "law; it points at something of their ALIP implementation outside the foot-placement formula. "
+        "MLIP at T_DS = 0 (a zero-length ZMP roll) is H-LIP too; only DCM, which regulates the divergent "
+        "component alone, steps differently. No command can separate ALIP from H-LIP here, so a larger step "
+        "than Fig. 8's (which passes Cassie's 0.5 m/s² command limiter) would make both fall or neither.",
+    ],
+    "xo": ["The Table I walk of diagrams/xo_walk.yaml (general-foot ALIP + momentum HQP); the ratios are "
+           "metrics.momentum_summary's; the figures are romoco run --plot's."],
+    "vimpc": ["Agility: romoco bench agility's ramps (a speed is tracked while the 1 s average stays within "
+              "20 % of the command). Solve time: romoco bench tick's mpc_solve on draco_walk at 0.5 m/s. "
+              "Fig. 3: along the CCINN forward ramp, the plant's centroidal inertia against the CCINN's "
+              "prediction from the base and foot poses."],
+}
+
+
+def claim_table_md(claims: list[Claim]) -> str:
+    lines = ["| paper | source | claim | paper | ours | ratio / direction | holds |", "|---" * 7 + "|"]
+    for c in claims:
+        lines.append(f"| {c.paper} | {c.source} | {c.claim} | {c.paper_value} | {c.ours} | {c.ratio} | "
+                     f"{_holds(c)} |")
+    return "\n".join(lines)
+
+
+def _holds(c: Claim) -> str:
+    return "not built" if c.holds is None else "yes" if c.holds else "**no**"
+
+
+def figures(rows: list[dict], out: Path) -> dict[str, Path]:
+    """The report's figures (title → PNG path) from the runs' rows."""
+    from romoco_drake.plots import plot_error_bars, plot_inertia_prediction, plot_velocity_traces
+
+    out.mkdir(parents=True, exist_ok=True)
+    made = {}
+    for robot in dict.fromkeys(r["robot"] for r in rows if r["part"] == "fig7"):
+        by = {r["controller"]: r for r in rows if r["part"] == "fig7" and r["robot"] == robot}
+        title = f"Fig. 7 ({robot}): velocity under each controller"
+        made[title] = plot_velocity_traces(out / f"fig7_{robot}_velocity.png", title,
+                                           {c: by[c]["trace"] for c in FIG7_CONTROLLERS})
+        metrics = {"‖velocity rms‖ [m/s]": {c: speed_error(by[c]) for c in FIG7_CONTROLLERS}}
+        for name, unit in ERRORS.items():
+            metrics[f"{name} rms [{unit}]"] = {c: tracking_error(by[c], name) for c in FIG7_CONTROLLERS}
+        title = f"Fig. 7 ({robot}): tracking errors"
+        made[title] = plot_error_bars(out / f"fig7_{robot}_errors.png", title, metrics)
+    fig8 = {r["planner"]: r for r in rows if r["part"] == "fig8"}
+    if fig8:
+        title = "Fig. 8 (Cassie, T_DS = 0): planners under an aggressive command"
+        made[title] = plot_velocity_traces(out / "fig8_cassie_velocity.png", title,
+                                           {p: fig8[p]["trace"] for p in FIG8_PLANNERS if p in fig8})
+    for r in rows:
+        for name, png in r.get("figures", {}).items():
+            path = out / f"{name}.png"
+            path.write_bytes(base64.b64decode(png))
+            made[f"XO: {name.removeprefix('xo_walk_').replace('_', ' ')}"] = path
+        if "inertia_probe" in r:
+            from romoco_drake.inertia.ccinn import OUTPUTS
+
+            title = f"Fig. 3: centroidal inertia along the DRACO {r['motion']} ramp (base frame, to a fall)"
+            probe = r["inertia_probe"]
+            end = math.inf if r["fall_time_s"] is None else r["fall_time_s"]
+            n = int(np.searchsorted(probe["t"], end, side="right"))
+            made[title] = plot_inertia_prediction(out / "fig3_inertia.png", title, probe["t"][:n],
+                                                  probe["true"][:n], probe["predicted"][:n], OUTPUTS)
+    return made
+
+
+def write_report(out: Path, papers: list[str], claims: list[Claim], rows: list[dict], meta: dict) -> dict:
+    """Writes report.md, report.html and results.json into ``out``; returns their paths."""
+    out = Path(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        made = figures(rows, out / "figures")
+        runs = [{k: v for k, v in r.items() if k not in ("trace", "figures", "inertia_probe")} for r in rows]
+        results = {"meta": meta, "claims": [dataclasses.asdict(c) for c in claims], "runs": runs}
+        (out / "results.json").write_text(json.dumps(results, indent=1, default=_json_default))
+        (out / "report.md").write_text(_markdown(papers, claims, made, meta, out))
+        (out / "report.html").write_text(_html(papers, claims, made, meta))
+    except OSError as e:
+        raise RomocoError(f"{out}: cannot write the report ({e.strerror})") from None
+    return {"report_md": str(out / "report.md"), "report_html": str(out / "report.html"),
+            "results_json": str(out / "results.json")}
+
+
+def _json_default(x):
+    return None if isinstance(x, float) and not math.isfinite(x) else str(x)
+
+
+def _header(meta: dict) -> str:
+    mode = "quick (" + meta["quick_shortens"] + ")" if meta["quick"] else "full length"
+    return (f"{meta['runs']} runs, {mode}; {meta['workers']} on {meta['wall_s']:.0f} s wall; "
+            f"{meta['held']} of {meta['scored']} scored claims hold, {meta['not_built']} not built.")
+
+
+def _markdown(papers, claims, made, meta, out: Path) -> str:
+    parts = ["# romoco reproduce: " + ", ".join(papers), "", _header(meta), "", claim_table_md(claims), ""]
+    for p in papers:
+        parts += [f"## Notes: {p}", ""] + [f"- {n}" for n in NOTES[p]] + [""]
+    parts += ["## Figures", ""]
+    for title, path in made.items():
+        parts += [f"![{title}]({path.relative_to(out)})", ""]
+    return "\n".join(parts)
+
+
+def _html(papers, claims, made, meta) -> str:
+    esc = html.escape
+    rows = "".join(
+        f"<tr class='{'nb' if c.holds is None else 'ok' if c.holds else 'bad'}'>"
+        + "".join(f"<td>{esc(str(x))}</td>" for x in (c.paper, c.source, c.claim, c.paper_value, c.ours,
+                                                      c.ratio, _holds(c).replace('**', '')))
+        + (f"</tr><tr><td></td><td colspan='6' class='note'>{esc(c.note)}</td></tr>" if c.note else "</tr>")
+        for c in claims)
+    notes = "".join(f"<h2>Notes: {esc(p)}</h2><ul>" + "".join(f"<li>{esc(n)}</li>" for n in NOTES[p])
+                    + "</ul>" for p in papers)
+    figs = "".join(f"<figure><img alt='{esc(t)}' src='data:image/png;base64,"
+                   f"{base64.b64encode(p.read_bytes()).decode()}'><figcaption>{esc(t)}</figcaption></figure>"
+                   for t, p in made.items())
+    style = ("body{font-family:sans-serif;max-width:1200px;margin:auto}table{border-collapse:collapse}"
+             "td,th{border:1px solid #ccc;padding:4px;font-size:13px}.ok td:last-child{background:#dfd}"
+             ".bad td:last-child{background:#fdd}.nb td:last-child{background:#eee}.note{color:#555;"
+             "font-size:12px}img{max-width:100%}")
+    head = "".join(f"<th>{h}</th>" for h in ("paper", "source", "claim", "paper", "ours", "ratio / direction",
+                                             "holds"))
+    return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>romoco reproduce</title><style>{style}"
+            f"</style></head><body><h1>romoco reproduce: {esc(', '.join(papers))}</h1>"
+            f"<p>{esc(_header(meta))}</p>"
+            f"<table><tr>{head}</tr>{rows}</table>{notes}<h2>Figures</h2>{figs}</body></html>")
