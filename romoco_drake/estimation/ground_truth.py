@@ -33,12 +33,20 @@ class GroundTruthEstimator(LeafSystem):
             prerequisites_of_calc={self.all_input_ports_ticket()})
 
     def _calc_state(self, context, output: BasicVector) -> None:
-        r = self._robot
-        x = np.zeros(r.nq + r.nv)
-        js = self.joint_state_input.Eval(context)
-        nj = len(r.joint_names)
-        x[r.joint_q_index] = js[:nj]
-        x[r.nq + r.joint_v_index] = js[nj:]
-        x[r.base_q_start:r.base_q_start + 7] = self.base_pose_input.Eval(context)
-        x[r.nq + r.base_v_start:r.nq + r.base_v_start + 6] = self.base_velocity_input.Eval(context)
-        output.SetFromVector(x)
+        output.SetFromVector(plant_state(self._robot, self.joint_state_input.Eval(context),
+                                         self.base_pose_input.Eval(context),
+                                         self.base_velocity_input.Eval(context)))
+
+
+def plant_state(robot: RobotModel, joint_state: np.ndarray, base_pose: np.ndarray,
+                base_velocity: np.ndarray) -> np.ndarray:
+    """x = [q; v] of the controller plant from the joints [q_j; v_j], the base pose [qw qx qy qz
+    x y z] and the base velocity [ω_WB; v_WB] (world); every estimator's output."""
+    r = robot
+    nj = len(r.joint_names)
+    x = np.zeros(r.nq + r.nv)
+    x[r.joint_q_index] = joint_state[:nj]
+    x[r.nq + r.joint_v_index] = joint_state[nj:]
+    x[r.base_q_start:r.base_q_start + 7] = base_pose
+    x[r.nq + r.base_v_start:r.nq + r.base_v_start + 6] = base_velocity
+    return x

@@ -8,6 +8,7 @@ from pydrake.math import RotationMatrix
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import BasicVector, LeafSystem
 
+from romoco_drake.estimation.ground_truth import plant_state
 from romoco_drake.estimation.invariant_ekf import InekfState, InvariantEkf, InvariantEkfParams
 from romoco_drake.robots.kinematics import RobotKinematics, declare_kinematics_cache
 from romoco_drake.robots.model import RobotModel
@@ -140,20 +141,11 @@ class InvariantEkfEstimator(LeafSystem):
         return int(context.get_discrete_state(self._rejected_index).value()[0])
 
     def _calc_state(self, context, output: BasicVector) -> None:
-        r = self._robot
-        nj = len(r.joint_names)
-        js = self.joint_state_input.Eval(context)
         s = self.filter_state(context)
         gyro = self.imu_input.Eval(context)[4:7]
-        x = np.zeros(r.nq + r.nv)
-        x[r.joint_q_index] = js[:nj]
-        x[r.nq + r.joint_v_index] = js[nj:]
-        b, bv = r.base_q_start, r.nq + r.base_v_start
-        x[b:b + 4] = RotationMatrix(_orthonormal(s.R)).ToQuaternion().wxyz()
-        x[b + 4:b + 7] = s.p
-        x[bv:bv + 3] = s.R @ (gyro - s.gyro_bias)
-        x[bv + 3:bv + 6] = s.v
-        output.SetFromVector(x)
+        pose = np.concatenate([RotationMatrix(_orthonormal(s.R)).ToQuaternion().wxyz(), s.p])
+        velocity = np.concatenate([s.R @ (gyro - s.gyro_bias), s.v])
+        output.SetFromVector(plant_state(self._robot, self.joint_state_input.Eval(context), pose, velocity))
 
 
 def _orthonormal(R: np.ndarray) -> np.ndarray:

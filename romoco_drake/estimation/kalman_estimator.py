@@ -8,6 +8,7 @@ from pydrake.math import RotationMatrix
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import BasicVector, LeafSystem
 
+from romoco_drake.estimation.ground_truth import plant_state
 from romoco_drake.estimation.kalman import (
     POSITION,
     VELOCITY,
@@ -168,25 +169,14 @@ class KalmanEstimator(LeafSystem):
         return int(context.get_discrete_state(self._rejected_index).value()[0])
 
     def _calc_state(self, context, output: BasicVector) -> None:
-        r = self._robot
-        nj = len(r.joint_names)
-        js = self.joint_state_input.Eval(context)
         imu = self.imu_input.Eval(context)
         kf = context.get_discrete_state(self._kf_index).value()
-        x = np.zeros(r.nq + r.nv)
-        x[r.joint_q_index] = js[:nj]
-        x[r.nq + r.joint_v_index] = js[nj:]
-        b, bv = r.base_q_start, r.nq + r.base_v_start
         R = _rotation(imu[:4])
-        if R is None:
-            x[b:b + 4] = np.nan
-            x[bv:bv + 3] = np.nan
-        else:
-            x[b:b + 4] = imu[:4] / np.linalg.norm(imu[:4])
-            x[bv:bv + 3] = R @ imu[4:7]
-        x[b + 4:b + 7] = kf[POSITION]
-        x[bv + 3:bv + 6] = kf[VELOCITY]
-        output.SetFromVector(x)
+        quaternion = np.full(4, np.nan) if R is None else imu[:4] / np.linalg.norm(imu[:4])
+        omega = np.full(3, np.nan) if R is None else R @ imu[4:7]
+        output.SetFromVector(plant_state(self._robot, self.joint_state_input.Eval(context),
+                                         np.concatenate([quaternion, kf[POSITION]]),
+                                         np.concatenate([omega, kf[VELOCITY]])))
 
 
 def _rotation(wxyz: np.ndarray) -> np.ndarray | None:
