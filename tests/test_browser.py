@@ -122,8 +122,11 @@ def _start_teleop(tmp_path) -> tuple[subprocess.Popen, str, queue.Queue]:
     """``romoco run g1_walk --meshcat --teleop`` in a subprocess; its page URL and stderr lines."""
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
     args = ["run", "g1_walk", "--meshcat", "--teleop", "--json", "--no-wait"]
+    # Ctrl-C must reach the run even when pytest itself was started with SIGINT ignored (a
+    # background job of a non-interactive shell): the child gets the default handler back.
     proc = subprocess.Popen([sys.executable, "-m", "romoco_drake.cli", *args], stdin=subprocess.DEVNULL,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=lambda: [lines.put(line) for line in proc.stderr], daemon=True).start()
     end = time.monotonic() + WAIT_S
@@ -177,7 +180,12 @@ def test_teleop_page_drives_the_robot(browser, tmp_path):
         browser.execute_cdp_cmd("Page.removeScriptToEvaluateOnNewDocument",
                                 {"identifier": script["identifier"]})
         proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=WAIT_S)
+        try:
+            out, _ = proc.communicate(timeout=WAIT_S)
+        except subprocess.TimeoutExpired:
+            proc.kill()  # never leave a real-time run behind
+            proc.communicate()
+            pytest.fail("romoco run --teleop did not end on Ctrl-C")
     assert proc.returncode == 0, out
     summary = json.loads(out.strip().splitlines()[-1])
     assert summary["teleop_estop"] is True
