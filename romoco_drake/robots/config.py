@@ -30,8 +30,9 @@ class ModelSource:
 class FootConfig:
     """One foot: its body, sole contact points and sole normal, in that body's frame.
 
-    ``points`` are the lowest points of the sole (toe first, then heel, for a line foot);
-    ``up`` is the sole's outward normal pointing away from the ground when standing.
+    ``points`` are the lowest points of the sole (toe first, then heel, for a line foot; the
+    bottom of the ball for a point foot); ``up`` is the sole's outward normal pointing away from
+    the ground when standing (for a point foot only where its simulated contact sphere sits).
     ``sim_points``, if given, are the simulation's contact points instead of ``points`` (a
     robot whose controller assumes a smaller patch than its physical sole plate).
     """
@@ -50,9 +51,10 @@ declare_ranges(FootConfig, points=Range(-1.0, 1.0, "m", size=3), up=Range(-1e3, 
 
 @dataclasses.dataclass
 class FeetConfig:
-    """Both feet. ``line`` feet have 2 contact points (toe, heel); ``plane`` feet >= 3."""
+    """Both feet. ``line`` feet have 2 contact points (toe, heel); ``plane`` feet >= 3; ``point``
+    feet exactly 1 (a ball foot: it carries a force, no moment, and its orientation is free)."""
 
-    type: Literal["line", "plane"]
+    type: Literal["line", "plane", "point"]
     left: FootConfig
     right: FootConfig
     friction: float = 0.8

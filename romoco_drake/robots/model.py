@@ -136,13 +136,15 @@ class RobotModel:
         for key, name, known in checks:
             if name not in known:
                 raise ConfigError(path, key, f"'{name}' is not in the model {self._prepared.path.name}")
+        need, most = {"point": (1, 1), "line": (2, None), "plane": (3, None)}[cfg.feet.type]
+        counted = f"{need}" if most else f">= {need}"
         for side in ("left", "right"):
-            need = 2 if cfg.feet.type == "line" else 3
             for key in ("points", "sim_points"):
                 pts = getattr(getattr(cfg.feet, side), key)
-                if pts is not None and (len(pts) < need or any(len(p) != 3 for p in pts)):
+                if pts is not None and (len(pts) < need or (most and len(pts) > most)
+                                        or any(len(p) != 3 for p in pts)):
                     raise ConfigError(path, f"feet.{side}.{key}",
-                                      f"a {cfg.feet.type} foot needs >= {need} points of 3 coordinates")
+                                      f"a {cfg.feet.type} foot needs {counted} points of 3 coordinates")
             up = getattr(cfg.feet, side).up
             if len(up) != 3 or np.linalg.norm(up) < 1e-9:
                 raise ConfigError(path, f"feet.{side}.up", "must be a nonzero 3-vector")
@@ -213,6 +215,12 @@ class RobotModel:
     @property
     def is_line_foot(self) -> bool:
         return self.config.feet.type == "line"
+
+    @property
+    def is_point_foot(self) -> bool:
+        """A point foot carries a force only: no contact moment, no centre of pressure, and no
+        orientation to regulate (a ball foot rolls)."""
+        return self.config.feet.type == "point"
 
     @property
     def foot_body_names(self) -> set[str]:

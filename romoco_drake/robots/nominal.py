@@ -4,6 +4,7 @@ Both soles flat on the ground (every sole point at z = 0, sole normal up, toe di
 along world x), feet ``nominal.foot_separation`` apart about the origin, base level, the
 internal loops closed, and the CoM at ``nominal.com_height`` straight above the middle of
 the support polygon; the remaining freedom goes to staying near ``nominal.joint_guess``.
+Point feet constrain only the point's position: a ball foot has no sole to keep flat.
 """
 
 from __future__ import annotations
@@ -57,6 +58,8 @@ def solve_nominal_pose(robot: RobotModel) -> NominalPose:
         # Millimetre tolerance: robots without ankle roll place the foot under the hip.
         tol = 1e-3
         ik.AddPositionConstraint(frame, center, world, [-tol, y - tol, -inf], [tol, y + tol, inf])
+        if robot.is_point_foot:
+            continue
         fwd = foot_forward_axis(robot, side)
         ik.AddAngleBetweenVectorsConstraint(world, [0, 1, 0], frame, fwd, np.pi / 2 - 1e-4, np.pi / 2 + 1e-4)
         ik.AddAngleBetweenVectorsConstraint(world, [0, 0, 1], frame, robot.feet[side].up, 0.0, 1e-2)
