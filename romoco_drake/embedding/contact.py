@@ -4,6 +4,7 @@ A foot in contact is held by a few representative sole points (paper Fig. 5): to
 heel for a line foot; front-left (LF), front-right (RF) and mid-back (MB) for a plane
 foot. Their stacked world-frame translational constraints (3 rows a point) fix 5 (line)
 or 6 (plane) foot DoF; the rows are redundant (rank 5 of 6, rank 6 of 9), as in the paper.
+A point foot is its one point: 3 independent rows, the foot free to turn about it.
 
 The multipliers of those rows are point forces f (3 a point, expressed in world). They
 act on the robot only through their resultant wrench about the sole centroid,
@@ -11,11 +12,14 @@ act on the robot only through their resultant wrench about the sole centroid,
 (net friction pyramid, net normal force, CoP inside the whole sole polygon, yaw moment
 within torsional friction) and mapped back to the point forces: the split among the points
 (internal forces) is free, and the CoP may use the whole sole, not only the triangle of the
-representative points.
+representative points. A point foot's force carries no moment, so it has no CoP or torsion
+limit: only the friction pyramid and the unilateral normal force.
 
 Limits are expressed in the foot's sole frame S (:func:`~romoco_drake.embedding.outputs.sole_frame`:
 origin at the sole-point centroid, z_S the sole normal, x_S forward), so they hold when the
-foot is not level.
+foot is not level. A point foot's limits are in its yaw frame instead (world z up, x along the
+base's heading: :func:`~romoco_drake.embedding.outputs.point_foot_yaw`), as its body tilts with
+the leg.
 """
 
 from __future__ import annotations
@@ -26,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.multibody.tree import Frame
 
-from romoco_drake.embedding.outputs import Output, sole_frame
+from romoco_drake.embedding.outputs import Output, point_foot_yaw, sole_frame
 from romoco_drake.errors import RomocoError
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
@@ -44,8 +48,11 @@ def select_contact_points(robot: RobotModel, side: str, line: bool | None = None
     the front points, MB the mean of the back points ("front"/"back": within 10% of the sole
     length from the front-/back-most point along the forward axis). ``line=True`` models a
     plane foot as the line from the mean of its back points to the mean of its front points.
+    Point foot: its one point.
     """
     pts = robot.feet[side].points
+    if robot.is_point_foot:
+        return ("point",), pts[:, :1].copy()
     if robot.is_line_foot:
         return ("toe", "heel"), pts[:, :2].copy()
     R_FS, p_FS = sole_frame(robot, side)
@@ -71,11 +78,12 @@ def contact_frame(robot: RobotModel, kin: RobotKinematics, side: str) -> tuple[n
     The origin is the stance sole's centre (the centroid of its sole points); z is world up and
     x the stance foot's heading, the direction the CoM walks in this step (the embedding turns
     each swing foot to the planned heading before it lands). No-slip keeps {c} fixed over the
-    step, so momenta about it evolve as the ALIP model says.
+    step, so momenta about it evolve as the ALIP model says. A point foot's x is the base's
+    heading (:func:`~romoco_drake.embedding.outputs.point_foot_yaw`).
     """
     R_FS, p_FS = sole_frame(robot, side)
     R_WF, p_WF = kin.frame_pose(robot.foot_frames[side])
-    fx, fy, _ = (R_WF @ R_FS[:, 0]).tolist()
+    fx, fy, _ = (kin.R_base[:, 0] if robot.is_point_foot else R_WF @ R_FS[:, 0]).tolist()
     return R_WF @ p_FS + p_WF, math.atan2(fy, fx)
 
 
@@ -132,8 +140,11 @@ def support_halfplanes(robot: RobotModel, side: str, line: bool | None = None
     """Outward normals N (e×2) and offsets d (e,) with the sole region {c : N c ≤ d} in S (x, y).
 
     Plane foot: the edges of the convex hull of all sole points. Line foot (or ``line=True``):
-    the segment from heel to toe along x_S (its lateral CoP is zero by construction).
+    the segment from heel to toe along x_S (its lateral CoP is zero by construction). Point
+    foot: none (its force has no moment, so no CoP to bound).
     """
+    if robot.is_point_foot:
+        return np.zeros((0, 2)), np.zeros(0)
     R_FS, p_FS = sole_frame(robot, side)
     if robot.is_line_foot or line:
         _, points = select_contact_points(robot, side, line)
@@ -178,13 +189,14 @@ class ContactModel:
     |f_x|, |f_y| ≤ μ (1 − ``friction_margin``) f_z with μ = ``feet.friction``; the CoP
     (−m_y, m_x)/f_z at least ``cop_margin`` (m) inside the sole region; and the yaw moment
     |m_z| ≤ μ ρ f_z (torsional friction, ρ the sole points' mean distance from the centroid,
-    halved for line contacts).
+    halved for line contacts). Point feet: the normal force and friction rows only.
     """
 
     def __init__(self, robot: RobotModel, *, friction_margin: float = 0.0, cop_margin: float = 0.0,
                  min_normal_force: float = 0.0, line_contact: bool = False):
         self.robot = robot
-        self.line_contact = robot.is_line_foot or line_contact
+        self.line_contact = not robot.is_point_foot and (robot.is_line_foot or line_contact)
+        self.point_contact = robot.is_point_foot
         plant = robot.plant
         mu = robot.config.feet.friction * (1.0 - friction_margin)
         limits = np.array([
@@ -216,7 +228,7 @@ class ContactModel:
             xy = (R_FS.T @ (robot.feet[side].points - p_FS[:, None]))[:2]
             rho = float(np.mean(np.linalg.norm(xy, axis=0))) * (0.5 if self.line_contact else 1.0)
             torsion = np.array([[0.0, 0.0, -mu * rho, 0.0, 0.0, 1.0], [0.0, 0.0, -mu * rho, 0.0, 0.0, -1.0]])
-            A_w = np.vstack([limits, cop, torsion])
+            A_w = limits if self.point_contact else np.vstack([limits, cop, torsion])
             b = np.zeros(len(A_w))
             b[0] = -min_normal_force
             # Point velocities of a rigid foot are Gᵀ [v; ω] (Gᵀ maps a twist to the points as G
@@ -301,7 +313,9 @@ class ContactModel:
         return U
 
     def sole_rotation(self, kin: RobotKinematics, side: str) -> np.ndarray:
-        """R_WS of the foot's sole frame at the state of ``kin``."""
+        """R_WS of the foot's sole frame at the state of ``kin`` (a point foot's yaw frame)."""
+        if self.point_contact:
+            return point_foot_yaw(kin.R_base)
         foot = self.feet[side]
         return kin.frame_pose(foot.frame)[0] @ foot.R_FS
 

@@ -43,7 +43,7 @@ class Output(SharedValue):
 class LegJoints:
     """The joints of one leg that walking outputs regulate by angle."""
 
-    hip_yaw: str
+    hip_yaw: str | None  # None: the leg has no joint turning it about the vertical
     ankle_roll: str | None
     hip_yaw_sign: float = 1.0  # +1 if the hip yaw turns the leg about +z at the nominal pose
 
@@ -56,7 +56,9 @@ def sole_frame(robot: RobotModel, side: str) -> tuple[np.ndarray, np.ndarray]:
     Origin at the centroid of the sole points; z_S along the sole normal ``up`` and x_S along
     the forward axis (:func:`~romoco_drake.robots.nominal.foot_forward_axis`). A plane foot
     keeps z_S = up exactly (x_S projected on the sole plane); a line foot keeps x_S exactly
-    on its toe-heel line (z_S = up made normal to it), so its contact points lie on x_S.
+    on its toe-heel line (z_S = up made normal to it), so its contact points lie on x_S. A point
+    foot's S is the plane foot's about its one point; its orientation means nothing (the ball
+    rolls), so what needs a yaw frame there uses :func:`point_foot_yaw` instead.
     """
     foot = robot.feet[side]
     x, z = foot_forward_axis(robot, side), foot.up
@@ -70,6 +72,17 @@ def sole_frame(robot: RobotModel, side: str) -> tuple[np.ndarray, np.ndarray]:
     R_FS.setflags(write=False)
     p_FS.setflags(write=False)
     return R_FS, p_FS
+
+
+def point_foot_yaw(R_WB: np.ndarray) -> np.ndarray:
+    """R_z(ψ) with ψ the heading of the base's forward axis (the rotation's first column).
+
+    A point foot's body turns with the leg, not with the ground contact, so its yaw frame (friction
+    pyramid, contact frame, swing-foot frame) is the base's heading, the direction the robot walks.
+    """
+    psi = atan2(R_WB[1, 0], R_WB[0, 0])
+    c, s = cos(psi), sin(psi)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def leg_chain(robot: RobotModel, side: str) -> list[Joint]:
@@ -90,9 +103,9 @@ def find_leg_joints(robot: RobotModel, side: str) -> LegJoints:
     """Hip yaw and ankle roll joints of a leg, found from the kinematics at the nominal pose.
 
     Hip yaw: the actuated joint between base and foot whose axis is closest to vertical
-    (within 45°; G1's and DRACO's are tilted ~30°). Ankle roll: one of the two actuated
-    joints nearest the foot whose axis is within 30° of the foot's forward axis, if any.
-    Found by geometry rather than name because the robots name them differently
+    (within 45°; G1's and DRACO's are tilted ~30°); a point-foot leg may have none. Ankle roll:
+    one of the two actuated joints nearest the foot whose axis is within 30° of the foot's forward
+    axis, if any. Found by geometry rather than name because the robots name them differently
     (``left_hip_yaw_joint``, ``left-yaw-op``, ``l_hip_ie``, ...).
     """
     plant = robot.plant
@@ -102,12 +115,15 @@ def find_leg_joints(robot: RobotModel, side: str) -> LegJoints:
     axes = np.array([j.frame_on_parent().CalcRotationMatrixInWorld(context).matrix() @ j.revolute_axis()
                      for j in chain])
     i_yaw = int(np.argmax(np.abs(axes[:, 2])))
-    if abs(axes[i_yaw, 2]) < np.cos(np.pi / 4):
+    has_yaw = abs(axes[i_yaw, 2]) >= np.cos(np.pi / 4)
+    if not has_yaw and not robot.is_point_foot:
         raise RomocoError(f"{robot.yaml_path}: no hip yaw joint (vertical axis) on the {side} leg")
     R_FS, _ = sole_frame(robot, side)
     forward = robot.foot_frames[side].CalcRotationMatrixInWorld(context).matrix() @ R_FS[:, 0]
     rolls = [j.name() for j, a in zip(chain[-2:], axes[-2:], strict=True)
              if abs(a @ forward) > np.cos(np.pi / 6)]
+    if not has_yaw:
+        return LegJoints(None, rolls[-1] if rolls else None)
     return LegJoints(chain[i_yaw].name(), rolls[-1] if rolls else None, float(np.sign(axes[i_yaw, 2])))
 
 
@@ -181,6 +197,10 @@ class WalkingOutputs:
       frame turns with the stance foot, so ṙ = R_zᵀ ḋ − ψ̇ e_z × r and
       r̈ = R_zᵀ d̈ − ψ̈ e_z × r − ψ̇ e_z × (R_zᵀ ḋ + ṙ): J and J̇·v include the ψ terms;
     - swing foot roll (only with an ankle roll joint) and pitch: tilt of the swing sole frame.
+
+    Point feet have no orientation to regulate: their outputs leave out the swing sole's yaw and
+    tilt (and stance_hip_yaw when the legs have no hip yaw joint), and the stance yaw frame is the
+    base's heading (:func:`point_foot_yaw`) rather than the stance foot's.
     """
 
     def __init__(self, robot: RobotModel):
@@ -188,25 +208,37 @@ class WalkingOutputs:
         plant = robot.plant
         self.legs = {side: find_leg_joints(robot, side) for side in ("left", "right")}
         self.has_ankle_roll = all(leg.ankle_roll is not None for leg in self.legs.values())
+        self.has_hip_yaw = all(leg.hip_yaw is not None for leg in self.legs.values())
         self._hip_yaw = {side: (plant.GetJointByName(leg.hip_yaw).position_start(),
                                 plant.GetJointByName(leg.hip_yaw).velocity_start())
-                         for side, leg in self.legs.items()}
+                         for side, leg in self.legs.items() if self.has_hip_yaw}
+        self._point = point = robot.is_point_foot
         soles = {side: sole_frame(robot, side) for side in ("left", "right")}
         self._centroid = {side: p_FS for side, (_, p_FS) in soles.items()}
         self._forward = {side: R_FS[:, 0] for side, (R_FS, _) in soles.items()}
         # Swing-foot tilt axes in the foot frame, as rows: roll = y_S,z; pitch = −x_S,z.
-        self._tilt_axes = {side: (np.vstack([R_FS[:, 1], -R_FS[:, 0]]) if self.has_ankle_roll
-                                  else -R_FS[:, :1].T) for side, (R_FS, _) in soles.items()}
+        self._tilt_axes = {side: (np.zeros((0, 3)) if point else np.vstack([R_FS[:, 1], -R_FS[:, 0]])
+                                  if self.has_ankle_roll else -R_FS[:, :1].T)
+                           for side, (R_FS, _) in soles.items()}
+        # The rows of S whose angular velocity turns the stance yaw frame: the stance foot's, or
+        # the base's for point feet.
+        self._yaw_rows = slice(12, 15) if point else slice(0, 3)
         self._W = plant.world_frame()
         check_floating_base(robot)
         self._Jw = base_angular_jacobian(robot)
-        self.names = ("com_z", "stance_hip_yaw", "pelvis_pitch", "pelvis_roll", "swing_foot_x",
-                      "swing_foot_y", "swing_foot_z", "swing_sole_yaw") + (
-            ("swing_foot_roll", "swing_foot_pitch") if self.has_ankle_roll else ("swing_foot_pitch",))
+        every = ("com_z", "stance_hip_yaw", "pelvis_pitch", "pelvis_roll", "swing_foot_x",
+                 "swing_foot_y", "swing_foot_z", "swing_sole_yaw") + (
+            () if point else ("swing_foot_roll", "swing_foot_pitch") if self.has_ankle_roll
+            else ("swing_foot_pitch",))
+        dropped = {name for name, drop in (("stance_hip_yaw", not self.has_hip_yaw),
+                                           ("swing_sole_yaw", point)) if drop}
+        self.names = tuple(n for n in every if n not in dropped)
+        # Rows of the evaluated outputs that are kept (None: all of them).
+        self._keep = np.array([i for i, n in enumerate(every) if n not in dropped]) if dropped else None
         # Output coefficients C on the rows of S = [stance ω (0:3); stance v (3:6); swing ω (6:9);
         # swing v (9:12); base ω (12:15); CoM z (15)]. Constant ones: com_z = CoM z − stance z,
         # swing_foot_z = swing z − stance z.
-        self._C0 = np.zeros((len(self.names), 16))
+        self._C0 = np.zeros((len(every), 16))
         self._C0[0, [15, 5]] = 1.0, -1.0
         self._C0[6, [11, 5]] = 1.0, -1.0
 
@@ -221,19 +253,23 @@ class WalkingOutputs:
         S = np.concatenate((J_st, J_sw, self._Jw, J_com[2:]))
         V = (S @ v).tolist()
         B = [*bias_st.tolist(), *bias_sw.tolist(), 0.0, 0.0, 0.0, float(com_bias[2])]
-        w_st, w_sw, w_b = V[0:3], V[6:9], V[12:15]
-        a_st, a_sw, a_b = B[0:3], B[6:9], B[12:15]
+        w_sw, w_b = V[6:9], V[12:15]
+        a_sw, a_b = B[6:9], B[12:15]
 
         C = self._C0.copy()
-        y = [0.0] * len(self.names)
-        Jdv = [0.0] * len(self.names)
+        k = len(C)
+        y = [0.0] * k
+        Jdv = [0.0] * k
         y[0], Jdv[0] = com[2] - p_st[2], B[15] - B[5]
-        y[1] = q[self._hip_yaw[stance][0]]
+        if self.has_hip_yaw:
+            y[1] = q[self._hip_yaw[stance][0]]
         x_b, y_b, _ = R_b.T.tolist()
         y[2], C[2, 12:15], Jdv[2] = _tilt([-x_b[0], -x_b[1], -x_b[2]], w_b, a_b)
         y[3], C[3, 12:15], Jdv[3] = _tilt(y_b, w_b, a_b)
 
-        psi, c_psi, psidot, psi_bias = _heading((R_st @ self._forward[stance]).tolist(), w_st, a_st)
+        h = self._yaw_rows
+        heading_axis = x_b if self._point else (R_st @ self._forward[stance]).tolist()
+        psi, c_psi, psidot, psi_bias = _heading(heading_axis, V[h], B[h])
         c, s = cos(psi), sin(psi)
         dx, dy, dz = (p_sw - p_st).tolist()
         vx, vy = V[9] - V[3], V[10] - V[4]
@@ -241,8 +277,8 @@ class WalkingOutputs:
         rx, ry = c * dx + s * dy, c * dy - s * dx
         vx, vy = c * vx + s * vy, c * vy - s * vx  # R_zᵀ ḋ
         sx, sy = 2.0 * vx + psidot * ry, 2.0 * vy - psidot * rx  # R_zᵀ ḋ + ṙ
-        C[4, 9:11], C[4, 3:5], C[4, 0:3] = (c, s), (-c, -s), (ry * c_psi[0], ry * c_psi[1], ry)
-        C[5, 9:11], C[5, 3:5], C[5, 0:3] = (-s, c), (s, -c), (-rx * c_psi[0], -rx * c_psi[1], -rx)
+        C[4, 9:11], C[4, 3:5], C[4, h] = (c, s), (-c, -s), (ry * c_psi[0], ry * c_psi[1], ry)
+        C[5, 9:11], C[5, 3:5], C[5, h] = (-s, c), (s, -c), (-rx * c_psi[0], -rx * c_psi[1], -rx)
         y[4:7] = rx, ry, dz
         Jdv[4:7] = (c * bx + s * by + psi_bias * ry + psidot * sy,
                     c * by - s * bx - psi_bias * rx - psidot * sx,
@@ -250,14 +286,17 @@ class WalkingOutputs:
 
         psi_sw, c_sw, _, psi_sw_bias = _heading((R_sw @ self._forward[swing]).tolist(), w_sw, a_sw)
         y[7] = remainder(psi_sw - psi, 2.0 * pi)
-        C[7, 6:9], C[7, 0:3] = c_sw, (-c_psi[0], -c_psi[1], -c_psi[2])
+        C[7, 6:9], C[7, h] = c_sw, (-c_psi[0], -c_psi[1], -c_psi[2])
         Jdv[7] = psi_sw_bias - psi_bias
         for i, axis in enumerate((self._tilt_axes[swing] @ R_sw.T).tolist(), start=8):
             y[i], C[i, 6:9], Jdv[i] = _tilt(axis, w_sw, a_sw)
 
         J = C @ S
-        J[1, self._hip_yaw[stance][1]] = 1.0
-        return Output(self.names, np.array(y), J, np.array(Jdv))
+        if self.has_hip_yaw:
+            J[1, self._hip_yaw[stance][1]] = 1.0
+        if self._keep is None:
+            return Output(self.names, np.array(y), J, np.array(Jdv))
+        return Output(self.names, np.array(y)[self._keep], J[self._keep], np.array(Jdv)[self._keep])
 
 
 class StandingOutputs:

@@ -137,7 +137,7 @@ class EmbeddingCore:
         # Without an ankle roll joint the leg cannot set the stance foot's roll moment, and a
         # flat-foot contact would tie the pelvis roll to the lateral CoM: the controller models
         # such feet as their toe-heel line (the simulation keeps the whole sole).
-        line = not self.walking.has_ankle_roll
+        line = not self.walking.has_ankle_roll and not robot.is_point_foot
         self.contact = contact or ContactModel(robot, line_contact=line,
                                                cop_margin=COP_MARGIN if robot.is_line_foot else 0.0)
         self.swing_height = robot.config.walking.swing_height
@@ -146,14 +146,18 @@ class EmbeddingCore:
         self.nominal_joints = robot.nominal.q[robot.actuated_q_index]
         plant = robot.plant
         self._hip_yaw_q = {s: plant.GetJointByName(leg.hip_yaw).position_start()
-                           for s, leg in self.walking.legs.items()}
+                           for s, leg in self.walking.legs.items() if self.walking.has_hip_yaw}
         self._hip_yaw_sign = {s: leg.hip_yaw_sign for s, leg in self.walking.legs.items()}
-        self._swing_index = self.walking.names.index("swing_foot_x")
-        self._swing_yaw_index = self.walking.names.index("swing_sole_yaw")
-        ss = np.ones(len(self.walking.names), dtype=bool)
+        names = self.walking.names
+        self._swing_index = names.index("swing_foot_x")
+        # The yaw outputs, where the feet have them (None: a point foot's or a leg without hip yaw).
+        self._stance_yaw_index = names.index("stance_hip_yaw") if "stance_hip_yaw" in names else None
+        self._swing_yaw_index = names.index("swing_sole_yaw") if "swing_sole_yaw" in names else None
+        ss = np.ones(len(names), dtype=bool)
         ds = np.zeros_like(ss)
         for name in ("com_z", "stance_hip_yaw", "pelvis_pitch", "pelvis_roll"):
-            ds[self.walking.names.index(name)] = True
+            if name in names:
+                ds[names.index(name)] = True
         self._walking_active = {"single": ss, "double": ds}
 
     def start_step(self, kin: RobotKinematics, stance_side: str, t: float, plan: PlannerOutput,
@@ -165,7 +169,8 @@ class EmbeddingCore:
         i = self._swing_index
         start = out.y[i:i + 3]
         trajectory = plan_swing(start, self._target(plan), plan.t_ss, self.swing_height)
-        yaws = (float(q[self._hip_yaw_q[stance_side]]), float(out.y[self._swing_yaw_index]))
+        yaws = (float(q[self._hip_yaw_q[stance_side]]) if self._stance_yaw_index is not None else 0.0,
+                float(out.y[self._swing_yaw_index]) if self._swing_yaw_index is not None else 0.0)
         origin, heading = contact_frame(self.robot, kin, stance_side)
         p_x, p_y, _, l_cx, l_cy, _ = contact_frame_state(kin, origin, heading).tolist()
         com_start = (float(origin[0]), float(origin[1]), heading, tau, p_x, p_y, l_cx, l_cy)
@@ -224,9 +229,11 @@ class EmbeddingCore:
         st0, sw0 = swing.liftoff_yaw
         st_goal = -self._hip_yaw_sign[stance] * 0.5 * plan.swing_yaw
         sw_goal = plan.swing_yaw
-        y_d[1], yd_d[1] = st0 + s * (st_goal - st0), rate * (st_goal - st0)
-        i_sw_yaw = self._swing_yaw_index
-        y_d[i_sw_yaw], yd_d[i_sw_yaw] = sw0 + s * (sw_goal - sw0), rate * (sw_goal - sw0)
+        i_st_yaw, i_sw_yaw = self._stance_yaw_index, self._swing_yaw_index
+        if i_st_yaw is not None:
+            y_d[i_st_yaw], yd_d[i_st_yaw] = st0 + s * (st_goal - st0), rate * (st_goal - st0)
+        if i_sw_yaw is not None:
+            y_d[i_sw_yaw], yd_d[i_sw_yaw] = sw0 + s * (sw_goal - sw0), rate * (sw_goal - sw0)
         if swing.trajectory is not None:
             i = self._swing_index
             y_d[i:i + 3], yd_d[i:i + 3], ydd_d[i:i + 3] = swing.trajectory.evaluate(tau)
