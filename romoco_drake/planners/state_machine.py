@@ -77,6 +77,9 @@ class GaitStateMachine(LeafSystem):
       starts. When measurements resume the step goes on from where it stopped, or, if the
       held swing foot came down meanwhile, the support switches at once; then the robot steps
       to a stop as under a zero command, and walks on from standing when the command asks.
+    - point feet have no support area to stand on (the CoM would balance on the segment between
+      two points): such a robot starts walking as soon as it stands balanced, under a zero command
+      too, and keeps stepping in place instead of stopping.
     - any mode → damping (latched) on a non-finite state, the base below ``fall_height`` of its
       nominal height, or a base tilt above ``fall_tilt`` rad; counted in ``safe_mode_entries``.
 
@@ -102,6 +105,7 @@ class GaitStateMachine(LeafSystem):
         self.touchdown_height, self.settle_time, self.lift_time = touchdown_height, settle_time, lift_time
         self._min_base_z = fall_height * robot.nominal.base_height
         self._cos_tilt = math.cos(fall_tilt)
+        self.steps_in_place = robot.is_point_foot
         self.kinematics_port = self.DeclareAbstractInputPort("kinematics", kinematics_model_value(robot))
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
         self.foot_contact_port = self.DeclareVectorInputPort("foot_contact", 2)
@@ -167,14 +171,14 @@ class GaitStateMachine(LeafSystem):
             s = replace(s, mode=Mode.IN_AIR)
         elif s.mode == Mode.IN_AIR and on.all():
             s = replace(s, mode=Mode.STANDING)
-        elif s.mode == Mode.STANDING and not is_zero(cmd) and self._balanced(kin):
+        elif s.mode == Mode.STANDING and (self.steps_in_place or not is_zero(cmd)) and self._balanced(kin):
             side = "right" if cmd.vy > 0.0 else "left"
             s = replace(s, mode=Mode.WALKING, side=side, step_start=t, t_ss=cmd.step_time, idle_steps=0)
         elif s.mode == Mode.WALKING and self._retime(s, t, plan):
             s = replace(s, t_ss=plan.t_ss)
         if s.mode == Mode.WALKING and t - s.step_start >= s.t_ss + self.t_ds - 1e-9:
             idle = s.idle_steps + 1 if is_zero(cmd) else 0
-            stopping = idle >= self.stop_steps
+            stopping = idle >= self.stop_steps and not self.steps_in_place
             # A stop holds the step in double support for up to settle_time while a sole rolls flat.
             settling = stopping and t - s.step_start < s.t_ss + self.t_ds + self.settle_time
             if stopping and self._feet_down(kin, on):
