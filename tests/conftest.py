@@ -6,12 +6,14 @@ import pytest
 # (default 5 %). G1 and Cassie: the manufacturers' published totals, "about" figures, so ±10 %
 # (robot-facts.md): G1's 35 kg includes the battery (its URDF sums to 33.3 kg); Cassie's 31 kg is
 # the published figure, its SDF sums to 32.9 kg (less the rods and cranks the model drops, ~2 %).
+# Bolt: about 1.3 kg published, an "about" figure too; its URDF sums to 1.254 kg.
 ROBOT_FACTS = {
     "g1": {"joints": 29, "actuators": 29, "mass": 35.0, "mass_rel": 0.10},
     "cassie": {"joints": 12, "actuators": 10, "mass": 31.0, "mass_rel": 0.10},
     "h1": {"joints": 19, "actuators": 19, "mass": 59.35},
     "xo": {"joints": 24, "actuators": 24, "mass": 150.0},
     "draco": {"joints": 27, "actuators": 25, "mass": 39.2},
+    "bolt": {"joints": 6, "actuators": 6, "mass": 1.3, "mass_rel": 0.10},
 }
 ROBOTS = list(ROBOT_FACTS)
 

@@ -48,7 +48,10 @@ def test_contact_points_and_wrench_map_rank(name):
         R_FS, p_FS = sole_frame(robot, side)
         xy = (R_FS.T @ (points - p_FS[:, None]))[:2]
         sole = (R_FS.T @ (robot.feet[side].points - p_FS[:, None]))[:2]
-        if robot.is_line_foot:
+        if robot.is_point_foot:  # a force at the sole point, no moment about it
+            assert names == ("point",) and np.allclose(xy, 0.0)
+            np.testing.assert_array_equal(foot.wrench_map, np.vstack([np.eye(3), np.zeros((3, 3))]))
+        elif robot.is_line_foot:
             assert names == ("toe", "heel") and xy[0, 0] > xy[0, 1]
             assert np.linalg.matrix_rank(foot.wrench_map) == 5
         else:
@@ -86,8 +89,10 @@ def _feasible_by_definition(robot, side, contact, f_S):
     mu = robot.config.feet.friction * (1 - MARGINS["friction_margin"])
     xy = (foot.R_FS.T @ (robot.feet[side].points - foot.p_FS[:, None]))[:2]
     rho = np.mean(np.linalg.norm(xy, axis=0)) * (0.5 if contact.line_contact else 1.0)
-    slacks = [f[2] - MARGINS["min_normal_force"], mu * f[2] - abs(f[0]), mu * f[2] - abs(f[1]),
-              mu * rho * f[2] - abs(m[2])]
+    slacks = [f[2] - MARGINS["min_normal_force"], mu * f[2] - abs(f[0]), mu * f[2] - abs(f[1])]
+    if robot.is_point_foot:  # no moment, so no torsion or CoP limit
+        return min(slacks) >= 0, min(abs(s) for s in slacks)
+    slacks.append(mu * rho * f[2] - abs(m[2]))
     if f[2] > 1e-6:  # the CoP of a vanishing normal force is round-off over round-off
         cop = np.array([-m[1], m[0]]) / f[2]
         if robot.is_line_foot:
@@ -173,3 +178,30 @@ def test_row_space_basis_spans_the_contact_rows_without_redundancy(name):
         assert U.shape == (J.shape[0], np.linalg.matrix_rank(J))
         np.testing.assert_allclose(U.T @ U, np.eye(U.shape[1]), atol=1e-12)
         np.testing.assert_allclose(J - U @ (U.T @ J), 0.0, atol=1e-10)
+
+
+def test_point_foot_is_a_force_with_friction_limits_in_the_base_yaw_frame():
+    """A point foot: 3 contact rows, limits on the force alone (normal force and friction pyramid,
+    no CoP or torsion rows), posed upright and along the base's heading however the leg tilts."""
+    robot = load_robot("bolt")
+    contact = ContactModel(robot, **MARGINS)
+    plant = robot.plant
+    context = plant.CreateDefaultContext()
+    q = robot.nominal.q.copy()
+    q[robot.joint_q_index] += 0.3  # legs tilted: the foot bodies are far from level
+    plant.SetPositions(context, q)
+    plant.SetFreeBodyPose(context, robot.base_body, RigidTransform(RollPitchYaw(0.0, 0.0, 0.7), [0, 0, 1]))
+    kin = RobotKinematics(robot, plant.GetPositionsAndVelocities(context))
+    for side in ("left", "right"):
+        foot = contact.feet[side]
+        assert foot.A_S.shape == (5, 3) and foot.motion_basis.shape == (3, 3)
+        A, b = contact.friction_constraints(kin, side)
+        mu = robot.config.feet.friction * (1 - MARGINS["friction_margin"])
+        c, s = np.cos(0.7), np.sin(0.7)
+        assert np.all(A @ [0.0, 0.0, 10.0] <= b)
+        assert np.any(A @ [0.0, 0.0, 1.0] > b)  # below the minimum normal force
+        along = np.array([c, s, 0.0])  # the heading: the pyramid's edge at μ along x_S
+        assert np.all(A @ (0.99 * mu * 10.0 * along + [0, 0, 10.0]) <= b)
+        assert np.any(A @ (1.01 * mu * 10.0 * along + [0, 0, 10.0]) > b)
+    rows = contact.constraints(kin, "double")
+    assert rows.J.shape == (6, robot.nv) and np.linalg.matrix_rank(rows.J) == 6
