@@ -89,22 +89,6 @@ MAX_DURATION_S = 3600.0  # one hour of simulated time: longer is a typo, not a s
 
 
 @dataclass
-class TaskGainConfig:
-    """Gains and weight of the task outputs whose names match the glob ``outputs`` (e.g.
-    ``pelvis_pitch``, ``com_[xy]``): see ``DEFAULT_TASK_GAINS`` in control/tasks.py."""
-
-    outputs: str
-    kp: float
-    kd: float
-    weight: float
-
-
-# Stiffer than 1e4 (1/s², a 16 Hz loop) outruns a 1 kHz tick; task weights are O(1-10), and 1e4
-# would override every other task.
-declare_ranges(TaskGainConfig, kp=Range(0.0, 1e4, "1/s²"), kd=Range(0.0, 1e3, "1/s"), weight=Range(0.0, 1e4))
-
-
-@dataclass
 class ControllerConfig:
     """A controller (see ``romoco list``), its rate, and the TSC-QP's QP solver.
 
@@ -126,10 +110,6 @@ class ControllerConfig:
     angular_momentum_weight: float = 0.0
     angular_momentum_damping: float = 10.0
     ankle_gain: float = 0.0
-    # Task gains searched before the defaults (the first entry whose glob matches an output wins),
-    # for the walking controllers that track task outputs: a robot whose outputs cannot all be
-    # met (a point-foot robot's underactuated ones) weighs them here.
-    task_gains: list[TaskGainConfig] = dataclasses.field(default_factory=list)
 
 
 # Task weights are O(1-10); 1e4 would override every task. Damping above 1e3/s outruns any

@@ -17,42 +17,30 @@ from romoco_drake.control.inverse_kinematics import IkSolver
 from romoco_drake.control.momentum import MomentumHqp
 from romoco_drake.control.mpc_wbc import MpcWbc
 from romoco_drake.control.standing import StandingController
-from romoco_drake.control.tasks import DEFAULT_TASK_GAINS, TaskGain
 from romoco_drake.control.tscqp import TscQp
 from romoco_drake.registry import Registry
-
-
-def task_gains(config) -> tuple[TaskGain, ...]:
-    """The scenario's ``controller.task_gains`` ahead of the defaults (the first match wins)."""
-    return tuple(TaskGain(g.outputs, g.kp, g.kd, g.weight) for g in config.task_gains) + DEFAULT_TASK_GAINS
-
 
 CONTROLLERS = Registry("controller")
 CONTROLLERS.add("standing", lambda robot, period, offset: StandingController(robot, period, offset),
                 "joint PD about the nominal pose plus gravity compensation (stands only)",
                 walking=False, motor_command=False)
 CONTROLLERS.add("tscqp", lambda robot, contact, period, config: TscQp(
-                    robot, contact, solver=config.solver, gains=task_gains(config),
+                    robot, contact, solver=config.solver,
                     angular_momentum_weight=config.angular_momentum_weight,
                     angular_momentum_damping=config.angular_momentum_damping, ankle_gain=config.ankle_gain),
                 "task-space QP over v̇ and contact forces (RoMoCo §V-A)", walking=True, motor_command=False,
               qp_solver=True)
-CONTROLLERS.add("id", lambda robot, contact, period, config: InverseDynamics(robot, contact,
-                                                                                 gains=task_gains(config)),
+CONTROLLERS.add("id", lambda robot, contact, period, config: InverseDynamics(robot, contact),
                 "inverse dynamics by orthogonal decomposition (RoMoCo §V-B)", walking=True,
                 motor_command=False)
-CONTROLLERS.add("velik", lambda robot, contact, period, config: IkSolver(robot, period, "velocity", contact,
-                                                                                gains=task_gains(config)),
+CONTROLLERS.add("velik", lambda robot, contact, period, config: IkSolver(robot, period, "velocity", contact),
                 "velocity IK in the constraint null space, joint PD (RoMoCo §V-C)", walking=True,
                 motor_command=True)
-CONTROLLERS.add("posik", lambda robot, contact, period, config: IkSolver(robot, period, "position", contact,
-                                                                              gains=task_gains(config)),
+CONTROLLERS.add("posik", lambda robot, contact, period, config: IkSolver(robot, period, "position", contact),
                 "position IK by Newton-Raphson, joint PD (RoMoCo §V-C)", walking=True, motor_command=True)
-CONTROLLERS.add("momentum", lambda robot, contact, period, config: MomentumHqp(
-                    robot, contact, task_gains=task_gains(config)),
+CONTROLLERS.add("momentum", lambda robot, contact, period, config: MomentumHqp(robot, contact),
                 "hierarchical centroidal-momentum QPs in the contact null space (XO paper §III)",
                 walking=True, motor_command=False, momentum_log=True)
-CONTROLLERS.add("wbc", lambda robot, contact, period, config: MpcWbc(robot, contact, solver=config.solver,
-                                                                          gains=task_gains(config)),
+CONTROLLERS.add("wbc", lambda robot, contact, period, config: MpcWbc(robot, contact, solver=config.solver),
                 "TSC-QP tracking a wrench MPC's contact wrenches and CoM (VI-MPC paper §III.E)",
                 walking=True, motor_command=False, qp_solver=True)
