@@ -39,10 +39,11 @@ class FallMonitor(LeafSystem):
         self._cos_max_tilt = np.cos(max_tilt)
         self._clearance = body_clearance
         plant = robot.plant
-        feet = robot.foot_body_names
+        # A foot is every body welded to it too (a sole frame, a force-sensor link).
+        feet = {b.index() for name in robot.foot_body_names
+                for b in plant.GetBodiesWeldedTo(plant.GetBodyByName(name))}
         self._bodies = [
-            plant.get_body(i) for i in plant.GetBodyIndices(robot.model_instance)
-            if plant.get_body(i).name() not in feet
+            plant.get_body(i) for i in plant.GetBodyIndices(robot.model_instance) if i not in feet
         ]
         self.state_input = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
         self._kinematics = declare_kinematics_cache(self, robot, self.state_input.Eval,

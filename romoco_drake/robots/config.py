@@ -14,11 +14,15 @@ class ModelSource:
     """Model file and the edits applied to its XML text before parsing.
 
     ``package`` is ``example-robot-data`` (located in the installed PyPI package at run
-    time) or ``romoco_models`` (this repository's ``models/``).
+    time), ``romoco_models`` (this repository's ``models/``) or absent: then ``file`` is a path
+    of the user's own, absolute or relative to the robot YAML's folder. ``package_paths`` names
+    the folders of the ROS packages its ``package://`` URIs use (relative ones, to the YAML's
+    folder); ``romoco new-robot --package-path`` fills it in.
     """
 
-    package: Literal["example-robot-data", "romoco_models"]
     file: str
+    package: Literal["example-robot-data", "romoco_models"] | None = None
+    package_paths: dict[str, str] = dataclasses.field(default_factory=dict)
     # Joints made rigid (e.g. Cassie's leaf springs): their type becomes "fixed".
     weld_joints: list[str] = dataclasses.field(default_factory=list)
     # Bodies dropped with every joint touching them (loop-closing linkages that are

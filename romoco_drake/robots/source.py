@@ -1,7 +1,8 @@
 """Locate robot model files and prepare their XML text for Drake's parser.
 
 Cassie and G1 come from the installed ``example-robot-data`` package, found at run time
-(its files are never copied). The XML is edited in memory before parsing:
+(its files are never copied); a user's robot names its own file and package folders. The
+XML is edited in memory before parsing:
 - every ``<collision>`` is dropped: the station gives each foot its own sole contact
   points, and Drake cannot build convex hulls of G1's ``.STL`` collision meshes;
 - joints listed in ``weld_joints`` become fixed (rigid springs);
@@ -60,13 +61,25 @@ def example_robot_data_root() -> Path:
 
 def package_paths(source: ModelSource) -> dict[str, Path]:
     """Packages to register with Drake's PackageMap for ``source``."""
+    packages = {name: Path(folder) for name, folder in source.package_paths.items()}
     if source.package == ERD_PACKAGE:
-        return {ERD_PACKAGE: example_robot_data_root()}
-    return {"romoco_models": MODELS_DIR}
+        packages[ERD_PACKAGE] = example_robot_data_root()
+    elif source.package == "romoco_models":
+        packages["romoco_models"] = MODELS_DIR
+    return packages
 
 
 def model_path(source: ModelSource) -> Path:
+    if source.package is None:
+        return Path(source.file)
     return package_paths(source)[source.package] / source.file
+
+
+def resolve_relative_paths(source: ModelSource, folder: Path) -> None:
+    """Makes a user model's relative ``file`` and ``package_paths`` relative to ``folder``."""
+    if source.package is None:
+        source.file = str((folder / source.file).resolve())
+    source.package_paths = {name: str((folder / p).resolve()) for name, p in source.package_paths.items()}
 
 
 @dataclass(frozen=True)
@@ -89,9 +102,9 @@ def _float_or_none(text: str | None) -> float | None:
 
 @functools.cache
 def _prepare_cached(source_key: tuple) -> PreparedModel:
-    package, file, weld_joints, remove_bodies = source_key
-    source = ModelSource(package=package, file=file, weld_joints=list(weld_joints),
-                         remove_bodies=list(remove_bodies))
+    package, file, packages, weld_joints, remove_bodies = source_key
+    source = ModelSource(package=package, file=file, package_paths=dict(packages),
+                         weld_joints=list(weld_joints), remove_bodies=list(remove_bodies))
     path = model_path(source)
     try:
         root = ET.parse(path).getroot()
@@ -195,5 +208,6 @@ def _joint_end(joint: ET.Element, tag: str) -> str | None:
 def prepare_model(source: ModelSource) -> PreparedModel:
     """Reads and edits the model file of ``source`` (cached per source)."""
     return _prepare_cached(
-        (source.package, source.file, tuple(source.weld_joints), tuple(source.remove_bodies))
+        (source.package, source.file, tuple(sorted(source.package_paths.items())),
+         tuple(source.weld_joints), tuple(source.remove_bodies))
     )
