@@ -191,11 +191,12 @@ def _cmd_diagram(args) -> int:
 
 
 def _cmd_new_robot(args) -> int:
-    from romoco_drake.robots.onboard import new_robot
+    from romoco_drake.robots.onboard import model_file_path, new_robot
 
     if args.out.exists() and not args.force:
         raise RomocoError(f"--out {args.out}: exists (use --force to overwrite)")
-    _, notes = new_robot(args.model_file, args.out, args.package_path)
+    model = model_file_path(args.model_file, args.package_path)
+    _, notes = new_robot(model, args.out, args.package_path)
     print(f"wrote {args.out}")
     for note in notes:
         print(f"  to check: {note}")
@@ -574,7 +575,8 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--depth", type=int, default=1, help="nested diagrams opened (1: the top level)")
     p.set_defaults(func=_cmd_diagram)
     p = sub.add_parser("new-robot", help="infer a robot YAML skeleton from a biped's URDF/SDFormat file")
-    p.add_argument("model_file", type=Path, metavar="MODEL_FILE")
+    p.add_argument("model_file", metavar="MODEL_FILE",
+                   help="a URDF/SDFormat path, or package://PKG/path (example-robot-data or --package-path)")
     p.add_argument("--package-path", type=Path, action="append", default=[], metavar="DIR",
                    help="a ROS package (folder with package.xml) or a folder of them, for package:// URIs")
     p.add_argument("--out", type=Path, required=True, metavar="robots/NAME.yaml",
@@ -696,6 +698,9 @@ def make_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = make_parser().parse_args(argv)
     try:
+        from romoco_drake.registry import load_plugins
+
+        load_plugins()
         return args.func(args)
     except RomocoError as e:
         print(f"romoco: error: {e}", file=sys.stderr)

@@ -221,8 +221,9 @@ def _side_from_name(name: str) -> str | None:
     return None
 
 
-def _user_source(model_file: Path, package_dirs: list[Path]) -> tuple[dict, dict[str, Path]]:
-    """The YAML ``model:`` entry for ``model_file`` and the package folders its URIs need."""
+def _user_source(model_file: Path | None, package_dirs: list[Path]) -> tuple[dict, dict[str, Path]]:
+    """The YAML ``model:`` entry for ``model_file`` and the package folders its URIs may need:
+    the ``--package-path`` packages and the installed example-robot-data."""
     from romoco_drake.robots.source import ERD_PACKAGE, example_robot_data_root
 
     packages: dict[str, Path] = {}
@@ -239,14 +240,16 @@ def _user_source(model_file: Path, package_dirs: list[Path]) -> tuple[dict, dict
             except ET.ParseError:
                 name = ""
             packages[name or manifest.parent.name] = manifest.parent.resolve()
-    model_file = model_file.resolve()
     try:
-        erd = example_robot_data_root()
+        packages[ERD_PACKAGE] = example_robot_data_root()
     except RomocoError:
-        erd = None
+        pass
+    if model_file is None:
+        return {}, packages
+    model_file = model_file.resolve()
+    erd = packages.get(ERD_PACKAGE)
     if erd is not None and model_file.is_relative_to(erd):
         entry = {"package": ERD_PACKAGE, "file": str(model_file.relative_to(erd))}
-        packages[ERD_PACKAGE] = erd
     else:
         entry = {"file": str(model_file)}
     if any(name != ERD_PACKAGE for name in packages):
@@ -281,6 +284,18 @@ def _knee(plant, context, leg: list, foot: str, fwd_W: np.ndarray, left_W: np.nd
     if max(upper, lower) > 2 * min(upper, lower):
         sign = 1.0 if upper > lower else -1.0
     return joint.name(), 0.6 * sign
+
+
+def model_file_path(model: str, package_dirs: list[Path] = ()) -> Path:
+    """A MODEL_FILE argument as a path: a file path, or ``package://PKG/...`` in the installed
+    example-robot-data or a ``--package-path`` package."""
+    if not model.startswith("package://"):
+        return Path(model)
+    package, _, rest = model[len("package://"):].partition("/")
+    _, packages = _user_source(None, list(package_dirs))
+    if package not in packages:
+        raise RomocoError(f"{model}: unknown package '{package}' (known: {', '.join(packages) or 'none'})")
+    return packages[package] / rest
 
 
 def infer(model_file: Path, name: str, package_dirs: list[Path] = ()) -> Inferred:
