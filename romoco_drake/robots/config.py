@@ -14,7 +14,9 @@ class ModelSource:
     """Model file and the edits applied to its XML text before parsing.
 
     ``package`` is ``example-robot-data`` (located in the installed PyPI package at run
-    time) or ``romoco_models`` (this repository's ``models/``).
+    time) or ``romoco_models`` (this repository's ``models/``). The edits are listed in
+    :mod:`romoco_drake.robots.source`; the rules there that need no field (mimic tags,
+    transmissions) apply to every model.
     """
 
     package: Literal["example-robot-data", "romoco_models"]
@@ -24,6 +26,14 @@ class ModelSource:
     # Bodies dropped with every joint touching them (loop-closing linkages that are
     # replaced by constraints).
     remove_bodies: list[str] = dataclasses.field(default_factory=list)
+    # For a URDF whose root link is not x forward, z up (iCub's root_link faces backward):
+    # the roll, pitch, yaw [rad] of that root link in a new massless root link ``romoco_base``
+    # welded to it, which becomes the floating base (``base_body: romoco_base``).
+    base_frame_rpy: list[float] | None = None
+
+
+# A rotation is three angles of at most a turn each.
+declare_ranges(ModelSource, base_frame_rpy=Range(-2 * math.pi, 2 * math.pi, "rad", size=3))
 
 
 @dataclasses.dataclass
