@@ -267,13 +267,13 @@ def _cmd_bench_embedding(args) -> int:
 
 
 def _cmd_bench_matrix(args) -> int:
-    from romoco_drake.bench.walking import WALKING_ROBOTS, bench_matrix
+    from romoco_drake.bench.walking import WALKING_ROBOTS, bench_matrix, walking_robots
     from romoco_drake.control.registry import CONTROLLERS
     from romoco_drake.rom.planners import PLANNERS
     from romoco_drake.runner import stderr_progress
 
     walking_controllers = [name for name, entry in CONTROLLERS.items() if entry.facts["walking"]]
-    robots = _names(args.robots, WALKING_ROBOTS, "robot", WALKING_ROBOTS)
+    robots = _names(args.robots, WALKING_ROBOTS, "robot", walking_robots())
     planners = _names(args.planners, ("hlip", "mlip", "dcm"), "planner", PLANNERS)
     controllers = _names(args.controllers, ("tscqp",), "walking controller", walking_controllers)
     rows = bench_matrix(robots, planners, controllers, args.duration, _sweep(args), progress=stderr_progress,
@@ -613,7 +613,8 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the result as JSON (last line)")
     p.set_defaults(func=_cmd_bench_embedding)
     p = bench.add_parser("matrix", help="every robot x planner x controller on its default walking profile")
-    p.add_argument("--robots", help="comma-separated (default: g1,cassie,h1)")
+    p.add_argument("--robots", help="comma-separated, any with a <robot>_walk scenario "
+                   "(default: g1,cassie,h1)")
     p.add_argument("--planners", help="comma-separated (default: hlip,mlip,dcm)")
     p.add_argument("--controllers", help="comma-separated (default: tscqp)")
     p.add_argument("--duration", type=float, default=None, help="simulated seconds per run")

@@ -25,8 +25,14 @@ from romoco_drake.scenario import (
     with_overrides,
 )
 
+# The matrix's default robots (the RoMoCo paper's); any robot with a walking scenario can be asked for.
 WALKING_ROBOTS = ("g1", "cassie", "h1")
 ESTIMATE_ERRORS = ("velocity_estimate_rms_error", "yaw_drift_rad_per_min", "position_drift_per_m")
+
+
+def walking_robots() -> list[str]:
+    """The robots with a default walking scenario, ``diagrams/<robot>_walk.yaml``."""
+    return sorted(name.removesuffix("_walk") for name in scenario_names() if name.endswith("_walk"))
 
 
 def walk_scenario(robot: str) -> Scenario:

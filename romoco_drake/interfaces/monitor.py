@@ -39,11 +39,10 @@ class FallMonitor(LeafSystem):
         self._cos_max_tilt = np.cos(max_tilt)
         self._clearance = body_clearance
         plant = robot.plant
-        # A foot is every body welded to it too (a sole frame, a force-sensor link).
-        feet = {b.index() for name in robot.foot_body_names
-                for b in plant.GetBodiesWeldedTo(plant.GetBodyByName(name))}
+        feet = robot.foot_body_names  # with the bodies welded to them (a sole frame, a sensor link)
         self._bodies = [
-            plant.get_body(i) for i in plant.GetBodyIndices(robot.model_instance) if i not in feet
+            plant.get_body(i) for i in plant.GetBodyIndices(robot.model_instance)
+            if plant.get_body(i).name() not in feet
         ]
         self.state_input = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
         self._kinematics = declare_kinematics_cache(self, robot, self.state_input.Eval,

@@ -233,7 +233,10 @@ class RobotModel:
 
     @property
     def foot_body_names(self) -> set[str]:
-        return {f.body_name for f in self.feet.values()}
+        """The foot bodies and every body welded to one (a sole frame, a force-sensor link)."""
+        plant = self.plant
+        return {b.name() for f in self.feet.values()
+                for b in plant.GetBodiesWeldedTo(plant.GetBodyByName(f.body_name, self.model_instance))}
 
     # ----------------------------------------------------------- simulation plant
     def add_to_builder(
