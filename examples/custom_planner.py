@@ -6,12 +6,16 @@
 a minimum and maximum step width), the kind of change a researcher makes for a real robot.
 Anything implementing `FootPlacementLaw._place` plugs in the same way; the rest of the loop
 (state machine, output embedding, TSC-QP) is unchanged.
+
+Importing this file registers the law as planner `hlip_clamped`, so the command line can use it:
+
+    ROMOCO_PLUGINS=examples/custom_planner.py romoco run g1_walk --planner hlip_clamped
 """
 
 import numpy as np
 
 from romoco_drake.robots.model import load_robot
-from romoco_drake.rom.planners import HlipLaw, PlannerParams
+from romoco_drake.rom.planners import PLANNERS, HlipLaw, PlannerParams
 from romoco_drake.runner import run_scenario
 from romoco_drake.scenario import load_scenario, with_overrides
 
@@ -32,6 +36,12 @@ class ClampedHlipLaw(HlipLaw):
         u_x = float(np.clip(u_x, -self.reach, self.reach))
         u_y = outward * float(np.clip(outward * u_y, self.min_width, self.max_width))
         return u_x, u_y, orbit, nominal
+
+
+# Registered once per process (a script run twice in one process, as tests do, finds it there).
+if ClampedHlipLaw.name not in PLANNERS:
+    PLANNERS.add(ClampedHlipLaw.name, ClampedHlipLaw, "H-LIP with steps clamped to a kinematic box "
+                 "(examples/custom_planner.py)", gains=ClampedHlipLaw.supported_gains, law=True)
 
 
 def main(duration: float = 5.0) -> dict:

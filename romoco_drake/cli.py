@@ -190,6 +190,21 @@ def _cmd_diagram(args) -> int:
     return 0
 
 
+def _cmd_new_robot(args) -> int:
+    from romoco_drake.robots.onboard import model_file_path, new_robot
+
+    if args.out.exists() and not args.force:
+        raise RomocoError(f"--out {args.out}: exists (use --force to overwrite)")
+    model = model_file_path(args.model_file, args.package_path)
+    _, notes = new_robot(model, args.out, args.package_path)
+    print(f"wrote {args.out}")
+    for note in notes:
+        print(f"  to check: {note}")
+    name = args.out.stem
+    print(f"next: `romoco show {name}`, then a scenario with `robot: {name}` (README: Adding a robot)")
+    return 0
+
+
 def _cmd_robot_sim(args) -> int:
     from romoco_drake.runner import run_robot_sim, stderr_progress
     from romoco_drake.scenario import load_scenario
@@ -559,6 +574,15 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, metavar="FILE.svg|.png|.pdf|.dot", help="default: SCENARIO.svg")
     p.add_argument("--depth", type=int, default=1, help="nested diagrams opened (1: the top level)")
     p.set_defaults(func=_cmd_diagram)
+    p = sub.add_parser("new-robot", help="infer a robot YAML skeleton from a biped's URDF/SDFormat file")
+    p.add_argument("model_file", metavar="MODEL_FILE",
+                   help="a URDF/SDFormat path, or package://PKG/path (example-robot-data or --package-path)")
+    p.add_argument("--package-path", type=Path, action="append", default=[], metavar="DIR",
+                   help="a ROS package (folder with package.xml) or a folder of them, for package:// URIs")
+    p.add_argument("--out", type=Path, required=True, metavar="robots/NAME.yaml",
+                   help="the YAML to write; its file name is the robot's name")
+    p.add_argument("--force", action="store_true", help="overwrite --out")
+    p.set_defaults(func=_cmd_new_robot)
     p = sub.add_parser("robot-sim", help="a simulated robot behind LCM, for `romoco run --hardware`")
     p.add_argument("scenario", help="scenario name or YAML path (robot, plant step, sensors, link)")
     p.add_argument("--lcm-url", help="LCM URL (default: Drake's UDP multicast)")
@@ -675,6 +699,9 @@ def make_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = make_parser().parse_args(argv)
     try:
+        from romoco_drake.registry import load_plugins
+
+        load_plugins()
         return args.func(args)
     except RomocoError as e:
         print(f"romoco: error: {e}", file=sys.stderr)

@@ -54,3 +54,46 @@ class Registry(Mapping[str, Entry]):
         if name not in self._entries:
             raise RomocoError(f"{where}unknown {self.kind} '{name}' (known: {', '.join(self._entries)})")
         return name
+
+
+PLUGIN_GROUP = "romoco_drake.plugins"
+
+
+def load_plugins() -> list[str]:
+    """Imports the user's component modules, which register themselves with ``add`` on import.
+
+    They are the ``romoco_drake.plugins`` entry points of installed packages, and the entries of
+    ``$ROMOCO_PLUGINS`` (``:``-separated module names or ``.py`` files), so that ``romoco run``
+    and the benches can name a planner or controller the user wrote. Returns what was loaded;
+    a plugin that fails to import is a one-line RomocoError.
+    """
+    import importlib
+    import importlib.metadata
+    import importlib.util
+    import os
+    import sys
+    from pathlib import Path
+
+    loaded = []
+    targets = [(ep.name, ep.value) for ep in importlib.metadata.entry_points(group=PLUGIN_GROUP)]
+    targets += [(t, t) for t in os.environ.get("ROMOCO_PLUGINS", "").split(os.pathsep) if t]
+    for name, target in targets:
+        try:
+            if target.endswith(".py"):
+                path = Path(target).resolve()
+                spec = importlib.util.spec_from_file_location(f"romoco_plugin_{path.stem}", path)
+                if spec is None or not path.is_file():
+                    raise RomocoError(f"plugin '{target}': no such file")
+                if spec.name in sys.modules:  # already registered in this process
+                    continue
+                module = importlib.util.module_from_spec(spec)
+                sys.modules[spec.name] = module
+                spec.loader.exec_module(module)
+            else:
+                importlib.import_module(target.partition(":")[0])
+        except RomocoError:
+            raise
+        except Exception as e:  # a user's module: any import failure is reported in one line
+            raise RomocoError(f"plugin '{name}' ({target}) failed to load: {type(e).__name__}: {e}") from None
+        loaded.append(target)
+    return loaded

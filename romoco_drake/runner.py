@@ -34,7 +34,8 @@ from romoco_drake.scenario import (
 PROGRESS_WALL_S = 2.0  # print progress lines at most this often
 # Drake's report that the plant's discrete contact solver gave up on a step (v1.51,
 # multibody/plant/sap_driver.cc; the plants here use SAP).
-SAP_DIVERGED = "The SAP solver failed to converge"
+# Drake's SAP contact solver reports a diverged state with one of these.
+SAP_DIVERGED = ("The SAP solver failed to converge", "The Hessian of the momentum cost")
 # No robot's |q| or |v| (m, rad, m/s, rad/s) gets here; a blown-up simulation does within a
 # few steps, often without a solver noticing (then a controller trips on it).
 BLOWN_UP = 1e6
@@ -219,16 +220,28 @@ def run_robot_sim(scenario: Scenario, duration: float | None = None, lcm_url: st
     except RuntimeError as e:
         raise RomocoError(f"robot-sim: no motor command within {wait_s:g} s "
                           f"({str(e).splitlines()[0][:120]})") from None
-    last_print = time.perf_counter()
+    last_print, diverged = time.perf_counter(), None
     with frozen_heap():
         while context.get_time() < duration - 1e-9:
-            simulator.AdvanceTo(min(duration, context.get_time() + 0.1))
+            try:
+                simulator.AdvanceTo(min(duration, context.get_time() + 0.1))
+            except Exception as e:  # a diverged simulation ends the run as a fall, as in run_scenario
+                state = plant.GetPositionsAndVelocities(plant.GetMyContextFromRoot(context))
+                if (reason := divergence(e, state)) is None:
+                    raise
+                diverged = (context.get_time(), reason)
+                break
             if progress is not None and time.perf_counter() - last_print > PROGRESS_WALL_S:
                 progress(f"[robot-sim {robot.name}] t = {context.get_time():.1f}/{duration:.1f} s")
                 last_print = time.perf_counter()
     monitor = station.GetSubsystemByName("monitor")
-    return ({"robot": robot.name, "lcm_url": lcm.get_lcm_url(), "duration_s": duration}
-            | monitor.summary(monitor.GetMyContextFromRoot(context)) | robot_summary(robot_sim, context))
+    summary = ({"robot": robot.name, "lcm_url": lcm.get_lcm_url(), "duration_s": duration}
+               | monitor.summary(monitor.GetMyContextFromRoot(context)) | robot_summary(robot_sim, context))
+    if diverged is not None:
+        summary["simulation_error"] = diverged[1]
+        if not summary["fell"]:
+            summary.update(fell=True, fall_time_s=diverged[0], fall_reason="simulation_diverged")
+    return summary
 
 
 def divergence(error: Exception, plant_state: np.ndarray | None) -> str | None:
@@ -240,7 +253,7 @@ def divergence(error: Exception, plant_state: np.ndarray | None) -> str | None:
     """
     text = str(error).strip()
     blown_up = plant_state is not None and not np.all(np.abs(plant_state) < BLOWN_UP)  # NaN included
-    if not blown_up and SAP_DIVERGED not in text:
+    if not blown_up and not any(marker in text for marker in SAP_DIVERGED):
         return None
     return text.splitlines()[0].split(". ")[0].rstrip(".") if text else type(error).__name__
 

@@ -18,7 +18,7 @@ def test_list_json():
     out = romoco("list", "--json")
     assert out.returncode == 0, out.stderr
     listing = json.loads(out.stdout.strip().splitlines()[-1])
-    assert listing["robots"] == ["bolt", "cassie", "draco", "g1", "h1", "xo"]
+    assert listing["robots"] == ["bolt", "cassie", "draco", "g1", "h1", "icub", "talos", "xo"]
     assert {f"{r}_stand" for r in listing["robots"]} <= set(listing["scenarios"])
     assert "standing" in listing["controllers"]
     assert listing["planners"] == ["alip", "hlip", "mlip", "dcm", "alip_general", "vimpc"]
@@ -26,7 +26,7 @@ def test_list_json():
 
 def test_list_text():
     out = romoco("list")
-    assert out.returncode == 0 and "robots: bolt, cassie, draco, g1, h1, xo" in out.stdout
+    assert out.returncode == 0 and "robots: bolt, cassie, draco, g1, h1, icub, talos, xo" in out.stdout
 
 
 def test_show_prints_facts_without_browser():

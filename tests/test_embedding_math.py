@@ -86,6 +86,8 @@ EXPECTED_LEG_JOINTS = {
     "h1": ("left_hip_yaw", None),
     "xo": ("left_hip_yaw", "left_ankle_roll"),
     "draco": ("l_hip_ie", "l_ankle_ie"),
+    "icub": ("l_hip_yaw", "l_ankle_roll"),
+    "talos": ("leg_left_1_joint", "leg_left_6_joint"),
     "bolt": (None, None),  # hip abduction, hip and knee flexion only
 }
 
@@ -95,7 +97,7 @@ def test_leg_joints_found_by_geometry(robot):
     right = find_leg_joints(robot, "right")
     assert (left.hip_yaw, left.ankle_roll) == EXPECTED_LEG_JOINTS[robot.name]
     def mirror(name):
-        return name and ("right" + name[4:] if name.startswith("left") else "r_" + name[2:])
+        return name and ("r_" + name[2:] if name.startswith("l_") else name.replace("left", "right"))
 
     assert (right.hip_yaw, right.ankle_roll) == (mirror(left.hip_yaw), mirror(left.ankle_roll))
 

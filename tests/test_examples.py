@@ -42,3 +42,10 @@ def test_walk_over_lcm_example():
     assert summary["controller_side"]["estop"] == 1 and summary["robot_side"]["estop"] == 1
     assert summary["controller_side"]["rejected_messages"] == 0
     assert summary["sent_is_damping"] and summary["applied_is_damping"]
+
+
+def test_custom_controller_example():
+    module = runpy.run_path(str(EXAMPLES / "custom_controller.py"))
+    summary = module["main"](4.0)
+    assert summary["fell"] is False and summary["controller"] == "tscqp_slew"
+    _walked_the_command(summary)

@@ -112,3 +112,53 @@ def test_sim_plant_has_sole_contacts_and_constraints(robot_name):
     assert plant.num_actuators() == robot.nu
     assert plant.num_constraints() == robot.num_internal_constraints()
     assert plant.num_positions() == robot.nq
+
+
+
+_INERTIA = "<inertia ixx='0.01' iyy='0.01' izz='0.01' ixy='0' ixz='0' iyz='0'/>"
+_LINK = "<link name='{}'><inertial><mass value='1'/>" + _INERTIA + "</inertial></link>"
+_JOINT = "<joint name='{}' type='{}'><parent link='{}'/><child link='{}'/><axis xyz='0 1 0'/>{}</joint>"
+_LIMIT = "<limit effort='5' lower='-1' upper='1' velocity='1'/>"
+_MODEL = ("<robot name='m'>" + "".join(_LINK.format(n) for n in ("root", "a", "b", "c"))
+          + _JOINT.format("ja", "revolute", "root", "a", _LIMIT + "<dynamics damping='0.1' friction='0.2'/>")
+          + _JOINT.format("jb", "fixed", "a", "b", "<mimic joint='ja'/>")
+          + _JOINT.format("jc", "revolute", "root", "c", _LIMIT + "<mimic joint='ja' multiplier='-1'/>")
+          + "<transmission name='t'><type>transmission_interface/SimpleTransmission</type>"
+            "<joint name='ja'><hardwareInterface>EffortJointInterface</hardwareInterface></joint>"
+            "<actuator name='ma'><mechanicalReduction>1</mechanicalReduction></actuator></transmission>"
+          + "</robot>")
+
+
+def test_model_source_drops_uncoupled_mimics_and_transmissions_and_adds_a_base_frame(tmp_path, monkeypatch):
+    """A fixed joint's <mimic> and every <transmission> go, a mimic of two revolute joints stays; with
+    base_frame_rpy the floating base is ``romoco_base``, the file's root turned by the rpy in it."""
+    import xml.etree.ElementTree as ET
+
+    from pydrake.multibody.parsing import Parser
+    from pydrake.multibody.plant import MultibodyPlant
+
+    from romoco_drake.robots.config import ModelSource
+    from romoco_drake.robots.source import _prepare_cached, prepare_model
+
+    (tmp_path / "m.urdf").write_text(_MODEL)
+    monkeypatch.setattr("romoco_drake.robots.source.MODELS_DIR", tmp_path)
+    _prepare_cached.cache_clear()
+    try:
+        source = ModelSource(package="romoco_models", file="m.urdf", base_frame_rpy=[0.0, 0.0, np.pi])
+        prepared = prepare_model(source)
+    finally:
+        _prepare_cached.cache_clear()
+    root = ET.fromstring(prepared.text)
+    mimics = {j.get("name") for j in root.iter("joint") if j.find("mimic") is not None}
+    assert mimics == {"jc"} and root.find("transmission") is None
+    assert "friction" not in root.find("joint/dynamics").attrib
+    assert prepared.effort_limits["ja"] == 5.0
+    plant = MultibodyPlant(0.0)
+    Parser(plant).AddModelsFromString(prepared.text, "urdf")
+    plant.Finalize()
+    assert plant.num_actuators() == 0
+    (base,) = plant.GetFloatingBaseBodies()
+    assert plant.get_body(base).name() == "romoco_base"
+    X = plant.CalcRelativeTransform(plant.CreateDefaultContext(), plant.get_body(base).body_frame(),
+                                    plant.GetFrameByName("root"))
+    np.testing.assert_allclose(X.rotation().matrix(), np.diag([-1.0, -1.0, 1.0]), atol=1e-12)

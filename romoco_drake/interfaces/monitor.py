@@ -39,7 +39,7 @@ class FallMonitor(LeafSystem):
         self._cos_max_tilt = np.cos(max_tilt)
         self._clearance = body_clearance
         plant = robot.plant
-        feet = robot.foot_body_names
+        feet = robot.foot_body_names  # with the bodies welded to them (a sole frame, a sensor link)
         self._bodies = [
             plant.get_body(i) for i in plant.GetBodyIndices(robot.model_instance)
             if plant.get_body(i).name() not in feet

@@ -14,16 +14,30 @@ class ModelSource:
     """Model file and the edits applied to its XML text before parsing.
 
     ``package`` is ``example-robot-data`` (located in the installed PyPI package at run
-    time) or ``romoco_models`` (this repository's ``models/``).
+    time), ``romoco_models`` (this repository's ``models/``) or absent: then ``file`` is a path
+    of the user's own, absolute or relative to the robot YAML's folder. ``package_paths`` names
+    the folders of the ROS packages its ``package://`` URIs use (relative ones, to the YAML's
+    folder); ``romoco new-robot --package-path`` fills it in. The edits are listed in
+    :mod:`romoco_drake.robots.source`; the rules there that need no field (mimic tags,
+    transmissions) apply to every model.
     """
 
-    package: Literal["example-robot-data", "romoco_models"]
     file: str
+    package: Literal["example-robot-data", "romoco_models"] | None = None
+    package_paths: dict[str, str] = dataclasses.field(default_factory=dict)
     # Joints made rigid (e.g. Cassie's leaf springs): their type becomes "fixed".
     weld_joints: list[str] = dataclasses.field(default_factory=list)
     # Bodies dropped with every joint touching them (loop-closing linkages that are
     # replaced by constraints).
     remove_bodies: list[str] = dataclasses.field(default_factory=list)
+    # For a URDF whose root link is not x forward, z up (iCub's root_link faces backward):
+    # the roll, pitch, yaw [rad] of that root link in a new massless root link ``romoco_base``
+    # welded to it, which becomes the floating base (``base_body: romoco_base``).
+    base_frame_rpy: list[float] | None = None
+
+
+# A rotation is three angles of at most a turn each.
+declare_ranges(ModelSource, base_frame_rpy=Range(-2 * math.pi, 2 * math.pi, "rad", size=3))
 
 
 @dataclasses.dataclass

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import fnmatch
 import functools
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,28 +31,44 @@ from pydrake.systems.framework import DiagramBuilder
 from romoco_drake.config import load_typed
 from romoco_drake.errors import ConfigError, RomocoError
 from romoco_drake.robots.config import RobotConfig
-from romoco_drake.robots.source import ROBOTS_DIR, package_paths, prepare_model
+from romoco_drake.robots.source import ROBOTS_DIR, package_paths, prepare_model, resolve_relative_paths
 
 SOLE_SPHERE_RADIUS = 0.005
 
 
+def robot_dirs() -> list[Path]:
+    """Folders searched for ``<name>.yaml``, first match wins: the shipped ``robots/``, then
+    each folder of ``$ROMOCO_ROBOT_PATH`` (``:``-separated), then ``./robots`` (a user's own
+    robots, as ``romoco new-robot --out robots/NAME.yaml`` writes them)."""
+    extra = [Path(p) for p in os.environ.get("ROMOCO_ROBOT_PATH", "").split(os.pathsep) if p]
+    dirs: list[Path] = []
+    for d in [ROBOTS_DIR, *extra, Path.cwd() / "robots"]:
+        if d.is_dir() and d.resolve() not in dirs:
+            dirs.append(d.resolve())
+    return dirs
+
+
+def robot_path(name: str) -> Path:
+    for d in robot_dirs():
+        if (d / f"{name}.yaml").is_file():
+            return d / f"{name}.yaml"
+    raise RomocoError(f"unknown robot '{name}' (known: {', '.join(robot_names())})")
+
+
 def robot_names() -> list[str]:
-    """Names of the robots with a YAML file in ``robots/``."""
-    return sorted(p.stem for p in ROBOTS_DIR.glob("*.yaml"))
+    """Names of the robots with a YAML file in the robot folders (:func:`robot_dirs`)."""
+    return sorted({p.stem for d in robot_dirs() for p in d.glob("*.yaml")})
 
 
 def load_robot_config(name: str) -> RobotConfig:
-    path = ROBOTS_DIR / f"{name}.yaml"
-    if not path.exists():
-        known = ", ".join(robot_names())
-        raise RomocoError(f"unknown robot '{name}' (known: {known})")
-    return load_robot_config_file(path)
+    return load_robot_config_file(robot_path(name))
 
 
 def load_robot_config_file(path: Path) -> RobotConfig:
     """Loads a robot YAML; its ``name`` must match the file name."""
     path = Path(path)
     cfg = load_typed(path, RobotConfig)
+    resolve_relative_paths(cfg.model, path.parent)
     if cfg.name != path.stem:
         raise ConfigError(path, "name", f"'{cfg.name}' does not match the file name '{path.stem}'")
     reach, w = cfg.walking.step_reach, cfg.walking
@@ -224,7 +241,10 @@ class RobotModel:
 
     @property
     def foot_body_names(self) -> set[str]:
-        return {f.body_name for f in self.feet.values()}
+        """The foot bodies and every body welded to one (a sole frame, a force-sensor link)."""
+        plant = self.plant
+        return {b.name() for f in self.feet.values()
+                for b in plant.GetBodiesWeldedTo(plant.GetBodyByName(f.body_name, self.model_instance))}
 
     # ----------------------------------------------------------- simulation plant
     def add_to_builder(
@@ -354,4 +374,4 @@ class RobotModel:
 @functools.cache
 def load_robot(name: str) -> RobotModel:
     """The RobotModel for ``robots/<name>.yaml`` (cached: building it parses the model)."""
-    return RobotModel(load_robot_config(name), ROBOTS_DIR / f"{name}.yaml")
+    return RobotModel(load_robot_config(name), robot_path(name))

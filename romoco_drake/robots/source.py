@@ -1,14 +1,24 @@
 """Locate robot model files and prepare their XML text for Drake's parser.
 
-Cassie and G1 come from the installed ``example-robot-data`` package, found at run time
-(its files are never copied). The XML is edited in memory before parsing:
+Cassie, G1, iCub and Talos come from the installed ``example-robot-data`` package, found at
+run time (its files are never copied); a user's robot names its own file and package folders.
+The XML is edited in memory before parsing:
 - every ``<collision>`` is dropped: the station gives each foot its own sole contact
   points, and Drake cannot build convex hulls of G1's ``.STL`` collision meshes;
+- every URDF ``<transmission>`` is dropped: RobotModel gives each non-passive joint one
+  actuator itself (Drake would add a second from Talos's transmissions);
+- a ``<mimic>`` whose joint or leader is not a 1-DoF joint (revolute, continuous,
+  prismatic) is dropped: there is no motion to couple, and Drake rejects the file (Talos's
+  gripper fingers are ``fixed`` joints that mimic the gripper motor). A mimic between two
+  1-DoF joints is kept for Drake;
+- the ``friction`` of a joint's ``<dynamics>`` is dropped (Drake ignores it, with a warning);
 - joints listed in ``weld_joints`` become fixed (rigid springs);
 - bodies listed in ``remove_bodies`` go, with every joint touching them (Cassie's
-  loop-closing rods, whose ``ball`` joints would make a kinematic loop).
+  loop-closing rods, whose ``ball`` joints would make a kinematic loop);
+- with ``base_frame_rpy`` a massless link ``romoco_base`` becomes the URDF's root, welded
+  to the file's root link at that orientation, so the floating base is x forward, z up.
 Effort limits are read from the XML because Drake keeps them only for URDF
-transmissions, and these models have none.
+transmissions, which are dropped.
 """
 
 from __future__ import annotations
@@ -24,6 +34,8 @@ from romoco_drake.robots.config import ModelSource
 from romoco_drake.robots.meshes import stl_as_obj
 
 ERD_PACKAGE = "example-robot-data"
+BASE_FRAME_LINK = "romoco_base"
+ONE_DOF_JOINTS = {"revolute", "continuous", "prismatic"}
 _PACKAGE_DIR = Path(__file__).resolve().parents[1]
 
 
@@ -60,13 +72,25 @@ def example_robot_data_root() -> Path:
 
 def package_paths(source: ModelSource) -> dict[str, Path]:
     """Packages to register with Drake's PackageMap for ``source``."""
+    packages = {name: Path(folder) for name, folder in source.package_paths.items()}
     if source.package == ERD_PACKAGE:
-        return {ERD_PACKAGE: example_robot_data_root()}
-    return {"romoco_models": MODELS_DIR}
+        packages[ERD_PACKAGE] = example_robot_data_root()
+    elif source.package == "romoco_models":
+        packages["romoco_models"] = MODELS_DIR
+    return packages
 
 
 def model_path(source: ModelSource) -> Path:
+    if source.package is None:
+        return Path(source.file)
     return package_paths(source)[source.package] / source.file
+
+
+def resolve_relative_paths(source: ModelSource, folder: Path) -> None:
+    """Makes a user model's relative ``file`` and ``package_paths`` relative to ``folder``."""
+    if source.package is None:
+        source.file = str((folder / source.file).resolve())
+    source.package_paths = {name: str((folder / p).resolve()) for name, p in source.package_paths.items()}
 
 
 @dataclass(frozen=True)
@@ -89,9 +113,10 @@ def _float_or_none(text: str | None) -> float | None:
 
 @functools.cache
 def _prepare_cached(source_key: tuple) -> PreparedModel:
-    package, file, weld_joints, remove_bodies = source_key
-    source = ModelSource(package=package, file=file, weld_joints=list(weld_joints),
-                         remove_bodies=list(remove_bodies))
+    package, file, packages, weld_joints, remove_bodies, base_frame_rpy = source_key
+    source = ModelSource(package=package, file=file, package_paths=dict(packages),
+                         weld_joints=list(weld_joints), remove_bodies=list(remove_bodies),
+                         base_frame_rpy=None if base_frame_rpy is None else list(base_frame_rpy))
     path = model_path(source)
     try:
         root = ET.parse(path).getroot()
@@ -108,10 +133,12 @@ def _prepare_cached(source_key: tuple) -> PreparedModel:
     for collision in list(root.iter("collision")):
         parents[collision].remove(collision)
     _visual_stl_to_obj(root, package_paths(source), path)
-    # Gazebo-only elements Drake would warn about.
-    for tag in ("plugin", "self_collide"):
+    # Gazebo-only elements Drake would warn about; transmissions (RobotModel adds the actuators).
+    for tag in ("plugin", "self_collide") + (("transmission",) if file_type == "urdf" else ()):
         for el in list(root.iter(tag)):
             parents[el].remove(el)
+    for dynamics in root.iter("dynamics"):
+        dynamics.attrib.pop("friction", None)
 
     links = {el.get("name"): el for el in root.iter("link")}
     joints = {el.get("name"): el for el in root.iter("joint")}
@@ -132,6 +159,12 @@ def _prepare_cached(source_key: tuple) -> PreparedModel:
         for tag in ("axis", "limit", "dynamics"):
             for el in list(joint.findall(tag)):
                 joint.remove(el)
+    if file_type == "urdf":
+        _drop_uncoupled_mimics(joints)
+        if base_frame_rpy is not None:
+            _add_base_frame(root, path, base_frame_rpy)
+    elif base_frame_rpy is not None:
+        raise RomocoError(f"{path}: base_frame_rpy is for URDF models only")
 
     efforts, velocities = {}, {}
     for name, joint in joints.items():
@@ -155,6 +188,31 @@ def _prepare_cached(source_key: tuple) -> PreparedModel:
         if (v := _float_or_none(velocity)) is not None and v > 0:
             velocities[name] = v
     return PreparedModel(ET.tostring(root, encoding="unicode"), file_type, path, efforts, velocities)
+
+
+def _drop_uncoupled_mimics(joints: dict[str, ET.Element]) -> None:
+    """Removes each ``<mimic>`` whose joint or leader has no single degree of freedom."""
+    for joint in joints.values():
+        mimic = joint.find("mimic")
+        if mimic is None:
+            continue
+        leader = joints.get(mimic.get("joint"))
+        leader_type = None if leader is None else leader.get("type")
+        if joint.get("type") not in ONE_DOF_JOINTS or leader_type not in ONE_DOF_JOINTS:
+            joint.remove(mimic)
+
+
+def _add_base_frame(root: ET.Element, path: Path, rpy: tuple[float, ...]) -> None:
+    """Makes a massless ``romoco_base`` link the root, welded to the old root at ``rpy``."""
+    children = {_joint_end(j, "child") for j in root.iter("joint")}
+    roots = [link.get("name") for link in root.iter("link") if link.get("name") not in children]
+    if len(roots) != 1:
+        raise RomocoError(f"{path}: base_frame_rpy needs one root link, found {len(roots)}")
+    ET.SubElement(root, "link", name=BASE_FRAME_LINK)
+    joint = ET.SubElement(root, "joint", name=f"{BASE_FRAME_LINK}_joint", type="fixed")
+    ET.SubElement(joint, "parent", link=BASE_FRAME_LINK)
+    ET.SubElement(joint, "child", link=roots[0])
+    ET.SubElement(joint, "origin", xyz="0 0 0", rpy=" ".join(f"{a:.17g}" for a in rpy))
 
 
 def _resolve_uri(uri: str, packages: dict[str, Path], model_file: Path) -> Path:
@@ -194,6 +252,8 @@ def _joint_end(joint: ET.Element, tag: str) -> str | None:
 
 def prepare_model(source: ModelSource) -> PreparedModel:
     """Reads and edits the model file of ``source`` (cached per source)."""
+    rpy = None if source.base_frame_rpy is None else tuple(source.base_frame_rpy)
     return _prepare_cached(
-        (source.package, source.file, tuple(source.weld_joints), tuple(source.remove_bodies))
+        (source.package, source.file, tuple(sorted(source.package_paths.items())),
+         tuple(source.weld_joints), tuple(source.remove_bodies), rpy)
     )
