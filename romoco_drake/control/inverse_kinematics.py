@@ -268,7 +268,10 @@ class IkSolver:
 
 
 def _ankle_actuators(robot: RobotModel, side: str) -> np.ndarray:
-    """Actuator indices of the leg's joints below the knee (ankle pitch/roll, Cassie's toe)."""
+    """Actuator indices of the leg's joints below the knee (ankle pitch/roll, Cassie's toe); none
+    for a point foot, whose leg ends at the knee's link."""
+    if robot.is_point_foot:
+        return np.zeros(0, dtype=int)
     chain = [j.name() for j in leg_chain(robot, side)]
     knee = next(i for i, name in enumerate(chain) if "knee" in name)
     return np.array([robot.actuator_names.index(name) for name in chain[knee + 1:]], dtype=int)

@@ -11,8 +11,9 @@ contact held only in acceleration; it is 0 by default, as in eq. 20: at touchdow
 foot still moves, and −k_h J_c v then asked for foot decelerations no admissible wrench gives
 (level 0 infeasible on most XO touchdowns with k_h = 20). The decision variables are
 x = [z; λ], λ the contact wrenches [τ; f] at the sole
-centres (each in its sole frame; five numbers, without the roll moment, for a line contact)
-and the internal-loop forces. A strict hierarchy is solved level by level
+centres (each in its sole frame; five numbers, without the roll moment, for a line contact;
+three, the force in the foot's yaw frame, for a point contact) and the internal-loop forces.
+A strict hierarchy is solved level by level
 (:func:`~romoco_drake.control.hqp.solve_hierarchy`):
 
 0. dynamics consistency (the unactuated rows of M v̇ + C = B τ + J_cᵀ λ), the contact wrench
@@ -43,7 +44,9 @@ plus what the body's roll angular momentum rate adds. A strict lateral row then 
 roll rate, and only the arms and waist could make up the difference to what the pelvis and
 swing-foot tasks move: on H1 they swung 1-2 rad off nominal into their torque limits and
 stops, and the tasks were missed by about their own size (vy rms 0.24 m/s). So there the
-lateral row (across the stance line) joins the task level with ``lateral_task_weight``.
+lateral row (across the stance line) joins the task level with ``lateral_task_weight``. A
+point contact gives no moment about any horizontal axis, so in its single support both
+horizontal rows do (with them strict a point-foot biped fell within a second).
 
 Where the angular rows sit is a gain (``MomentumGains.weighted_axes``): the axes named there
 leave level 1 and join the task level with ``angular_task_weight``. Measured on ``xo_walk``
@@ -177,7 +180,9 @@ class MomentumHqp:
         mu = robot.config.feet.friction * (1.0 - friction_margin)
         # A line contact (a foot without an ankle roll joint, as the embedding models it) is free
         # to roll about its toe-heel axis x_S: its row ω_x and its wrench's τ_x are dropped.
-        self._sole_rows = np.arange(1, 6) if contact.line_contact else np.arange(6)
+        # A point contact holds the point's position only and carries a force: rows v and f.
+        self._sole_rows = (np.arange(3, 6) if contact.point_contact
+                           else np.arange(1, 6) if contact.line_contact else np.arange(6))
         self._soles, self._cones = {}, {}
         for side in ("left", "right"):
             R_FS, p_FS = sole_frame(robot, side)
@@ -275,6 +280,9 @@ class MomentumHqp:
                 rot = self._line_frame(kin, feet[0])
                 A_GP[3:5], target[3:5] = rot @ A_GP[3:5], rot @ target[3:5]
                 soft[4] = rows[4]
+            elif self.contact.point_contact and len(feet) == 1:
+                # A point contact gives no moment about any horizontal axis: both horizontal rows.
+                soft[3:5] = rows[3:5]
             strict = rows & ~soft
             levels.append(Level("momentum", A_GP[strict], target[strict], w[strict]))
         J_out = tasks.J[other]
@@ -326,9 +334,9 @@ class MomentumHqp:
         cols = self._sole_rows
         blocks = []
         for side in feet:
-            frame, R_FS, p_FS = self._soles[side]
+            frame, _, p_FS = self._soles[side]
             R_WF, p_WF = kin.frame_pose(frame)
-            R = R_WF @ R_FS
+            R = self._sole_rotation(kin, side)
             rx, ry, rz = (R_WF @ p_FS + p_WF - kin.p_com).tolist()
             X = np.zeros((6, 6))
             X[:3, :3] = X[3:, 3:] = R
@@ -381,12 +389,19 @@ class MomentumHqp:
     def sole_motion(self, kin: RobotKinematics, side: str) -> tuple[np.ndarray, np.ndarray]:
         """The sole centre's spatial Jacobian rows [ω; v] and bias acceleration in the sole frame
         S (the rows the contact holds: six, or five for a line contact)."""
-        frame, R_FS, p_FS = self._soles[side]
+        frame, _, p_FS = self._soles[side]
         J, bias = kin.spatial_jacobian(frame, p_FS)
-        R_SW = (kin.frame_pose(frame)[0] @ R_FS).T
+        R_SW = self._sole_rotation(kin, side).T
         J_S = np.vstack([R_SW @ J[:3], R_SW @ J[3:]])
         bias_S = np.concatenate([R_SW @ bias[:3], R_SW @ bias[3:]])
         return J_S[self._sole_rows], bias_S[self._sole_rows]
+
+    def _sole_rotation(self, kin: RobotKinematics, side: str) -> np.ndarray:
+        """R_WS: the sole frame, or a point foot's yaw frame (its body tilts with the leg)."""
+        if self.contact.point_contact:
+            return self.contact.sole_rotation(kin, side)
+        frame, R_FS, _ = self._soles[side]
+        return kin.frame_pose(frame)[0] @ R_FS
 
     def _joint_acceleration_bounds(self, kin: RobotKinematics) -> tuple[np.ndarray, np.ndarray]:
         """q̈ bounds that keep each limited joint inside its range (less ``limit_margin``) over the
