@@ -14,7 +14,9 @@ wraps it as a system. Desired values per mode:
   controllers leave the horizontal CoM to the pendulum) is the ALIP flow about the stance
   contact frame {c} from the CoM and contact momentum latched at the step's first tick, at the
   plan's z0 (XO paper eq. 9-12 with L_CoM = 0: ṗ_x = L_cy/(mH), ṗ_y = −L_cx/(mH)).
-  Double support keeps CoM height, pelvis tilt and the stance hip yaw.
+  Double support keeps CoM height, pelvis tilt and the stance hip yaw. Point feet have no
+  swing-sole yaw or tilt outputs (nor stance hip yaw without a hip yaw joint): their swing foot
+  is placed by position only.
 - standing: CoM over the middle of the two soles at the nominal CoM height, pelvis level and
   facing the mean heading of the feet. On entering standing the CoM reference is a quintic
   from the CoM's state at that instant to that target over ``STAND_SETTLE_S``, so the switch
