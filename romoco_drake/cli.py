@@ -391,9 +391,12 @@ def _cmd_bench_push(args) -> int:
         raise RomocoError(f"--phases must be in [0, 1), got {args.phases}")
     if not (0.0 <= args.ankle_gain <= 10.0 and 0.0 <= args.angular_momentum_weight <= 1e4):
         raise RomocoError("--ankle-gain must be in [0, 10] and --angular-momentum-weight in [0, 1e4]")
+    if not (0.0 <= args.speed <= 2.0 and 0.01 <= args.push_duration <= 1.0):
+        raise RomocoError("--speed must be in [0, 2] m/s and --push-duration in [0.01, 1] s")
     result = bench_push(args.robot, impulses, phases, directions, adapt=not args.no_adapt,
                         ankle_gain=args.ankle_gain, angular_momentum_weight=args.angular_momentum_weight,
-                        sweep=_sweep(args), progress=stderr_progress)
+                        speed=args.speed, push_s=args.push_duration, sweep=_sweep(args),
+                        progress=stderr_progress)
     if args.json:
         print(json.dumps(result))
         return 0
@@ -652,6 +655,8 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--ankle-gain", type=float, default=0.0, help="TSC-QP ankle strategy (0: off)")
     p.add_argument("--angular-momentum-weight", type=float, default=0.0,
                    help="TSC-QP angular-momentum damping task (0: off)")
+    p.add_argument("--speed", type=float, default=0.4, help="forward walking speed (m/s)")
+    p.add_argument("--push-duration", type=float, default=0.1, help="how long each push lasts (s)")
     p.add_argument("--json", action="store_true", help="print one JSON object (last line)")
     _add_sweep_args(p)
     p.set_defaults(func=_cmd_bench_push)

@@ -66,7 +66,7 @@ from romoco_drake.robots.kinematics import RobotKinematicsSystem
 from romoco_drake.robots.model import RobotModel, load_robot, robot_names
 from romoco_drake.robots.source import DIAGRAMS_DIR
 from romoco_drake.rom.planners import PLANNERS, FootPlacementLaw, PlannerParams, make_planner
-from romoco_drake.rom.step_adapt import StepAdapter, StepAdaptWeights, StepBounds
+from romoco_drake.rom.step_adapt import StepAdapter, StepAdaptWeights
 from romoco_drake.rom.types import WalkCommand
 
 STATE_LOG_PERIOD = 0.01  # s, the state samples summaries and plots are computed from
@@ -596,9 +596,7 @@ def step_adapter(scenario: Scenario, robot: RobotModel) -> StepAdapter | None:
     cfg, reach = scenario.planner.step_adaptation, robot.config.walking.step_reach
     if not cfg.enabled or reach is None:
         return None
-    bounds = StepBounds(reach.forward, reach.backward, reach.lateral_min, reach.lateral_max, reach.t_ss_min,
-                        reach.t_ss_max)
-    return StepAdapter(bounds, robot.total_mass,
+    return StepAdapter(reach, robot.total_mass,
                        StepAdaptWeights(cfg.step_weight, cfg.timing_weight, cfg.offset_weight))
 
 

@@ -56,12 +56,17 @@ def test_swing_retimed_mid_step_is_continuous_and_lands_on_time():
     np.testing.assert_allclose(v, 0.0, atol=1e-9)
 
 
-def test_contradictory_step_reach_is_a_one_line_error(tmp_path):
+@pytest.mark.parametrize(("key", "value", "message"), [
+    ("t_ss_min", 0.35, "t_ss_min..t_ss_max must contain"),  # above walking.t_ss = 0.3
+    ("lateral_min", 0.4, "lateral_min must be at least 0 and below lateral_max"),
+    ("forward", -0.3, "forward must be ahead of -backward"),
+])
+def test_contradictory_step_reach_is_a_one_line_error(tmp_path, key, value, message):
     data = yaml.safe_load((ROBOTS_DIR / "g1.yaml").read_text())
-    data["walking"]["step_reach"]["t_ss_min"] = 0.35  # above walking.t_ss = 0.3
+    data["walking"]["step_reach"][key] = value
     path = tmp_path / "g1.yaml"
     path.write_text(yaml.safe_dump(data))
-    with pytest.raises(ConfigError, match="walking.step_reach: t_ss_min..t_ss_max must contain") as error:
+    with pytest.raises(ConfigError, match=f"walking.step_reach: {message}") as error:
         load_robot_config_file(path)
     assert "\n" not in str(error.value)
 

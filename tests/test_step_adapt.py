@@ -106,7 +106,7 @@ def test_qp_solution_matches_brute_force():
 
 
 def test_bad_bounds_and_weights_are_one_line_errors():
-    with pytest.raises(RomocoError, match="lateral_min"):
+    with pytest.raises(ValueError, match="lateral_min"):
         dataclasses.replace(BOUNDS, lateral_min=0.5)
     with pytest.raises(RomocoError, match="weights must be positive"):
         StepAdapter(BOUNDS, MASS, StepAdaptWeights(timing=0.0))

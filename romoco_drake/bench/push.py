@@ -1,13 +1,14 @@
 """``romoco bench push``: the largest push a walking robot survives, per direction and gait phase.
 
-The robot stands for ``START_S``, then walks forward at ``SPEED`` (the scenario's
-``<robot>_walk`` setup, command replaced). Once it has walked ``WALK_S`` the base gets a
-``PUSH_S`` push of impulse J (N·s; force J / ``PUSH_S``) in the heading frame, forward, backward,
-left or right, starting at a fraction of a step (the gait phase: 0 is the support switch). The
-step clock comes from one unpushed run: steps are periodic by then. Survival: no fall (the fall
-monitor: base tilt, base height or a body other than a foot touching the ground) within
-``HOLD_S`` of the push start. Impulses are tried in increasing order; a (direction, phase) cell
-stops at its first fall, and its score is the largest impulse survived before it (0: none).
+The robot stands for ``START_S``, then walks forward at ``speed`` (default ``SPEED``; the
+scenario's ``<robot>_walk`` setup, command replaced). Once it has walked ``WALK_S`` the base
+gets a ``push_s`` (default ``PUSH_S``) push of impulse J (N·s; force J / ``push_s``) in the
+heading frame, forward, backward, left or right, starting at a fraction of a step (the gait
+phase: 0 is the support switch). The step clock comes from one unpushed run: steps are periodic
+by then. Survival: no fall (the fall monitor: base tilt, base height or a body other than a foot
+touching the ground) within ``HOLD_S`` of the push start. Impulses are tried in increasing
+order; a (direction, phase) cell stops at its first fall, and its score is the largest impulse
+survived before it (0: none).
 """
 
 from __future__ import annotations
@@ -38,8 +39,8 @@ CRITERION = f"no fall within {HOLD_S:g} s of the push start (base tilt, base hei
 
 
 def walking_scenario(robot: str, adapt: bool = True, ankle_gain: float = 0.0,
-                     angular_momentum_weight: float = 0.0) -> Scenario:
-    """``diagrams/<robot>_walk.yaml`` walking forward at SPEED from START_S, step adaptation on or
+                     angular_momentum_weight: float = 0.0, speed: float = SPEED) -> Scenario:
+    """``diagrams/<robot>_walk.yaml`` walking forward at ``speed`` from START_S, step adaptation on or
     off, with the TSC-QP's ankle gain and angular-momentum weight (control/tscqp.py)."""
     base = load_scenario(f"{robot}_walk")
     planner = dataclasses.replace(base.planner, step_adaptation=dataclasses.replace(
@@ -47,7 +48,7 @@ def walking_scenario(robot: str, adapt: bool = True, ankle_gain: float = 0.0,
     controller = dataclasses.replace(base.controller, ankle_gain=ankle_gain,
                                      angular_momentum_weight=angular_momentum_weight)
     return dataclasses.replace(base, name=f"{robot}_push", planner=planner, controller=controller,
-                               disturbances=[], command=[CommandPoint(0.0), CommandPoint(START_S, SPEED)])
+                               disturbances=[], command=[CommandPoint(0.0), CommandPoint(START_S, speed)])
 
 
 def step_clock(scenario: Scenario) -> tuple[float, float]:
@@ -65,27 +66,28 @@ def step_clock(scenario: Scenario) -> tuple[float, float]:
     return schedule.step_start + step, step
 
 
-def pushed(scenario: Scenario, t: float, impulse: float, direction: str) -> Scenario:
-    """``scenario`` with one push of ``impulse`` N·s at time t, lasting until HOLD_S after it."""
+def pushed(scenario: Scenario, t: float, impulse: float, direction: str, push_s: float = PUSH_S) -> Scenario:
+    """``scenario`` with one ``push_s`` push of ``impulse`` N·s at time t, lasting until HOLD_S after it."""
     dx, dy = DIRECTIONS[direction]
-    force = [dx * impulse / PUSH_S, dy * impulse / PUSH_S, 0.0]
+    force = [dx * impulse / push_s, dy * impulse / push_s, 0.0]
     return dataclasses.replace(scenario, duration_s=t + HOLD_S,
-                               disturbances=[Disturbance(t, PUSH_S, force=force, frame="heading")])
+                               disturbances=[Disturbance(t, push_s, force=force, frame="heading")])
 
 
 def bench_push(robot: str = "g1", impulses=IMPULSES, phases=PHASES, directions=tuple(DIRECTIONS),
                adapt: bool = True, ankle_gain: float = 0.0, angular_momentum_weight: float = 0.0,
-               sweep: SweepOptions = IN_PROCESS, progress=None) -> dict:
+               speed: float = SPEED, push_s: float = PUSH_S, sweep: SweepOptions = IN_PROCESS,
+               progress=None) -> dict:
     """The push table (module docstring): per cell the largest impulse survived, and per direction
     the smallest of those over the phases."""
-    scenario = walking_scenario(robot, adapt, ankle_gain, angular_momentum_weight)
+    scenario = walking_scenario(robot, adapt, ankle_gain, angular_momentum_weight, speed)
     start, step = step_clock(scenario)
     cells = {(d, ph): {"direction": d, "phase": ph, "push_time_s": round(start + ph * step, 4),
                        "survived": 0.0, "fell_at": None, "fall_time_s": None}
              for d in directions for ph in phases}
     alive = list(cells)
     for impulse in sorted(impulses):
-        variants = [Variant(pushed(scenario, cells[c]["push_time_s"], impulse, c[0]),
+        variants = [Variant(pushed(scenario, cells[c]["push_time_s"], impulse, c[0], push_s),
                             {"direction": c[0], "phase": c[1], "impulse": impulse},
                             options={"stop_after_fall": 0.1}) for c in alive]
         rows = run_sweep(variants, sweep, progress)
@@ -99,6 +101,6 @@ def bench_push(robot: str = "g1", impulses=IMPULSES, phases=PHASES, directions=t
             break
     per_direction = {d: min(cells[(d, ph)]["survived"] for ph in phases) for d in directions}
     return {"robot": robot, "step_adaptation": adapt, "ankle_gain": ankle_gain,
-            "angular_momentum_weight": angular_momentum_weight, "speed_mps": SPEED, "push_s": PUSH_S,
+            "angular_momentum_weight": angular_momentum_weight, "speed_mps": speed, "push_s": push_s,
             "impulses": sorted(impulses), "step_s": round(step, 4), "criterion": CRITERION,
             "per_direction": per_direction, "cells": list(cells.values())}

@@ -7,6 +7,7 @@ import math
 from typing import Literal
 
 from romoco_drake.config import Range, declare_ranges, positive
+from romoco_drake.rom.step_adapt import StepBounds
 
 
 @dataclasses.dataclass
@@ -160,29 +161,11 @@ declare_ranges(CommandLimits, vx=positive(5.0, "m/s"), vy=positive(5.0, "m/s"), 
                ax=positive(20.0, "m/s²"), ay=positive(20.0, "m/s²"), wz_rate=positive(50.0, "rad/s²"))
 
 
-@dataclasses.dataclass
-class StepReachConfig:
-    """Where and when a step may land, for step adaptation (rom/step_adapt.py).
-
-    The swing foot's touchdown relative to the stance foot, stance yaw frame: up to ``forward``
-    ahead and ``backward`` behind [m], and ``lateral_min``..``lateral_max`` to its own side [m]
-    (``lateral_min`` keeps the feet apart: no crossing step). ``t_ss_min``..``t_ss_max`` [s]: the
-    single-support times a step may be shortened or stretched to. Values come from the leg: a
-    step of length u puts each foot u/2 from a hip over the midpoint, which a leg of straight
-    length L at hip height h reaches while u/2 < √(L² − h²).
-    """
-
-    forward: float
-    backward: float
-    lateral_min: float
-    lateral_max: float
-    t_ss_min: float
-    t_ss_max: float
-
-
-# A step is within 2 m of the stance foot (no biped's leg is longer); the feet keep at least 0 m
-# apart; a swing under 0.1 s cannot lift and land a foot.
-declare_ranges(StepReachConfig, forward=Range(-2.0, 2.0, "m"), backward=Range(-2.0, 2.0, "m"),
+# Step adaptation's reach (rom/step_adapt.py StepBounds) comes from the leg: a step of length u
+# puts each foot u/2 from a hip over the midpoint, which a leg of straight length L at hip height
+# h reaches while u/2 < √(L² − h²). A step is within 2 m of the stance foot (no biped's leg is
+# longer); the feet keep at least 0 m apart; a swing under 0.1 s cannot lift and land a foot.
+declare_ranges(StepBounds, forward=Range(-2.0, 2.0, "m"), backward=Range(-2.0, 2.0, "m"),
                lateral_min=Range(0.0, 2.0, "m"), lateral_max=positive(2.0, "m"),
                t_ss_min=Range(0.1, 2.0, "s"), t_ss_max=Range(0.1, 2.0, "s"))
 
@@ -204,7 +187,7 @@ class WalkingConfig:
     # The fraction of single support after which the swing foot's target is no longer replanned
     # (late target moves need large swing accelerations just before touchdown).
     swing_target_freeze: float = 0.85
-    step_reach: StepReachConfig | None = None
+    step_reach: StepBounds | None = None
 
 
 # A single-support phase under 0.1 s leaves no time to swing a leg (and t_ss ≤ 0 never steps);

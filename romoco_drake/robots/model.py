@@ -73,10 +73,6 @@ def load_robot_config_file(path: Path) -> RobotConfig:
         raise ConfigError(path, "name", f"'{cfg.name}' does not match the file name '{path.stem}'")
     reach, w = cfg.walking.step_reach, cfg.walking
     if reach is not None:
-        if not -reach.backward < reach.forward:
-            raise ConfigError(path, "walking.step_reach", "forward must be ahead of -backward")
-        if not reach.lateral_min < reach.lateral_max:
-            raise ConfigError(path, "walking.step_reach", "lateral_min must be below lateral_max")
         if not reach.t_ss_min <= w.t_ss <= reach.t_ss_max:
             raise ConfigError(path, "walking.step_reach", f"t_ss_min..t_ss_max must contain walking.t_ss "
                               f"({w.t_ss:g} s)")

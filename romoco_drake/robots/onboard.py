@@ -1,7 +1,8 @@
 """``romoco new-robot``: a robot YAML skeleton inferred from a biped's model file.
 
 What is read from the model (parsed by Drake at its zero configuration, the legs hanging):
-- the floating base: the body Drake gives a floating joint;
+- the floating base: the body Drake gives a floating joint; a URDF whose ankles both sit at the
+  front of their soles faces backward and is re-rooted at an x-forward frame (base_frame_rpy);
 - the feet: on each side, the lowest body that ends a chain of moving joints (its geometry
   and that of bodies welded to it count), left and right from link names, else from the
   base frame's +y;
@@ -9,8 +10,8 @@ What is read from the model (parsed by Drake at its zero configuration, the legs
   (waist, arms, head, joints both legs share) is locked;
 - the sole: the lowest collision geometry (boxes, spheres, cylinders, STL, OBJ and COLLADA
   meshes; visual geometry when a foot has none) within 0.5 mm of its lowest point, reduced to
-  a toe edge and a heel edge where the sole is at least 60 % of its widest (corners of a box
-  or of contact spheres are kept exactly; a rounded toe is cut back to where it is wide);
+  the toe and heel edges of the largest quadrilateral inside it (corners of a box or of contact
+  spheres are kept exactly; a rounded toe is cut back to where the sole is wide);
   a sole narrower than 1.5 cm is a line foot, a smaller one a point foot;
 - joint limits and effort limits (listed in the YAML's comments);
 - the nominal pose: the existing standing IK at 92 % of the straight-leg CoM height, whose
@@ -35,7 +36,6 @@ from romoco_drake.robots.meshes import read_stl
 
 LOWEST_BAND = 5e-4  # m: geometry this close to a foot's lowest point is sole (a 15 mm ball's
 # cap is then 8 mm across: still a point)
-EDGE_WIDTH_FRACTION = 0.6  # toe and heel edges sit where the sole is this wide
 LINE_WIDTH = 0.015  # m: a sole narrower than this is a line (and shorter too: a point)
 CROUCH = 0.92  # nominal CoM height / straight-leg CoM height
 KP_PER_EFFORT = 2.0  # (N·m/rad) per N·m of effort limit: G1's 88 N·m hips get 176
@@ -192,8 +192,10 @@ def _cross_section(hull: np.ndarray, s: float) -> tuple[float, float] | None:
 def sole_outline(points_sl: np.ndarray) -> tuple[str, np.ndarray]:
     """Foot type and sole points (K, 2) in (forward, left) coordinates from the sole's lowest points.
 
-    Plane: toe-left, toe-right, heel-left, heel-right, on the edges where the sole is
-    ``EDGE_WIDTH_FRACTION`` of its widest. Line: toe, heel. Point: the centroid.
+    Plane: toe-left, toe-right, heel-left, heel-right: the cross-sections of the sole's convex
+    hull at a toe and a heel line chosen to give the largest quadrilateral (convexity keeps it
+    inside the sole; a box's or contact spheres' corners come out exactly, a rounded toe is cut
+    back to where the sole is wide). Line: toe, heel. Point: the centroid.
     """
     hull = convex_hull_2d(points_sl)
     s_min, s_max = points_sl[:, 0].min(), points_sl[:, 0].max()
@@ -204,12 +206,13 @@ def sole_outline(points_sl: np.ndarray) -> tuple[str, np.ndarray]:
         mid = points_sl[:, 1].mean()
         return "line", np.array([[s_max, mid], [s_min, mid]])
     samples = np.linspace(s_min, s_max, 201)
-    sections = [_cross_section(hull, s) for s in samples]
-    widths = np.array([hi - lo if sec is not None else 0.0 for sec in sections for lo, hi in [sec or (0, 0)]])
-    wide = np.flatnonzero(widths >= EDGE_WIDTH_FRACTION * widths.max())
-    toe, heel = sections[wide[-1]], sections[wide[0]]
-    return "plane", np.array([[samples[wide[-1]], toe[1]], [samples[wide[-1]], toe[0]],
-                              [samples[wide[0]], heel[1]], [samples[wide[0]], heel[0]]])
+    sections = np.array([_cross_section(hull, s) or (np.nan, np.nan) for s in samples])
+    widths = np.nan_to_num(sections[:, 1] - sections[:, 0])
+    # Area of the quadrilateral with its toe at sample i and heel at sample j (< i).
+    area = np.triu((samples[None, :] - samples[:, None]) * (widths[None, :] + widths[:, None]) / 2, 1)
+    heel, toe = np.unravel_index(np.argmax(area), area.shape)
+    return "plane", np.array([[samples[toe], sections[toe, 1]], [samples[toe], sections[toe, 0]],
+                              [samples[heel], sections[heel, 1]], [samples[heel], sections[heel, 0]]])
 
 
 # ----------------------------------------------------------------------------- model
@@ -298,8 +301,13 @@ def model_file_path(model: str, package_dirs: list[Path] = ()) -> Path:
     return packages[package] / rest
 
 
-def infer(model_file: Path, name: str, package_dirs: list[Path] = ()) -> Inferred:
-    """Reads a biped's model file and infers the structural fields of its robot YAML."""
+def infer(model_file: Path, name: str, package_dirs: list[Path] = (),
+          base_frame_rpy: list[float] | None = None) -> Inferred:
+    """Reads a biped's model file and infers the structural fields of its robot YAML.
+
+    ``base_frame_rpy``: re-root the model at a frame so turned (ModelSource.base_frame_rpy); a
+    URDF whose feet show it faces backward is re-rooted by a half turn about z.
+    """
     from pydrake.multibody.parsing import Parser
     from pydrake.multibody.plant import MultibodyPlant
 
@@ -309,8 +317,10 @@ def infer(model_file: Path, name: str, package_dirs: list[Path] = ()) -> Inferre
     if not model_file.is_file():
         raise RomocoError(f"{model_file}: no such model file")
     entry, packages = _user_source(model_file, list(package_dirs))
-    source = ModelSource(file=str(model_file.resolve()),
+    source = ModelSource(file=str(model_file.resolve()), base_frame_rpy=base_frame_rpy,
                          package_paths={n: str(p) for n, p in packages.items()})
+    if base_frame_rpy is not None:
+        entry["base_frame_rpy"] = [round(a, 6) for a in base_frame_rpy]
     prepared = prepare_model(source)
     plant = MultibodyPlant(0.0)
     parser = Parser(plant)
@@ -406,7 +416,7 @@ def infer(model_file: Path, name: str, package_dirs: list[Path] = ()) -> Inferre
     leg_set = set(legs["left"]) | set(legs["right"])
     locked = [j.name() for j in all_moving if j.name() not in leg_set]
 
-    feet, types, centers = {}, set(), {}
+    feet, types, centers, heel_first = {}, set(), {}, 0
     for side, (body, low, cloud, kind) in candidates.items():
         if kind != "collision":
             notes.append(f"feet.{side}: sole from {kind} (no collision geometry on '{body}'); check it")
@@ -415,18 +425,22 @@ def infer(model_file: Path, name: str, package_dirs: list[Path] = ()) -> Inferre
         foot_type, outline = sole_outline(sl)
         types.add(foot_type)
         X = X_WB[body]
-        p_W = np.array([fwd_W * s + left_W * lat for s, lat in outline]) + np.array([0, 0, low])
+        p_W = np.array([fwd_W * s + left_W * lat for s, lat in outline])
         p_W[:, 2] = low
         points = X.inverse().multiply(p_W.T).T
         up = X.rotation().inverse().multiply(np.array([0.0, 0.0, 1.0]))
         centers[side] = p_W.mean(axis=0)
         ankle = X.translation() @ fwd_W
-        if foot_type == "plane" and ankle - sl[:, 0].min() > 2 * (sl[:, 0].max() - ankle):
-            notes.append(f"feet.{side}: the ankle sits near the front of the sole: the base frame's +x "
-                         "may point backward (the robot would walk heel first)")
+        heel_first += foot_type == "plane" and ankle - sl[:, 0].min() > 2 * (sl[:, 0].max() - ankle)
         feet[side] = {"body": body, "points": points, "up": up}
     if len(types) != 1:
         raise RomocoError(f"{model_file}: the feet differ in kind ({', '.join(sorted(types))})")
+    if heel_first == 2 and base_frame_rpy is None and prepared.file_type == "urdf":
+        # Both ankles sit at the front of their soles: the model's x axis points backward.
+        turned = infer(model_file, name, package_dirs, base_frame_rpy=[0.0, 0.0, math.pi])
+        turned.notes.insert(0, f"the model's root link '{base.name()}' faces backward (the ankles sit at "
+                               "the front of the soles): re-rooted at an x-forward frame (base_frame_rpy)")
+        return turned
 
     joints = []
     lower, upper = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()

@@ -40,7 +40,8 @@ from romoco_drake.rom.types import SWING_COMMIT_FRACTION, PlannerOutput
 
 @dataclass(frozen=True)
 class StepBounds:
-    """The swing foot's reachable touchdown box and single-support times (stance yaw frame).
+    """The swing foot's reachable touchdown box and single-support times (stance yaw frame); a
+    robot YAML's ``walking.step_reach``.
 
     ``forward``, ``backward``: how far ahead of / behind the stance contact the foot may land (m);
     ``lateral_min``, ``lateral_max``: its lateral distance from the stance contact, on its own side
@@ -55,10 +56,13 @@ class StepBounds:
     t_ss_max: float
 
     def __post_init__(self):
-        if not (self.forward > -self.backward and 0.0 <= self.lateral_min < self.lateral_max
-                and 0.0 < self.t_ss_min <= self.t_ss_max):
-            raise RomocoError(f"step bounds need forward > -backward, 0 <= lateral_min < lateral_max and "
-                              f"0 < t_ss_min <= t_ss_max, got {self}")
+        """A ValueError names the violated bound (a robot YAML's loader makes it one line)."""
+        if not self.forward > -self.backward:
+            raise ValueError("forward must be ahead of -backward")
+        if not 0.0 <= self.lateral_min < self.lateral_max:
+            raise ValueError("lateral_min must be at least 0 and below lateral_max")
+        if not 0.0 < self.t_ss_min <= self.t_ss_max:
+            raise ValueError("t_ss_min must be positive and at most t_ss_max")
 
     def box(self, stance_side: str) -> tuple[tuple[float, float], tuple[float, float]]:
         """((x_lo, x_hi), (y_lo, y_hi)) of the swing foot when ``stance_side`` supports."""
