@@ -123,15 +123,18 @@ _MODEL = ("<robot name='m'>" + "".join(_LINK.format(n) for n in ("root", "a", "b
           + _JOINT.format("ja", "revolute", "root", "a", _LIMIT + "<dynamics damping='0.1' friction='0.2'/>")
           + _JOINT.format("jb", "fixed", "a", "b", "<mimic joint='ja'/>")
           + _JOINT.format("jc", "revolute", "root", "c", _LIMIT + "<mimic joint='ja' multiplier='-1'/>")
+          + "<link name='d'><inertial><mass value='0'/>" + _INERTIA + "</inertial></link>"
+          + _JOINT.format("jd", "fixed", "c", "d", "")
           + "<transmission name='t'><type>transmission_interface/SimpleTransmission</type>"
             "<joint name='ja'><hardwareInterface>EffortJointInterface</hardwareInterface></joint>"
             "<actuator name='ma'><mechanicalReduction>1</mechanicalReduction></actuator></transmission>"
           + "</robot>")
 
 
-def test_model_source_drops_uncoupled_mimics_and_transmissions_and_adds_a_base_frame(tmp_path, monkeypatch):
-    """A fixed joint's <mimic> and every <transmission> go, a mimic of two revolute joints stays; with
-    base_frame_rpy the floating base is ``romoco_base``, the file's root turned by the rpy in it."""
+def test_model_source_rules(tmp_path, monkeypatch):
+    """A fixed joint's <mimic> and every <transmission> go, a mimic of two revolute joints stays; a
+    zero-mass link stays massless (Drake would make it 1 kg); with base_frame_rpy the floating base
+    is ``romoco_base``, the file's root turned by the rpy in it."""
     import xml.etree.ElementTree as ET
 
     from pydrake.multibody.parsing import Parser
@@ -157,6 +160,7 @@ def test_model_source_drops_uncoupled_mimics_and_transmissions_and_adds_a_base_f
     Parser(plant).AddModelsFromString(prepared.text, "urdf")
     plant.Finalize()
     assert plant.num_actuators() == 0
+    assert plant.CalcTotalMass(plant.CreateDefaultContext()) == pytest.approx(4.0)
     (base,) = plant.GetFloatingBaseBodies()
     assert plant.get_body(base).name() == "romoco_base"
     X = plant.CalcRelativeTransform(plant.CreateDefaultContext(), plant.get_body(base).body_frame(),

@@ -12,6 +12,8 @@ The XML is edited in memory before parsing:
   gripper fingers are ``fixed`` joints that mimic the gripper motor). A mimic between two
   1-DoF joints is kept for Drake;
 - the ``friction`` of a joint's ``<dynamics>`` is dropped (Drake ignores it, with a warning);
+- a URDF link of zero mass gets zero rotational inertia too (Bolt's foot balls give a mass of 0
+  with a nonzero inertia, which Drake rejects with a warning and replaces by a 1 kg body);
 - joints listed in ``weld_joints`` become fixed (rigid springs);
 - bodies listed in ``remove_bodies`` go, with every joint touching them (Cassie's
   loop-closing rods, whose ``ball`` joints would make a kinematic loop);
@@ -139,6 +141,8 @@ def _prepare_cached(source_key: tuple) -> PreparedModel:
             parents[el].remove(el)
     for dynamics in root.iter("dynamics"):
         dynamics.attrib.pop("friction", None)
+    if file_type == "urdf":
+        _zero_massless_inertia(root)
 
     links = {el.get("name"): el for el in root.iter("link")}
     joints = {el.get("name"): el for el in root.iter("joint")}
@@ -188,6 +192,15 @@ def _prepare_cached(source_key: tuple) -> PreparedModel:
         if (v := _float_or_none(velocity)) is not None and v > 0:
             velocities[name] = v
     return PreparedModel(ET.tostring(root, encoding="unicode"), file_type, path, efforts, velocities)
+
+
+def _zero_massless_inertia(root: ET.Element) -> None:
+    """Sets the ``<inertia>`` of every zero-mass URDF ``<inertial>`` to zero."""
+    for inertial in root.iter("inertial"):
+        mass, inertia = inertial.find("mass"), inertial.find("inertia")
+        if mass is not None and inertia is not None and _float_or_none(mass.get("value")) == 0.0:
+            for key in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):
+                inertia.set(key, "0")
 
 
 def _drop_uncoupled_mimics(joints: dict[str, ET.Element]) -> None:
