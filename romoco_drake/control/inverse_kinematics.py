@@ -269,9 +269,20 @@ class IkSolver:
 
 def _ankle_actuators(robot: RobotModel, side: str) -> np.ndarray:
     """Actuator indices of the leg's joints below the knee (ankle pitch/roll, Cassie's toe); none
-    for a point foot, whose leg ends at the knee's link."""
+    for a point foot, whose leg ends at the knee's link.
+
+    Found by geometry at the nominal pose, not by name (TALOS numbers its leg joints): the joints
+    within a quarter of the leg's length (first leg joint to sole centre) of the sole centre. On
+    the shipped robots the ankles are within 0.14 of it and the knees 0.43 or more away.
+    """
     if robot.is_point_foot:
         return np.zeros(0, dtype=int)
-    chain = [j.name() for j in leg_chain(robot, side)]
-    knee = next(i for i, name in enumerate(chain) if "knee" in name)
-    return np.array([robot.actuator_names.index(name) for name in chain[knee + 1:]], dtype=int)
+    plant = robot.plant
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, robot.nominal.q)
+    chain = leg_chain(robot, side)
+    origins = np.array([j.frame_on_child().CalcPoseInWorld(context).translation() for j in chain])
+    sole = robot.sole_points_in_world(context, side).mean(axis=1)
+    to_sole = np.linalg.norm(origins - sole, axis=1)
+    return np.array([robot.actuator_names.index(j.name()) for j, d in zip(chain, to_sole, strict=True)
+                     if d < 0.25 * to_sole[0]], dtype=int)
