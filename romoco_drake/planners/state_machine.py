@@ -43,8 +43,7 @@ class GaitSchedule(SharedValue):
     safe_mode_entries: int
     fall_reason: str
     air_since: float = math.nan  # since when neither foot switch has reported contact (s)
-    recovering: bool = False  # a blind link paused walking: step to a stop
-    paused: bool = False  # the step clock is stopped while the link is blind
+    recovering: bool = False  # a blind link stopped walking: step to a stop
 
 
 def is_zero(cmd: WalkCommand) -> bool:
@@ -72,11 +71,10 @@ class GaitStateMachine(LeafSystem):
       points within ``touchdown_height`` of its lowest one). A sole that landed on its heel (H1's
       line-modelled feet land 1-2 cm toe-up) gets up to ``settle_time`` in double support to roll
       flat; if it does not, the robot keeps stepping in place.
-    - while the link to the robot is past its ride-through (``link_stage`` ≥ STAND: the station
-      holds the robot's predicted posture blind) the step clock stops with it and nothing
-      starts. When measurements resume the step goes on from where it stopped, or, if the
-      held swing foot came down meanwhile, the support switches at once; then the robot steps
-      to a stop as under a zero command, and walks on from standing when the command asks.
+    - while the link to the robot is past its ride-through (``link_stage`` ≥ STAND: the station's
+      measurements are a prediction) the robot steps to a stop as under a zero command, the
+      step clock running on, and nothing starts; it keeps stepping to a stop when measurements
+      resume, and walks on from standing when the command asks.
     - any mode → damping (latched) on a non-finite state, the base below ``fall_height`` of its
       nominal height, or a base tilt above ``fall_tilt`` rad; counted in ``safe_mode_entries``.
 
@@ -150,19 +148,10 @@ class GaitStateMachine(LeafSystem):
                 s = replace(s, air_since=math.nan)
         elif math.isnan(s.air_since):
             s = replace(s, air_since=t)
-        if blind:
-            if s.mode == Mode.WALKING:  # the step clock stops with the robot's posture
-                s = replace(s, step_start=s.step_start + self.period, idle_steps=0, recovering=True,
-                            paused=True)
-            return s
-        if s.recovering:
+        if blind and s.mode == Mode.WALKING and not s.recovering:
+            s = replace(s, recovering=True)
+        if blind or s.recovering:  # step to a stop; nothing starts while blind
             cmd = WalkCommand(step_width=cmd.step_width, com_height=cmd.com_height, step_time=cmd.step_time)
-        if s.paused:
-            s = replace(s, paused=False)
-            if s.mode == Mode.WALKING and (on[1] if s.side == "left" else on[0]):
-                # The held swing foot came down while the robot was blind: that was its touchdown.
-                return replace(s, side=other_side(s.side), step_start=t, t_ss=cmd.step_time,
-                               steps=s.steps + 1, idle_steps=s.idle_steps + 1)
         if s.mode == Mode.STANDING and t - s.air_since >= self.lift_time - 1e-9:
             s = replace(s, mode=Mode.IN_AIR)
         elif s.mode == Mode.IN_AIR and on.all():
