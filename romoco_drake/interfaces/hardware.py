@@ -19,13 +19,16 @@ Safety at the interface (each counted, see :func:`link_summary`):
 
 - **lost measurements** (proprioception, and motion capture when the estimator reads it), in
   stages by the age of the last good message (:class:`LinkStage`), each entry counted:
-  ``timeout_s`` without a message is a ``stale_events``; up to ``ride_through_s`` the
-  measurement ports carry a constant-velocity prediction from the last message and the
-  controller keeps walking (``ride_through_events``); for ``stand_s`` more the state machine
-  stops stepping and the robot is sent a joint PD hold of its predicted posture with the YAML's
-  gains (``stand_events``); after that damping (q_d = q, v_d = 0, τ_ff = 0, K_p = 0, K_d from
-  the robot YAML; ``damping_events``). Messages resuming end any stage. Before the first
-  message the robot is sent damping (not counted: nothing was lost yet).
+  ``timeout_s`` without a message is a ``stale_events``. From the first missed message the
+  robot is predicted by the controller plant's constrained forward dynamics under the commands
+  actually sent (:mod:`~romoco_drake.interfaces.predictor`; fresh motion capture resets its
+  base). Up to ``ride_through_s`` the measurement ports carry that prediction, the controller
+  walks on it, and the robot is sent the controller's torque plus a joint PD toward the
+  predicted joint state with the YAML's gains (``ride_through_events``); for ``stand_s`` more
+  the same goes on while the state machine steps to a stop (``stand_events``); after that
+  damping about where the prediction stopped (q_d = q, v_d = 0, τ_ff = 0, K_p = 0, K_d from the
+  robot YAML; ``damping_events``). Messages resuming end any stage. Before the first message
+  the robot is sent damping (not counted: nothing was lost yet).
 - **rejected messages**: bytes that do not decode, the wrong joint count, NaN/Inf, non-unit
   quaternions, times that go backwards (:mod:`~romoco_drake.interfaces.lcm_codec`) are dropped
   and the last good values kept; a non-finite command from the controller is not sent
@@ -90,9 +93,9 @@ class LinkConfig:
     receive_rate_hz: float = 1000.0  # how often received messages are checked and taken over
     max_joint_speed: float = 30.0  # rad/s, |v_d| limit of a sent command
     max_gain_factor: float = 3.0  # K_p, K_d at most this times the robot YAML's gains
-    # Controller side, measurements lost: predicted up to this age of the last message (walking on) ...
+    # Controller side, measurements lost: predicted, walking on, up to this age of the last message ...
     ride_through_s: float = 0.1
-    # ... then held at the robot's predicted posture by joint PD (standing) this much longer, then damping.
+    # ... then predicted while stepping to a stop (and standing) this much longer, then damping.
     stand_s: float = 2.0
     # Robot side, commands lost: the last posture is held by joint PD this long, then damping.
     hold_s: float = 0.5
@@ -100,9 +103,9 @@ class LinkConfig:
 
 # A stream stale for a second has long lost the robot; the receive rate is a clock like the
 # controller's; 100 rad/s is beyond any joint motor; a gain factor of 10 lets a sender ask for
-# 10× the YAML gains, more is no longer the same robot. A prediction from joint velocities is
-# worthless after a second (a whole gait cycle); a blind posture hold beyond a minute is a robot
-# left alone, which damping should take over.
+# 10× the YAML gains, more is no longer the same robot. Walking on a prediction for more than a
+# second (a whole gait cycle) outruns any model; standing on one beyond a minute is a robot left
+# alone, which damping should take over.
 declare_ranges(LinkConfig, timeout_s=positive(1.0, "s"), receive_rate_hz=Range(1.0, 10000.0, "Hz"),
                max_joint_speed=positive(100.0, "rad/s"), max_gain_factor=positive(10.0),
                ride_through_s=Range(0.0, 1.0, "s"), stand_s=Range(0.0, 60.0, "s"),
@@ -113,8 +116,8 @@ class LinkStage(IntEnum):
     """How the controller side acts on the age of the newest measurement (module docstring)."""
 
     FRESH = 0  # measurements arrive: the controller's command is sent
-    RIDE_THROUGH = 1  # lost for less than ride_through_s: predicted measurements, the command is sent
-    STAND = 2  # lost for up to stand_s more: stop stepping, hold the predicted posture by joint PD
+    RIDE_THROUGH = 1  # lost for less than ride_through_s: predicted measurements, the command plus a PD sent
+    STAND = 2  # lost for up to stand_s more: the same, stepping to a stop
     DAMPING = 3  # lost for longer (or never received): damping
 
 

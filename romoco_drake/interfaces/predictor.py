@@ -15,9 +15,10 @@ One step of length h, for the command [q_d; v_d; τ_ff; K_p; K_d] (actuator orde
   −β e / h, e their drift from where they touched down (Baumgarte), through the least-squares
   solve of (J A⁻¹ Jᵀ) Λ = −β e / h − J v*; v⁺ = v* + A⁻¹ Jᵀ Λ. A foot whose summed normal
   impulse pulls (the controller lifts it) leaves contact and the step is solved again;
-- q⁺ = q + h N(q) v⁺ (the quaternion renormalised); a foot out of contact whose lowest sole
-  point comes down to the ground (the height of the soles in contact when the prediction
-  started) touches down: its points are held from then on at their place, on the ground.
+- q⁺ = q + h N(q) v⁺ (the quaternion renormalised), a joint past its limit stopped there; a
+  foot out of contact whose lowest sole point comes down to the ground (the height of the soles
+  in contact when the prediction started) touches down: its points are held from then on at
+  their place, on the ground.
 """
 
 from __future__ import annotations
@@ -100,8 +101,11 @@ class ContactPredictor:
             if not pulling:
                 break
             contact[pulling[0]] = False
-        qdot = plant.MapVelocityToQDot(ctx, v_next)
-        q_next = q + h * qdot
+        q_next = q + h * plant.MapVelocityToQDot(ctx, v_next)
+        jq, jv = r.joint_q_index, r.joint_v_index
+        stopped = np.clip(q_next[jq], r.q_lower[jq], r.q_upper[jq])
+        v_next[jv[stopped != q_next[jq]]] = 0.0
+        q_next[jq] = stopped
         b = r.base_q_start
         q_next[b:b + 4] /= np.linalg.norm(q_next[b:b + 4])
         lin = r.base_v_start + 3
