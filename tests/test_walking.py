@@ -153,10 +153,11 @@ def test_state_machine_in_air_until_both_feet_touch_down(g1):
     assert machine.schedule(context).mode == "walking"
 
 
-def test_state_machine_steps_to_a_stop_while_the_link_is_blind_then_walks_on(g1):
-    """Link past its ride-through (stage ≥ STAND: the measurements are a prediction): the step
-    clock runs on and the robot steps to a stop although the command still asks to walk, and
-    nothing starts while blind; back, it walks on from standing."""
+def test_state_machine_stops_while_the_link_is_blind_then_walks_on(g1):
+    """Link past its ride-through (stage ≥ STAND: the measurements are a prediction): ``stop``
+    asks the command limiter for a stop, the step clock runs on and, the command down to zero,
+    the robot stops after ``stop_steps``; standing blind, nothing starts whatever the command;
+    back, it walks on."""
     from romoco_drake.interfaces.hardware import LinkStage
     from romoco_drake.planners.state_machine import BLIND_STAGE
 
@@ -166,21 +167,21 @@ def test_state_machine_steps_to_a_stop_while_the_link_is_blind_then_walks_on(g1)
     simulator = Simulator(machine, context)
     machine.command_port.FixValue(context, _command(w, vx=0.3))
     simulator.AdvanceTo(0.15)
-    assert machine.schedule(context).mode == "walking"
+    assert machine.schedule(context).mode == "walking" and machine.stop_port.Eval(context)[0] == 0.0
     machine.link_stage_port.FixValue(context, [float(LinkStage.STAND)])
-    modes, steps = [], []
-    for _ in range(round((machine.stop_steps + 2) * w.t_ss / 0.002)):
-        simulator.AdvanceTo(context.get_time() + 0.002)
-        modes.append(machine.schedule(context).mode)
-        steps.append(machine.schedule(context).steps)
-    stop = modes.index(Mode.STANDING)
-    assert all(m == Mode.WALKING for m in modes[:stop]) and all(m == Mode.STANDING for m in modes[stop:])
-    assert steps[stop] == machine.stop_steps  # the step in progress and one more, on the running clock
-    assert stop * 0.002 <= machine.stop_steps * w.t_ss
-    assert machine.schedule(context).recovering is False
+    simulator.AdvanceTo(0.16)
+    assert machine.schedule(context).blind and machine.stop_port.Eval(context)[0] == 1.0
+    simulator.AdvanceTo(0.15 + w.t_ss)
+    assert machine.schedule(context).steps == 1  # the clock runs on
+    machine.command_port.FixValue(context, _command(w))  # the limiter's stop reached zero
+    simulator.AdvanceTo(context.get_time() + (machine.stop_steps + 1) * w.t_ss)
+    assert machine.schedule(context).mode == "standing"
+    machine.command_port.FixValue(context, _command(w, vx=0.3))
+    simulator.AdvanceTo(context.get_time() + 0.05)
+    assert machine.schedule(context).mode == "standing" and machine.stop_port.Eval(context)[0] == 1.0
     machine.link_stage_port.FixValue(context, [float(LinkStage.FRESH)])
     simulator.AdvanceTo(context.get_time() + 0.01)
-    assert machine.schedule(context).mode == "walking"
+    assert machine.schedule(context).mode == "walking" and machine.stop_port.Eval(context)[0] == 0.0
 
 
 @pytest.mark.parametrize("scenario", ["g1_walk", "cassie_walk"])
