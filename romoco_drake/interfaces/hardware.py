@@ -25,7 +25,8 @@ Safety at the interface (each counted, see :func:`link_summary`):
   base). Up to ``ride_through_s`` the measurement ports carry that prediction, the controller
   walks on it, and the robot is sent the controller's torque plus a joint PD toward the
   predicted joint state with the YAML's gains (``ride_through_events``); for ``stand_s`` more
-  the same goes on while the state machine steps to a stop (``stand_events``); after that
+  the same goes on while the state machine slows the robot down to a stop (``stand_events``,
+  ``GaitStateMachine``); after that
   damping about where the prediction stopped (q_d = q, v_d = 0, τ_ff = 0, K_p = 0, K_d from the
   robot YAML; ``damping_events``). Messages resuming end any stage. Before the first message
   the robot is sent damping (not counted: nothing was lost yet).
@@ -95,7 +96,7 @@ class LinkConfig:
     max_gain_factor: float = 3.0  # K_p, K_d at most this times the robot YAML's gains
     # Controller side, measurements lost: predicted, walking on, up to this age of the last message ...
     ride_through_s: float = 0.1
-    # ... then predicted while stepping to a stop (and standing) this much longer, then damping.
+    # ... then predicted while slowing down to a stop (and standing) this much longer, then damping.
     stand_s: float = 2.0
     # Robot side, commands lost: the last posture is held by joint PD this long, then damping.
     hold_s: float = 0.5
@@ -117,7 +118,7 @@ class LinkStage(IntEnum):
 
     FRESH = 0  # measurements arrive: the controller's command is sent
     RIDE_THROUGH = 1  # lost for less than ride_through_s: predicted measurements, the command plus a PD sent
-    STAND = 2  # lost for up to stand_s more: the same, stepping to a stop
+    STAND = 2  # lost for up to stand_s more: the same, slowing down to a stop
     DAMPING = 3  # lost for longer (or never received): damping
 
 
