@@ -26,10 +26,10 @@ Safety at the interface (each counted, see :func:`link_summary`):
   walks on it, and the robot is sent the controller's torque plus a joint PD toward the
   predicted joint state with the YAML's gains (``ride_through_events``); for ``stand_s`` more
   the same goes on while the state machine slows the robot down to a stop (``stand_events``,
-  ``GaitStateMachine``); after that
-  damping about where the prediction stopped (q_d = q, v_d = 0, τ_ff = 0, K_p = 0, K_d from the
-  robot YAML; ``damping_events``). Messages resuming end any stage. Before the first message
-  the robot is sent damping (not counted: nothing was lost yet).
+  ``GaitStateMachine``); after that damping about where the prediction stopped (q_d = q,
+  v_d = 0, τ_ff = 0, K_p = 0, K_d from the robot YAML; ``damping_events``). Messages resuming
+  end any stage. Before the first message the robot is sent damping (not counted: nothing was
+  lost yet).
 - **rejected messages**: bytes that do not decode, the wrong joint count, NaN/Inf, non-unit
   quaternions, times that go backwards (:mod:`~romoco_drake.interfaces.lcm_codec`) are dropped
   and the last good values kept; a non-finite command from the controller is not sent

@@ -53,7 +53,6 @@ class ContactPredictor:
         self.robot = robot
         self.context = robot.plant.CreateDefaultContext()
         self._kp, self._kd = np.zeros(robot.nv), np.zeros(robot.nv)
-        self._up = np.array([0.0, 0.0, 1.0])
 
     def start(self, x: np.ndarray, contact) -> PredictedState:
         """The prediction from state ``x`` with the feet ``contact`` (left, right) on the ground."""
