@@ -10,15 +10,15 @@ One step of length h, for the command [q_d; v_d; τ_ff; K_p; K_d] (actuator orde
 - the motors' PD is implicit, as a drive's fast loop is: with A = M + h K_d + h² K_p (the gains on
   the actuated rows), v* = v + h A⁻¹ (B τ₀ − C(q, v) v + τ_g), τ₀ = K_p (q_d − q − h v) +
   K_d (v_d − v) + τ_ff; a joint whose τ₀ passes its effort limit is saturated there (no gains);
-- rigid contact and the robot's internal loops as velocity constraints: the sole points of the
-  feet in contact (and the loops' rows) get the impulse Λ that brings their velocity to
-  −β e / h, e their drift from where they touched down (Baumgarte), through the least-squares
-  solve of (J A⁻¹ Jᵀ) Λ = −β e / h − J v*; v⁺ = v* + A⁻¹ Jᵀ Λ. A foot whose summed normal
+- contact and the robot's internal loops as velocity constraints: the sole points of the feet
+  in contact (and the loops' rows) get the impulse Λ that brings their velocity to −β e / h,
+  e their drift from where they touched down (Baumgarte), from the regularised solve of
+  (J A⁻¹ Jᵀ + ε I) Λ = −β e / h − J v*; v⁺ = v* + A⁻¹ Jᵀ Λ. A foot whose summed normal
   impulse pulls (the controller lifts it) leaves contact and the step is solved again;
 - q⁺ = q + h N(q) v⁺ (the quaternion renormalised), a joint past its limit stopped there; a
   foot out of contact whose lowest sole point comes down to the ground (the height of the soles
-  in contact when the prediction started) touches down: its points are held from then on at
-  their place, on the ground.
+  in contact when the prediction started) touches down: its points are held from then on where
+  they are (none below the ground).
 """
 
 from __future__ import annotations
@@ -31,6 +31,10 @@ from romoco_drake.robots.model import RobotModel
 
 SIDES = ("left", "right")
 BAUMGARTE = 0.2  # share of a contact point's drift removed per step
+# The constraint solve's regularisation, relative to the mean of diag(J A⁻¹ Jᵀ): a slightly
+# compliant contact, so a foot that lands tilted on a leg that cannot flatten it (H1: no ankle
+# roll) takes bounded impulses (rigid, the open-loop prediction blew up at such touchdowns).
+COMPLIANCE = 1e-2
 RELEASE_IMPULSE = 0.0  # N·s: a foot whose summed normal impulse is below this leaves contact
 
 
@@ -133,7 +137,8 @@ class ContactPredictor:
             return v_free, {side: 0.0 for side in SIDES}
         J, target, owner = np.vstack(rows), np.concatenate(targets), np.concatenate(owners)
         A_inv_Jt = np.linalg.solve(A, J.T)
-        impulse = np.linalg.lstsq(J @ A_inv_Jt, target - J @ v_free, rcond=1e-9)[0]
+        G = J @ A_inv_Jt
+        impulse = np.linalg.solve(G + COMPLIANCE * np.trace(G) / len(G) * np.eye(len(G)), target - J @ v_free)
         normal = {side: float(impulse[(owner == i)][2::3].sum()) for i, side in enumerate(SIDES)}
         return v_free + A_inv_Jt @ impulse, normal
 
@@ -149,5 +154,5 @@ class ContactPredictor:
             anchors[i] = sole
             if sole[2].min() <= p.ground:
                 contact[i] = True
-                anchors[i] = np.vstack([sole[:2], np.full(sole.shape[1], p.ground)])
+                anchors[i] = np.vstack([sole[:2], np.maximum(sole[2], p.ground)])
         return replace(p, contact=tuple(contact), anchors=tuple(anchors))
