@@ -639,6 +639,7 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     kin = kinematics.kinematics_port
     builder.Connect(kin, machine.kinematics_port)
     builder.Connect(limiter.command_port, machine.command_port)
+    builder.Connect(machine.stop_port, limiter.stop_port)
     builder.Connect(station.GetOutputPort("foot_contact"), machine.foot_contact_port)
     builder.Connect(station.GetOutputPort("link_stage"), machine.link_stage_port)
     builder.Connect(kin, rom_state.kinematics_port)

@@ -42,6 +42,19 @@ def test_limiter_takes_a_non_finite_command_as_a_stop():
     assert np.all(np.diff(out[:, 0]) <= 0.0)  # slows down at the acceleration limit, no jump
 
 
+def test_limiter_stops_while_asked_to_whatever_the_command():
+    """The state machine's ``stop`` (a blind link): the target is zero, reached at the
+    acceleration limit; unset, the command is followed again."""
+    limiter = CommandLimiter(LIMITS, period=0.01)
+    _, context = _run(limiter, [0.6, 0.0, 0.0, 0.2, 0.65, 0.3], 200)
+    limiter.stop_port.FixValue(context, [1.0])
+    out, context = _run(limiter, [0.6, 0.0, 0.0, 0.2, 0.65, 0.3], 200, context)
+    np.testing.assert_allclose(out[:, 0], np.maximum(0.6 - 0.005 * np.arange(1, 201), 0.0), atol=1e-12)
+    limiter.stop_port.FixValue(context, [0.0])
+    out, _ = _run(limiter, [0.6, 0.0, 0.0, 0.2, 0.65, 0.3], 10, context)
+    assert out[-1, 0] == pytest.approx(0.05)
+
+
 @pytest.mark.parametrize("starts, vx", [([0.0, 1.0, 3.0, 4.0], [0.0, 1.0, 0.2, 0.2]),
                                         ([0.0, 1.0, 1.5, 6.0], [0.0, 2.0, -0.5, 0.0])])
 def test_reach_times_match_the_limiter(starts, vx):

@@ -19,13 +19,17 @@ Safety at the interface (each counted, see :func:`link_summary`):
 
 - **lost measurements** (proprioception, and motion capture when the estimator reads it), in
   stages by the age of the last good message (:class:`LinkStage`), each entry counted:
-  ``timeout_s`` without a message is a ``stale_events``; up to ``ride_through_s`` the
-  measurement ports carry a constant-velocity prediction from the last message and the
-  controller keeps walking (``ride_through_events``); for ``stand_s`` more the state machine
-  stops stepping and the robot is sent a joint PD hold of its predicted posture with the YAML's
-  gains (``stand_events``); after that damping (q_d = q, v_d = 0, τ_ff = 0, K_p = 0, K_d from
-  the robot YAML; ``damping_events``). Messages resuming end any stage. Before the first
-  message the robot is sent damping (not counted: nothing was lost yet).
+  ``timeout_s`` without a message is a ``stale_events``. From the first missed message the
+  robot is predicted by the controller plant's constrained forward dynamics under the commands
+  actually sent (:mod:`~romoco_drake.interfaces.predictor`; fresh motion capture resets its
+  base). Up to ``ride_through_s`` the measurement ports carry that prediction, the controller
+  walks on it, and the robot is sent the controller's torque plus a joint PD toward the
+  predicted joint state with the YAML's gains (``ride_through_events``); for ``stand_s`` more
+  the same goes on while the state machine slows the robot down to a stop (``stand_events``,
+  ``GaitStateMachine``); after that damping about where the prediction stopped (q_d = q,
+  v_d = 0, τ_ff = 0, K_p = 0, K_d from the robot YAML; ``damping_events``). Messages resuming
+  end any stage. Before the first message the robot is sent damping (not counted: nothing was
+  lost yet).
 - **rejected messages**: bytes that do not decode, the wrong joint count, NaN/Inf, non-unit
   quaternions, times that go backwards (:mod:`~romoco_drake.interfaces.lcm_codec`) are dropped
   and the last good values kept; a non-finite command from the controller is not sent
@@ -42,17 +46,19 @@ rest, so the controller starts from a sane state while the robot is still sent d
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
 from pydrake.common.eigen_geometry import Quaternion
-from pydrake.common.value import AbstractValue
+from pydrake.common.value import AbstractValue, Value
 from pydrake.lcm import DrakeLcmInterface
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem, ValueProducer
 from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
 
 from romoco_drake.config import Range, declare_ranges, positive
+from romoco_drake.estimation.ground_truth import plant_state
 from romoco_drake.interfaces.dropout import STREAM_CHANNELS, Dropout, DroppingPublisher
 from romoco_drake.interfaces.lcm_codec import (
     BASE_STATE_CHANNEL,
@@ -69,6 +75,7 @@ from romoco_drake.interfaces.lcm_codec import (
     encode_controller_status,
     encode_motor_command,
 )
+from romoco_drake.interfaces.predictor import ContactPredictor, PredictedState
 from romoco_drake.modes import Mode
 from romoco_drake.robots.model import RobotModel
 
@@ -87,9 +94,9 @@ class LinkConfig:
     receive_rate_hz: float = 1000.0  # how often received messages are checked and taken over
     max_joint_speed: float = 30.0  # rad/s, |v_d| limit of a sent command
     max_gain_factor: float = 3.0  # K_p, K_d at most this times the robot YAML's gains
-    # Controller side, measurements lost: predicted up to this age of the last message (walking on) ...
+    # Controller side, measurements lost: predicted, walking on, up to this age of the last message ...
     ride_through_s: float = 0.1
-    # ... then held at the robot's predicted posture by joint PD (standing) this much longer, then damping.
+    # ... then predicted while slowing down to a stop (and standing) this much longer, then damping.
     stand_s: float = 2.0
     # Robot side, commands lost: the last posture is held by joint PD this long, then damping.
     hold_s: float = 0.5
@@ -97,9 +104,9 @@ class LinkConfig:
 
 # A stream stale for a second has long lost the robot; the receive rate is a clock like the
 # controller's; 100 rad/s is beyond any joint motor; a gain factor of 10 lets a sender ask for
-# 10× the YAML gains, more is no longer the same robot. A prediction from joint velocities is
-# worthless after a second (a whole gait cycle); a blind posture hold beyond a minute is a robot
-# left alone, which damping should take over.
+# 10× the YAML gains, more is no longer the same robot. Walking on a prediction for more than a
+# second (a whole gait cycle) outruns any model; standing on one beyond a minute is a robot left
+# alone, which damping should take over.
 declare_ranges(LinkConfig, timeout_s=positive(1.0, "s"), receive_rate_hz=Range(1.0, 10000.0, "Hz"),
                max_joint_speed=positive(100.0, "rad/s"), max_gain_factor=positive(10.0),
                ride_through_s=Range(0.0, 1.0, "s"), stand_s=Range(0.0, 60.0, "s"),
@@ -110,8 +117,8 @@ class LinkStage(IntEnum):
     """How the controller side acts on the age of the newest measurement (module docstring)."""
 
     FRESH = 0  # measurements arrive: the controller's command is sent
-    RIDE_THROUGH = 1  # lost for less than ride_through_s: predicted measurements, the command is sent
-    STAND = 2  # lost for up to stand_s more: stop stepping, hold the predicted posture by joint PD
+    RIDE_THROUGH = 1  # lost for less than ride_through_s: predicted measurements, the command plus a PD sent
+    STAND = 2  # lost for up to stand_s more: the same, slowing down to a stop
     DAMPING = 3  # lost for longer (or never received): damping
 
 
@@ -123,17 +130,6 @@ def link_stage(age: float, config: LinkConfig) -> LinkStage:
         return LinkStage.RIDE_THROUGH
     stand_until = config.timeout_s + config.ride_through_s + config.stand_s
     return LinkStage.STAND if age <= stand_until else LinkStage.DAMPING
-
-
-def predict_proprioception(values: np.ndarray, num_joints: int, dt: float) -> np.ndarray:
-    """[q; v; imu; contact] ``dt`` s later at constant joint velocity and base angular velocity
-    (the IMU's quaternion turned by its gyro); the accelerometer and contacts are held."""
-    out = values.copy()
-    nj = num_joints
-    out[:nj] += dt * values[nj:2 * nj]
-    imu = values[2 * nj:2 * nj + 10]
-    out[2 * nj:2 * nj + 4] = _turned(imu[:4], imu[4:7] * dt, body=True)
-    return out
 
 
 def predict_base_state(values: np.ndarray, dt: float) -> np.ndarray:
@@ -172,12 +168,6 @@ def damping_command(robot: RobotModel, q: np.ndarray) -> np.ndarray:
     """[q_d; v_d; τ_ff; K_p; K_d] holding nothing: joint damping −K_d v about the measured q."""
     nu = robot.nu
     return np.concatenate([q, np.zeros(2 * nu), np.zeros(nu), robot.kd])
-
-
-def hold_command(robot: RobotModel, q: np.ndarray) -> np.ndarray:
-    """[q_d; v_d; τ_ff; K_p; K_d] holding the posture ``q`` with the robot YAML's joint PD gains."""
-    nu = robot.nu
-    return np.concatenate([q, np.zeros(2 * nu), robot.kp, robot.kd])
 
 
 class EstopLatch:
@@ -286,6 +276,17 @@ class Inbox:
         return context.get_time() - arrival if received else np.inf
 
 
+@dataclass(frozen=True)
+class BlindPrediction:
+    """A receiver's prediction while proprioception is missing: the :class:`PredictedState`, the
+    last IMU message and the prediction's base orientation when it started (the predicted IMU
+    orientation turns the last measured one by the base's predicted rotation since)."""
+
+    state: PredictedState
+    imu: np.ndarray
+    base_wxyz: np.ndarray
+
+
 class MeasurementReceiver(LeafSystem):
     """Proprioception and motion-capture messages → the station's measurement ports.
 
@@ -293,22 +294,30 @@ class MeasurementReceiver(LeafSystem):
     |-----------------|-----|----------|------------------------------------------------------|
     | proprioception  | in  | abstract | raw bytes of ROMOCO_PROPRIOCEPTION                    |
     | base_state      | in  | abstract | raw bytes of ROMOCO_BASE_STATE                        |
+    | command         | in  | 5·nu     | the motor command being sent (drives the prediction)  |
     | joint_state, imu, …, base_velocity | out | as the station | newest good values, or predicted |
     | link            | out | 1        | the :class:`LinkStage` of the needed streams          |
     | stats           | out | 5        | rejected, stale events, entries to ride-through, stand, damping |
 
-    While the needed streams are stale (no message for ``timeout_s``) the outputs are predicted
-    from the last good values (:func:`predict_proprioception`, :func:`predict_base_state`) up to
-    ``ride_through_s`` after it arrived, and held at that prediction afterwards, so the estimator
-    and controller carry on (ride-through) and the posture held in the STAND stage is where the
-    robot was predicted to be. A stream that is not needed is predicted the same way while stale.
+    From the first update without a new proprioception message the receiver predicts the robot
+    (:class:`~romoco_drake.interfaces.predictor.ContactPredictor`): the last message's joints,
+    the base from the last motion-capture message (without one: the IMU's orientation and gyro,
+    the velocity that keeps the feet in contact still) and its contact flags, propagated one
+    update period at a time under the ``command`` input, with the base reset to the motion
+    capture's while that stream is fresh. Once the stream is stale (``timeout_s``) the outputs
+    carry the prediction (joints, contacts, the IMU turned, its gyro and accelerometer from the
+    predicted base motion), through ride-through and STAND; in DAMPING it stops where it was. A
+    new message ends it. A stale base stream with fresh proprioception is predicted at constant
+    velocity (:func:`predict_base_state`). The command input has no feedthrough: the outputs
+    are the state of the last update.
     """
 
     def __init__(self, robot: RobotModel, config: LinkConfig, require_base_state: bool = False):
         """``require_base_state``: the estimator reads the base ports (ground truth from motion
         capture), so a stale or missing ROMOCO_BASE_STATE stream breaks the link too."""
         super().__init__()
-        self.config, self.require_base_state = config, require_base_state
+        self.robot, self.config, self.require_base_state = robot, config, require_base_state
+        self.predictor = ContactPredictor(robot)
         nj = len(robot.joint_names)
         start = nominal_measurements(robot)
 
@@ -324,8 +333,8 @@ class MeasurementReceiver(LeafSystem):
         self.proprioception = Inbox(self, "proprioception", proprioception, first)
         self.base_state = Inbox(self, "base_state", base_state,
                                 np.concatenate([start["base_pose"], start["base_velocity"]]))
-        predictors = {self.proprioception: lambda values, dt: predict_proprioception(values, nj, dt),
-                      self.base_state: predict_base_state}
+        self.command_port = self.DeclareVectorInputPort("command", 5 * robot.nu)
+        self._blind = self.DeclareAbstractState(Value[object](None))
         self._link = self.DeclareDiscreteState([float(LinkStage.DAMPING)])
         self._stats = self.DeclareDiscreteState(5)
         layout = {"joint_state": (self.proprioception, 0, 2 * nj),
@@ -335,19 +344,81 @@ class MeasurementReceiver(LeafSystem):
         for name, (inbox, a, b) in layout.items():
             self.DeclareVectorOutputPort(
                 name, b - a, lambda context, out, inbox=inbox, a=a, b=b:
-                out.SetFromVector(self._measured(context, inbox, predictors[inbox])[a:b]),
-                prerequisites_of_calc={inbox.latest.ticket(), self.time_ticket()})
+                out.SetFromVector(self._measured(context, inbox)[a:b]),
+                prerequisites_of_calc={inbox.latest.ticket(), self.time_ticket(), self.all_state_ticket()})
         self.link_port = self.DeclareStateOutputPort("link", self._link)
         self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.receive_rate_hz, 0.0, self._update)
 
-    def _measured(self, context, inbox: Inbox, predict) -> np.ndarray:
-        """The inbox's newest values, predicted forward while its stream is stale."""
+    def blind(self, context) -> BlindPrediction | None:
+        """The current prediction (None while proprioception arrives)."""
+        return context.get_abstract_state(int(self._blind)).get_value()
+
+    def _measured(self, context, inbox: Inbox) -> np.ndarray:
+        """The inbox's newest values, or predicted while its stream is stale."""
         age = inbox.age(context)
         if age <= self.config.timeout_s or not np.isfinite(age):
             return inbox.latest.Eval(context)
-        stored = context.get_discrete_state(inbox.values).value()
-        return predict(stored, min(age, self.config.timeout_s + self.config.ride_through_s))
+        blind = self.blind(context)
+        if blind is None:  # only the base stream is stale
+            stored = context.get_discrete_state(inbox.values).value()
+            return predict_base_state(stored, min(age, self.config.timeout_s + self.config.ride_through_s))
+        return self._predicted(blind) if inbox is self.proprioception else blind.state.x[self._base_rows()]
+
+    def _base_rows(self) -> np.ndarray:
+        """Indices of [quaternion; position; ω_W; v_W] in x."""
+        r = self.robot
+        return np.r_[r.base_q_start:r.base_q_start + 7, r.nq + r.base_v_start:r.nq + r.base_v_start + 6]
+
+    def _predicted(self, blind: BlindPrediction) -> np.ndarray:
+        """[q; v; imu; contact] of the prediction (the class docstring)."""
+        r, x = self.robot, blind.state.x
+        base = x[r.base_q_start:r.base_q_start + 4]
+        R_WB = Quaternion(wxyz=base / np.linalg.norm(base)).rotation()
+        turned = Quaternion(wxyz=blind.base_wxyz).inverse().multiply(Quaternion(wxyz=base))
+        wxyz = Quaternion(wxyz=blind.imu[:4] / np.linalg.norm(blind.imu[:4])).multiply(turned).wxyz()
+        w = r.nq + r.base_v_start
+        gyro = R_WB.T @ x[w:w + 3]
+        accelerometer = R_WB.T @ (blind.state.base_acceleration - r.plant.gravity_field().gravity_vector())
+        return np.concatenate([x[r.joint_q_index], x[r.nq + r.joint_v_index], wxyz, gyro, accelerometer,
+                               np.array(blind.state.contact, dtype=float)])
+
+    def _start(self, context, state) -> BlindPrediction:
+        """The prediction from the last good messages (class docstring)."""
+        r, nj = self.robot, len(self.robot.joint_names)
+        values = state.get_discrete_state().get_vector(int(self.proprioception.values)).value()
+        imu, contact = values[2 * nj:2 * nj + 10], values[2 * nj + 10:] > 0.5
+        if self.base_state.age(context, state) < np.inf:
+            base = state.get_discrete_state().get_vector(int(self.base_state.values)).value()
+            x = plant_state(r, values[:2 * nj], base[:7], base[7:])
+        else:
+            wxyz = imu[:4] if np.all(np.isfinite(imu[:4])) else r.nominal.q[r.base_q_start:r.base_q_start + 4]
+            R_WB = Quaternion(wxyz=wxyz / np.linalg.norm(wxyz)).rotation()
+            pose = np.concatenate([wxyz, r.nominal.q[r.base_q_start + 4:r.base_q_start + 7]])
+            x = plant_state(r, values[:2 * nj], pose, np.concatenate([R_WB @ imu[4:7], np.zeros(3)]))
+            lin = r.nq + r.base_v_start + 3
+            x[lin:lin + 3] = self.predictor.contact_velocity(x, contact)
+        base_wxyz = x[r.base_q_start:r.base_q_start + 4].copy()
+        return BlindPrediction(self.predictor.start(x, contact), imu.copy(), base_wxyz)
+
+    def _predict(self, context, state, stage: LinkStage) -> None:
+        """Starts, steps, or ends the prediction in this update (class docstring)."""
+        blind = self.blind(context)
+        _, arrival, received = state.get_discrete_state().get_vector(int(self.proprioception.meta)).value()
+        if not received or arrival == context.get_time():
+            if blind is not None:
+                state.get_mutable_abstract_state(int(self._blind)).set_value(None)
+            return
+        if stage == LinkStage.DAMPING and blind is not None:
+            return
+        blind = blind or self._start(context, state)
+        p = blind.state
+        if self.base_state.fresh(context, state, self.config.timeout_s):
+            x = p.x.copy()
+            x[self._base_rows()] = state.get_discrete_state().get_vector(int(self.base_state.values)).value()
+            p = dataclasses.replace(p, x=x)
+        p = self.predictor.step(p, self.command_port.Eval(context), 1.0 / self.config.receive_rate_hz)
+        state.get_mutable_abstract_state(int(self._blind)).set_value(dataclasses.replace(blind, state=p))
 
     def _update(self, context, state) -> None:
         rejected, stale_events, *entries = context.get_discrete_state(self._stats).value()
@@ -362,6 +433,7 @@ class MeasurementReceiver(LeafSystem):
         stale_events += was == LinkStage.FRESH and stage != LinkStage.FRESH
         if lost and stage > was:  # each stage entered counts; skipped ones (ride_through_s 0) do not
             entries[stage - 1] += 1
+        self._predict(context, state, stage)
         state.get_mutable_discrete_state().get_mutable_vector(int(self._link)).SetFromVector([float(stage)])
         state.get_mutable_discrete_state().get_mutable_vector(int(self._stats)).SetFromVector(
             [rejected, stale_events, *entries])
@@ -382,11 +454,13 @@ class CommandSender(LeafSystem):
     | stats         | out | 3        | rejected (non-finite) commands, clamped commands, E-stop engagements |
 
     The command is computed from the current inputs: the controller's command, clamped (module
-    docstring), while measurements are fresh; in the RIDE_THROUGH and STAND stages a joint PD hold
-    of the measured posture, i.e. the prediction (moving during ride-through, stopped in STAND);
-    damping after that, before the first measurement, or while the E-stop is engaged
-    (:class:`EstopLatch`). It is published ``PUBLISH_DELAY`` after each controller tick, because a publish
-    at the tick's own instant sees the state from before that tick's updates, i.e. the previous
+    docstring), while measurements are fresh; in the RIDE_THROUGH and STAND stages (the
+    measurements predicted) the same command with a joint PD toward the prediction on every
+    joint the controller commands by torque only (q_d, v_d = the predicted joint state, K_p,
+    K_d = the robot YAML's), so the controller's torque is the feedforward and the PD keeps
+    the robot near the prediction; damping after that, before the first measurement, or while
+    the E-stop is engaged (:class:`EstopLatch`). It is published ``PUBLISH_DELAY`` after each
+    controller tick, because a publish at the tick's own instant sees the state from before that
     tick's command. The periodic update (every ``period``) latches the E-stop and counts.
     """
 
@@ -417,12 +491,11 @@ class CommandSender(LeafSystem):
 
     def _checked(self, context, latched: bool) -> tuple[np.ndarray, bool, bool]:
         """(command to send, rejected as non-finite, clamped) for the current inputs."""
-        nu = self.robot.nu
-        q = self.joint_state_port.Eval(context)[self._joint_of_actuator]
+        nu, nj = self.robot.nu, len(self.robot.joint_names)
+        joints = self.joint_state_port.Eval(context)
+        q, v = joints[self._joint_of_actuator], joints[nj + self._joint_of_actuator]
         stage = self.link_port.Eval(context)[0]
-        if stage in (LinkStage.RIDE_THROUGH, LinkStage.STAND) and not latched:
-            return hold_command(self.robot, q), False, False
-        if stage not in (LinkStage.FRESH, LinkStage.RIDE_THROUGH) or latched:
+        if stage not in (LinkStage.FRESH, LinkStage.RIDE_THROUGH, LinkStage.STAND) or latched:
             return damping_command(self.robot, q), False, False
         if self.motor_pd:
             wanted = self.motor_command_port.Eval(context).copy()
@@ -430,6 +503,11 @@ class CommandSender(LeafSystem):
             # Torque mode: K_p = 0, so q_d only has to be valid (within limits, not counted).
             wanted = np.concatenate([np.clip(q, self._lower[:nu], self._upper[:nu]), np.zeros(4 * nu)])
         wanted[2 * nu:3 * nu] += self.actuation_port.Eval(context)
+        if stage != LinkStage.FRESH:  # predicted measurements: joints without gains follow the prediction
+            q_d, v_d, _, kp, kd = wanted.reshape(5, nu)
+            torque = (kp == 0.0) & (kd == 0.0)
+            q_d[torque], v_d[torque] = q[torque], v[torque]
+            kp[torque], kd[torque] = self.robot.kp[torque], self.robot.kd[torque]
         if not np.all(np.isfinite(wanted)):
             return damping_command(self.robot, q), True, False
         command = np.clip(wanted, self._lower, self._upper)
@@ -493,6 +571,7 @@ def make_hardware_station(robot: RobotModel, lcm: DrakeLcmInterface, period: flo
             dropouts)
     builder.Connect(receiver.GetOutputPort("joint_state"), sender.joint_state_port)
     builder.Connect(receiver.link_port, sender.link_port)
+    builder.Connect(sender.command_port, receiver.command_port)
     if motor_pd:
         builder.ExportInput(sender.motor_command_port, "motor_command")
     builder.ExportInput(sender.actuation_port, "actuation")

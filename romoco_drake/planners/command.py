@@ -86,11 +86,13 @@ class CommandLimiter(LeafSystem):
     Each ``period`` the held (vx, vy, wz) moves toward the input's, clipped to ±the limits'
     velocities, by at most the limits' accelerations times ``period``. The other entries (step
     width, CoM height, step time) pass through. A non-finite velocity entry is taken as a stop
-    (target 0), so a bad command slows the robot down instead of reaching the planner.
+    (target 0), so a bad command slows the robot down instead of reaching the planner; so is
+    any command while the optional ``stop`` input is set (the state machine's, on a blind link).
 
     | port | kind | size | meaning |
     |---|---|---|---|
     | ``command_in`` | in | 6 | :class:`WalkCommand` vector as asked |
+    | ``stop`` | in | 1 | optional: > 0.5 ramps to a stop whatever is asked (read in the update only) |
     | ``command`` | out | 6 | the same with the limited (vx, vy, wz) |
 
     Discrete state: the limited (vx, vy, wz), from zero (the robot starts standing).
@@ -101,8 +103,12 @@ class CommandLimiter(LeafSystem):
         self.period, self.limits = period, limits
         self._max = np.array([limits.vx, limits.vy, limits.wz])
         self.command_in_port = self.DeclareVectorInputPort("command_in", COMMAND_SIZE)
+        self.stop_port = self.DeclareVectorInputPort("stop", 1)
         self._velocity = self.DeclareDiscreteState(3)
-        self.command_port = self.DeclareVectorOutputPort("command", COMMAND_SIZE, self._calc)
+        self.command_port = self.DeclareVectorOutputPort(
+            "command", COMMAND_SIZE, self._calc,
+            prerequisites_of_calc={self.input_port_ticket(self.command_in_port.get_index()),
+                                   self.discrete_state_ticket(self._velocity)})
         self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
 
     def clipped(self, command: WalkCommand) -> bool:
@@ -112,6 +118,8 @@ class CommandLimiter(LeafSystem):
     def _update(self, context, discrete_state) -> None:
         held = context.get_discrete_state(self._velocity).value()
         target = np.nan_to_num(self.command_in_port.Eval(context)[:3], nan=0.0, posinf=0.0, neginf=0.0)
+        if self.stop_port.HasValue(context) and self.stop_port.Eval(context)[0] > 0.5:
+            target = np.zeros(3)
         discrete_state.get_mutable_vector(self._velocity).SetFromVector(
             limited_velocity(held, target, self.limits, self.period))
 

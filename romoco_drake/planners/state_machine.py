@@ -43,8 +43,7 @@ class GaitSchedule(SharedValue):
     safe_mode_entries: int
     fall_reason: str
     air_since: float = math.nan  # since when neither foot switch has reported contact (s)
-    recovering: bool = False  # a blind link paused walking: step to a stop
-    paused: bool = False  # the step clock is stopped while the link is blind
+    blind: bool = False  # the link is past its ride-through: slow down to a stop, nothing starts
 
 
 def is_zero(cmd: WalkCommand) -> bool:
@@ -72,11 +71,11 @@ class GaitStateMachine(LeafSystem):
       points within ``touchdown_height`` of its lowest one). A sole that landed on its heel (H1's
       line-modelled feet land 1-2 cm toe-up) gets up to ``settle_time`` in double support to roll
       flat; if it does not, the robot keeps stepping in place.
-    - while the link to the robot is past its ride-through (``link_stage`` ≥ STAND: the station
-      holds the robot's predicted posture blind) the step clock stops with it and nothing
-      starts. When measurements resume the step goes on from where it stopped, or, if the
-      held swing foot came down meanwhile, the support switches at once; then the robot steps
-      to a stop as under a zero command, and walks on from standing when the command asks.
+    - while the link to the robot is past its ride-through (``link_stage`` ≥ STAND: the station's
+      measurements are a prediction) ``stop`` asks the command limiter for a stop, so the robot
+      slows down and stops as under a zero command (the step clock running on), and nothing
+      starts. With the link back it follows the command again: walks on if it had not
+      stopped yet, starts from standing if it had.
     - point feet have no support area to stand on (the CoM would balance on the segment between
       two points): such a robot starts walking as soon as it stands balanced, under a zero command
       too, and keeps stepping in place instead of stopping.
@@ -93,6 +92,7 @@ class GaitStateMachine(LeafSystem):
     | ``mode`` | out | abstract | :class:`~romoco_drake.modes.Mode` |
     | ``gait_phase`` | out | 2 | stance (+1 left, −1 right), time in step [s] |
     | ``schedule`` | out | abstract | :class:`GaitSchedule` |
+    | ``stop`` | out | 1 | 1.0 while the link is blind (the command limiter's ``stop``), else 0.0 |
     """
 
     def __init__(self, robot: RobotModel, period: float, t_ds: float, balance_speed: float = 0.1,
@@ -125,6 +125,9 @@ class GaitStateMachine(LeafSystem):
             "schedule", lambda: AbstractValue.Make(initial),
             lambda c, v: v.set_value(self.schedule(c)),
             prerequisites_of_calc={self.abstract_state_ticket(self._schedule)})
+        self.stop_port = self.DeclareVectorOutputPort(
+            "stop", 1, lambda c, out: out.SetFromVector([float(self.schedule(c).blind)]),
+            prerequisites_of_calc={self.abstract_state_ticket(self._schedule)})
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, offset, self._update)
 
     def schedule(self, context) -> GaitSchedule:
@@ -154,19 +157,10 @@ class GaitStateMachine(LeafSystem):
                 s = replace(s, air_since=math.nan)
         elif math.isnan(s.air_since):
             s = replace(s, air_since=t)
-        if blind:
-            if s.mode == Mode.WALKING:  # the step clock stops with the robot's posture
-                s = replace(s, step_start=s.step_start + self.period, idle_steps=0, recovering=True,
-                            paused=True)
-            return s
-        if s.recovering:
+        if s.blind != blind:
+            s = replace(s, blind=blind)
+        if blind and s.mode == Mode.STANDING:  # nothing starts while blind
             cmd = WalkCommand(step_width=cmd.step_width, com_height=cmd.com_height, step_time=cmd.step_time)
-        if s.paused:
-            s = replace(s, paused=False)
-            if s.mode == Mode.WALKING and (on[1] if s.side == "left" else on[0]):
-                # The held swing foot came down while the robot was blind: that was its touchdown.
-                return replace(s, side=other_side(s.side), step_start=t, t_ss=cmd.step_time,
-                               steps=s.steps + 1, idle_steps=s.idle_steps + 1)
         if s.mode == Mode.STANDING and t - s.air_since >= self.lift_time - 1e-9:
             s = replace(s, mode=Mode.IN_AIR)
         elif s.mode == Mode.IN_AIR and on.all():
@@ -182,7 +176,7 @@ class GaitStateMachine(LeafSystem):
             # A stop holds the step in double support for up to settle_time while a sole rolls flat.
             settling = stopping and t - s.step_start < s.t_ss + self.t_ds + self.settle_time
             if stopping and self._feet_down(kin, on):
-                s = replace(s, mode=Mode.STANDING, idle_steps=0, steps=s.steps + 1, recovering=False)
+                s = replace(s, mode=Mode.STANDING, idle_steps=0, steps=s.steps + 1)
             elif not settling:
                 s = replace(s, side=other_side(s.side), step_start=t, t_ss=cmd.step_time, steps=s.steps + 1,
                             idle_steps=idle)
