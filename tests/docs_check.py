@@ -44,7 +44,7 @@ def main(argv: list[str]) -> int:
             try:
                 run = subprocess.run(["bash", "-euo", "pipefail", "-c", block], cwd=tmp, capture_output=True,
                                      text=True, timeout=BLOCK_TIMEOUT_S)
-                ok, tail = run.returncode == 0, (run.stderr or run.stdout).strip().splitlines()[-3:]
+                ok, tail = run.returncode == 0, (run.stderr or run.stdout).strip().splitlines()[-15:]
             except subprocess.TimeoutExpired:
                 ok, tail = False, [f"timed out after {BLOCK_TIMEOUT_S} s"]
             status = "ok" if ok else "FAILED"

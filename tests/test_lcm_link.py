@@ -1,6 +1,7 @@
 """The LCM link: the hardware station's ports, standing and walking over LCM, safe modes under
 faults (stale, malformed, non-finite, out-of-limit, E-stop) on both sides, and the CLI."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -736,3 +737,33 @@ def test_motion_capture_is_part_of_the_link_when_the_estimator_reads_it(g1):
     run(side.config.timeout_s + 0.005, with_base=False)
     _assert_along_prediction(g1, side.last_command(), np.full(g1.nu, 1.0), side.output("joint_state"))
     assert side.summary()["stale_events"] == 1 and side.summary()["ride_through_events"] == 1
+
+
+def test_a_prediction_that_fails_is_held_where_it_last_was(g1, monkeypatch):
+    """A predictor step that raises (a degenerate state, e.g. of a fallen robot) or blows up leaves
+    the ports at the last good prediction, and the link's stages go on without an exception."""
+    from romoco_drake.interfaces.predictor import ContactPredictor
+
+    side = ControllerSide(g1, np.full(g1.nu, 0.2), LinkConfig(ride_through_s=0.05, stand_s=0.05))
+    nj = len(g1.joint_names)
+    side.advance(0.03, lambda utime: _proprioception(g1, utime, _inside_limits(g1, 0.05)))
+    side.advance(2 * side.config.timeout_s)  # blind: predicting
+    held = side.output("joint_state").copy()
+    assert np.all(np.isfinite(held))
+    step = ContactPredictor.step
+
+    def failing(self, p, command, h):
+        raise RuntimeError("QuaternionToRotationMatrix(): All the elements in a quaternion are zero.")
+
+    monkeypatch.setattr(ContactPredictor, "step", failing)
+    side.advance(0.02)
+    np.testing.assert_array_equal(side.output("joint_state"), held)
+
+    def blowing_up(self, p, command, h):
+        stepped = step(self, p, command, h)
+        return dataclasses.replace(stepped, x=np.full_like(stepped.x, np.nan))
+
+    monkeypatch.setattr(ContactPredictor, "step", blowing_up)
+    side.advance(0.1)  # into damping
+    assert np.all(np.isfinite(side.output("joint_state")[:nj]))
+    assert side.output("link_stage")[0] == LinkStage.DAMPING

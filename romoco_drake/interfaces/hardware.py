@@ -417,7 +417,12 @@ class MeasurementReceiver(LeafSystem):
             x = p.x.copy()
             x[self._base_rows()] = state.get_discrete_state().get_vector(int(self.base_state.values)).value()
             p = dataclasses.replace(p, x=x)
-        p = self.predictor.step(p, self.command_port.Eval(context), 1.0 / self.config.receive_rate_hz)
+        try:
+            p = self.predictor.step(p, self.command_port.Eval(context), 1.0 / self.config.receive_rate_hz)
+        except (RuntimeError, np.linalg.LinAlgError):  # a degenerate state, e.g. of a fallen robot
+            return
+        if not np.all(np.isfinite(p.x)):  # a prediction that blows up is held where it last was
+            return
         state.get_mutable_abstract_state(int(self._blind)).set_value(dataclasses.replace(blind, state=p))
 
     def _update(self, context, state) -> None:
