@@ -12,7 +12,7 @@ Every commanded component must be within 20 % of its command.
 
 A ramp that ends in a fall also reports ``settled``: the same score over the samples whose 1 s
 average ends a whole window before the fall. The stumble before a fall often lurches the robot
-along the command and lifts the trailing average back within 20 % (DRACO forward: 0.91 m/s
+along the command and lifts the trailing average back within 20 % (DRACO forward with t_ds 0.05: 0.91 m/s
 scored at a fall after walking at 0.55-0.67 m/s for 3 s), which ``settled`` does not count.
 """
 
