@@ -34,6 +34,7 @@ from romoco_drake.embedding.outputs import Output, point_foot_yaw, sole_frame
 from romoco_drake.errors import RomocoError
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
+from romoco_drake.rom.polygon import convex_hull_2d
 
 SIDES = ("left", "right")
 # Contact domain -> feet in contact.
@@ -119,22 +120,6 @@ def wrench_map(points: np.ndarray) -> np.ndarray:
     return np.vstack([np.tile(np.eye(3), k), np.hstack([_skew(p) for p in points.T])])
 
 
-def _convex_hull(xy: np.ndarray) -> np.ndarray:
-    """Counter-clockwise convex hull vertices (m×2) of 2D points xy (n×2), monotone chain."""
-    pts = sorted(map(tuple, np.round(xy, 12)))
-
-    def half(points: list) -> list:
-        chain: list = []
-        for p in points:
-            while len(chain) >= 2 and ((chain[-1][0] - chain[-2][0]) * (p[1] - chain[-2][1])
-                                       - (chain[-1][1] - chain[-2][1]) * (p[0] - chain[-2][0])) <= 0:
-                chain.pop()
-            chain.append(p)
-        return chain[:-1]
-
-    return np.array(half(pts) + half(pts[::-1]))
-
-
 def support_halfplanes(robot: RobotModel, side: str, line: bool | None = None
                        ) -> tuple[np.ndarray, np.ndarray]:
     """Outward normals N (e×2) and offsets d (e,) with the sole region {c : N c ≤ d} in S (x, y).
@@ -150,7 +135,7 @@ def support_halfplanes(robot: RobotModel, side: str, line: bool | None = None
         _, points = select_contact_points(robot, side, line)
         toe, heel = (R_FS.T @ (points - p_FS[:, None]))[0]
         return np.array([[1.0, 0.0], [-1.0, 0.0]]), np.array([toe, -heel])
-    hull = _convex_hull((R_FS.T @ (robot.feet[side].points - p_FS[:, None]))[:2].T)
+    hull = convex_hull_2d((R_FS.T @ (robot.feet[side].points - p_FS[:, None]))[:2].T)
     edges = np.roll(hull, -1, axis=0) - hull
     normals = np.column_stack([edges[:, 1], -edges[:, 0]]) / np.linalg.norm(edges, axis=1)[:, None]
     return normals, np.einsum("ij,ij->i", normals, hull)

@@ -33,6 +33,7 @@ import numpy as np
 
 from romoco_drake.errors import RomocoError
 from romoco_drake.robots.meshes import read_stl
+from romoco_drake.rom.polygon import convex_hull_2d
 
 LOWEST_BAND = 5e-4  # m: geometry this close to a foot's lowest point is sole (a 15 mm ball's
 # cap is then 8 mm across: still a point)
@@ -157,25 +158,6 @@ def link_geometry(root: ET.Element, kind: str, resolve) -> dict[str, np.ndarray]
         if clouds:
             out[link.get("name")] = np.vstack(clouds)
     return out
-
-
-def convex_hull_2d(points: np.ndarray) -> np.ndarray:
-    """Counter-clockwise hull (M, 2) of 2-D points (monotone chain)."""
-    pts = sorted(set(map(tuple, np.round(points, 9))))
-    if len(pts) <= 2:
-        return np.array(pts)
-
-    def half(seq):
-        chain: list = []
-        for p in seq:
-            while len(chain) >= 2 and ((chain[-1][0] - chain[-2][0]) * (p[1] - chain[-2][1])
-                                       - (chain[-1][1] - chain[-2][1]) * (p[0] - chain[-2][0])) <= 0:
-                chain.pop()
-            chain.append(p)
-        return chain
-
-    lower, upper = half(pts), half(reversed(pts))
-    return np.array(lower[:-1] + upper[:-1])
 
 
 def _cross_section(hull: np.ndarray, s: float) -> tuple[float, float] | None:
