@@ -632,6 +632,7 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
         builder.Connect(rom_state.rom_state_port, planner.rom_state_port)
         if adapter is not None:
             builder.Connect(planner.planner_output_port, machine.planner_output_port)
+            builder.Connect(rom_state.swing_foot_port, planner.swing_foot_port)
     embedding = builder.AddNamedSystem("embedding", OutputEmbedding(robot, period, core, offset))
     solver = CONTROLLERS[scenario.controller.name].factory(robot, core.contact, period, scenario.controller)
     controller = builder.AddNamedSystem("controller",

@@ -74,6 +74,23 @@ def test_inward_push_never_crosses_and_steps_early():
     assert adapted.t_ss < plan.t_ss - 0.03
 
 
+def test_late_step_lands_where_the_swing_can_still_reach():
+    """Pushed forward late in the swing: without the swing foot's position the step goes to the
+    forward bound; with it, the foothold stays within swing_speed·(T − t) of the foot."""
+    bounds = dataclasses.replace(BOUNDS, swing_speed=2.0)
+    adapter = StepAdapter(bounds, MASS)
+    state, tau, foot = rom_state((0.05, -0.1), (1.2, -0.1)), 0.2, (-0.05, -0.22)
+    law = make_planner("hlip", PlannerParams(mass=MASS))
+    plan = law.plan(state, "left", tau, CMD)
+    free = adapter.adapt(plan, state, tau)
+    bound = adapter.adapt(plan, state, tau, foot)
+    assert free.swing_target[0] == pytest.approx(BOUNDS.forward)
+    reach = bounds.swing_speed * (bound.t_ss - tau)
+    assert abs(bound.swing_target[0] - foot[0]) <= reach + 1e-9
+    assert abs(bound.swing_target[1] - foot[1]) <= reach + 1e-9
+    assert bound.swing_target[0] < free.swing_target[0] - 0.05
+
+
 def test_step_time_never_ends_before_the_step_is_committed():
     _, adapted = _plan_and_adapt("hlip", rom_state((0.0, -0.1), (0.4, -1.0)), "left", 0.2)
     assert adapted.t_ss >= 0.2 / 0.85 - 1e-12

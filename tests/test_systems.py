@@ -175,9 +175,14 @@ def test_rom_state_is_com_and_momentum_about_the_stance_sole_in_its_yaw_frame(si
     p = R_z.T @ (plant.CalcCenterOfMassPositionInWorld(plant_context) - pivot)
     L = R_z.T @ plant.CalcSpatialMomentumInWorldAboutPoint(plant_context, pivot).rotational()
     np.testing.assert_allclose(out, np.concatenate([p, L]), atol=1e-9)
+    other = "right" if side == "left" else "left"
+    _, p_FS_other = sole_frame(robot, other)
+    swing = R_z.T @ (robot.foot_frames[other].CalcPoseInWorld(plant_context).multiply(p_FS_other) - pivot)
+    np.testing.assert_allclose(system.swing_foot_port.Eval(context), swing[:2], atol=1e-9)
     x[robot.nq] = np.nan
     system.kinematics_port.FixValue(context, RobotKinematics(robot, x))
     assert np.all(np.isnan(system.rom_state_port.Eval(context)))
+    assert np.all(np.isnan(system.swing_foot_port.Eval(context)))
 
 
 def test_status_sender_encodes_what_a_log_needs():

@@ -41,7 +41,10 @@ GRAVITY = 9.81  # m/s²
 
 DEFAULT_TASK_GAINS = (
     TaskGain("com_[xy]", 30.0, 12.0, 10.0),  # standing: gentle, the support polygon is small
-    TaskGain("com_*", 100.0, 20.0, 10.0),
+    # CoM height outweighs the swing foot: after a wide or long recovery step the trailing leg is
+    # straight, and a swing foot lifted at the CoM's expense straightened G1's stance knee to its
+    # stop (weight 10: 6 of 16 pushes of 20 N·s fell that way; romoco bench push).
+    TaskGain("com_*", 100.0, 20.0, 100.0),
     TaskGain("pelvis_yaw", 50.0, 10.0, 1.0),  # standing: only the feet's friction turns the body
     TaskGain("pelvis_*", 200.0, 30.0, 10.0),
     TaskGain("*hip_yaw", 100.0, 20.0, 1.0),

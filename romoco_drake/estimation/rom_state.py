@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.embedding.contact import contact_frame, contact_frame_state
 from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_value
 from romoco_drake.robots.model import RobotModel
-from romoco_drake.rom.types import GAIT_PHASE_SIZE, ROM_STATE_SIZE, side_from_sign
+from romoco_drake.rom.types import GAIT_PHASE_SIZE, ROM_STATE_SIZE, other_side, side_from_sign
 
 
 class RomStateFromRobot(LeafSystem):
@@ -25,6 +27,7 @@ class RomStateFromRobot(LeafSystem):
     | ``kinematics`` | in | abstract | :class:`~romoco_drake.robots.kinematics.RobotKinematics` of the state |
     | ``gait_phase`` | in | 2 | stance (+1 left, −1 right), time in step [s] |
     | ``rom_state`` | out | 6 | [p (m), L (kg·m²/s)] in {c} |
+    | ``swing_foot`` | out | 2 | the other sole's centre (x, y) in {c} [m] (step adaptation's swing reach) |
     """
 
     def __init__(self, robot: RobotModel):
@@ -34,12 +37,29 @@ class RomStateFromRobot(LeafSystem):
         self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
         self.rom_state_port = self.DeclareVectorOutputPort(
             "rom_state", ROM_STATE_SIZE, self._calc, prerequisites_of_calc={self.all_input_ports_ticket()})
+        self.swing_foot_port = self.DeclareVectorOutputPort(
+            "swing_foot", 2, self._calc_swing_foot, prerequisites_of_calc={self.all_input_ports_ticket()})
 
     def compute(self, kin: RobotKinematics, side: str) -> np.ndarray:
         """The ROM state for ``side`` stance; NaN on a non-finite state (planners fall back)."""
         if not kin.finite:
             return np.full(6, np.nan)
         return contact_frame_state(kin, *contact_frame(self.robot, kin, side))
+
+    def swing_foot(self, kin: RobotKinematics, side: str) -> np.ndarray:
+        """The swing (non-``side``) sole's centre relative to the stance contact, in {c}; NaN on a
+        non-finite state."""
+        if not kin.finite:
+            return np.full(2, np.nan)
+        origin, heading = contact_frame(self.robot, kin, side)
+        swing_origin, _ = contact_frame(self.robot, kin, other_side(side))
+        dx, dy = (swing_origin - origin)[:2].tolist()
+        c, s = math.cos(heading), math.sin(heading)
+        return np.array([c * dx + s * dy, c * dy - s * dx])
+
+    def _calc_swing_foot(self, context, out) -> None:
+        phase = self.gait_phase_port.Eval(context)
+        out.SetFromVector(self.swing_foot(self.kinematics_port.Eval(context), side_from_sign(phase[0])))
 
     def _calc(self, context, out) -> None:
         phase = self.gait_phase_port.Eval(context)

@@ -22,13 +22,15 @@ class FootPlacementPlanner(LeafSystem):
 
     Stateless: the output is a function of the inputs (cached by Drake until they change). With an
     ``adapter`` (:class:`~romoco_drake.rom.step_adapt.StepAdapter`) the law's plan is then bounded
-    to the robot's reach and its step time adapted to the current swing (push recovery).
+    to the robot's reach and its step time adapted to the current swing (push recovery); with
+    ``swing_foot`` connected, also to where the swing foot can still land in the time left.
 
     | port | kind | size | meaning |
     |---|---|---|---|
     | ``rom_state`` | in | 6 | CoM rel. stance contact [m], momentum about it [kg·m²/s]; stance yaw frame |
     | ``gait_phase`` | in | 2 | stance (+1 left, −1 right), time in step [s] |
     | ``command`` | in | 6 | vx, vy [m/s], wz [rad/s], step width, CoM height [m], SS time [s] |
+    | ``swing_foot`` | in | 2 | optional: swing sole (x, y) rel. stance contact [m]; stance yaw frame |
     | ``planner_output`` | out | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` |
     """
 
@@ -38,6 +40,7 @@ class FootPlacementPlanner(LeafSystem):
         self.rom_state_port = self.DeclareVectorInputPort("rom_state", ROM_STATE_SIZE)
         self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
+        self.swing_foot_port = self.DeclareVectorInputPort("swing_foot", 2)
         self.planner_output_port = self.DeclareAbstractOutputPort(
             "planner_output", lambda: AbstractValue.Make(self._plan_default()), self._calc_plan
         )
@@ -53,7 +56,8 @@ class FootPlacementPlanner(LeafSystem):
         rom_state = self.rom_state_port.Eval(context).tolist()
         plan = self.law.plan(rom_state, side_from_sign(sign), t_in_step, cmd)
         if self.adapter is not None:
-            plan = self.adapter.adapt(plan, rom_state, t_in_step)
+            swing = self.swing_foot_port.Eval(context) if self.swing_foot_port.HasValue(context) else None
+            plan = self.adapter.adapt(plan, rom_state, t_in_step, swing)
         value.set_value(plan)
 
 

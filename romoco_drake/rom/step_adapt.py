@@ -21,8 +21,12 @@ runs away from the bound, later when it comes back.
 
 The reachable box is in the stance yaw frame: forward/backward, and a lateral band on the swing
 foot's own side of the stance foot (at least ``lateral_min`` away), so a crossing step is never
-asked for. The solution is exact: the QP is a convex piecewise quadratic in σ alone once u is
-minimised out per axis, minimised interval by interval.
+asked for. A step must also be one the swing leg can still make: given the swing foot's current
+position s (when the planner is given it), the touchdown point lies within ``swing_speed``·(T − t)
+of s on each axis, so a step shortened late in the swing is not asked to land far away (the
+swing would land fast and slide, or late). That window depends on σ through T = ln σ / λ, so
+the QP is solved over σ on a grid refined around its best point, with u minimised exactly for
+each σ (a clipped scalar minimiser per axis).
 """
 
 from __future__ import annotations
@@ -45,7 +49,8 @@ class StepBounds:
 
     ``forward``, ``backward``: how far ahead of / behind the stance contact the foot may land (m);
     ``lateral_min``, ``lateral_max``: its lateral distance from the stance contact, on its own side
-    (m); ``t_ss_min``, ``t_ss_max``: the single-support times a step may take (s).
+    (m); ``t_ss_min``, ``t_ss_max``: the single-support times a step may take (s); ``swing_speed``:
+    how fast the swing foot can still move horizontally, per axis (m/s; 0: no limit).
     """
 
     forward: float
@@ -54,6 +59,7 @@ class StepBounds:
     lateral_max: float
     t_ss_min: float
     t_ss_max: float
+    swing_speed: float = 0.0
 
     def __post_init__(self):
         """A ValueError names the violated bound (a robot YAML's loader makes it one line)."""
@@ -63,6 +69,8 @@ class StepBounds:
             raise ValueError("lateral_min must be at least 0 and below lateral_max")
         if not 0.0 < self.t_ss_min <= self.t_ss_max:
             raise ValueError("t_ss_min must be positive and at most t_ss_max")
+        if not self.swing_speed >= 0.0:
+            raise ValueError("swing_speed must be at least 0")
 
     def box(self, stance_side: str) -> tuple[tuple[float, float], tuple[float, float]]:
         """((x_lo, x_hi), (y_lo, y_hi)) of the swing foot when ``stance_side`` supports."""
@@ -92,9 +100,12 @@ class StepAdapter:
             raise RomocoError(f"mass must be positive, got {mass}")
         self.bounds, self.mass, self.weights, self.g = bounds, mass, weights, g
 
-    def adapt(self, plan: PlannerOutput, rom_state: Sequence[float], t_in_step: float) -> PlannerOutput:
+    def adapt(self, plan: PlannerOutput, rom_state: Sequence[float], t_in_step: float,
+              swing_foot: Sequence[float] | None = None) -> PlannerOutput:
         """``plan`` with its foothold and single-support time adapted; ``rom_state`` is the six numbers
-        of the ``rom_state`` port (stance yaw frame, momentum about the stance contact)."""
+        of the ``rom_state`` port (stance yaw frame, momentum about the stance contact);
+        ``swing_foot`` the swing sole's (x, y) relative to the stance contact in the same frame
+        (None: the step is not bounded by what the swing can still reach)."""
         if not plan.valid or not math.isfinite(t_in_step):
             return plan
         b = self.bounds
@@ -107,25 +118,30 @@ class StepAdapter:
         dcm0 = ((p_x + l_y / mk) * decay, (p_y - l_x / mk) * decay)
         if not all(map(math.isfinite, dcm0)):
             return plan
+        window = None
+        if swing_foot is not None and b.swing_speed > 0.0:
+            s = (float(swing_foot[0]), float(swing_foot[1]))
+            if all(map(math.isfinite, s)):
+                window = SwingWindow(s, b.swing_speed, t_in_step, lam)
         sigma_n = math.exp(lam * plan.t_ss)
         u_n = (float(plan.swing_target[0]), float(plan.swing_target[1]))
         implied = tuple(d * sigma_n - u for d, u in zip(dcm0, u_n, strict=True))
         offset_n = self.viable_offset(implied, plan.stance_side, sigma_n)
         box = b.box(plan.stance_side)
         if (offset_n == implied and all(lo <= u <= hi for u, (lo, hi) in zip(u_n, box, strict=True))
-                and b.t_ss_min <= plan.t_ss <= b.t_ss_max):
+                and b.t_ss_min <= plan.t_ss <= b.t_ss_max
+                and (window is None or window.contains(u_n, plan.t_ss))):
             # The law's own step is reachable and viable: the QP's minimum (zero), at any phase.
             return replace(plan, timing_adapted=True)
         # The step may not end before it is committed (SWING_COMMIT_FRACTION of it passed).
         t_lo = max(b.t_ss_min, t_in_step / SWING_COMMIT_FRACTION)
         t_hi = max(b.t_ss_max, t_lo)
         sigma, u = solve_step_qp(u_n, sigma_n, offset_n, dcm0, box,
-                                 (math.exp(lam * t_lo), math.exp(lam * t_hi)), self.weights)
+                                 (math.exp(lam * t_lo), math.exp(lam * t_hi)), self.weights, window)
         t_ss = math.log(sigma) / lam
         target = np.array([u[0], u[1], float(plan.swing_target[2])])
         return replace(plan, swing_target=target, t_ss=t_ss, time_to_touchdown=max(t_ss - t_in_step, 0.0),
                        timing_adapted=True)
-
 
     def viable_offset(self, offset: tuple[float, float], stance_side: str, sigma_n: float
                       ) -> tuple[float, float]:
@@ -146,54 +162,67 @@ class StepAdapter:
         return b_x, b_y
 
 
+@dataclass(frozen=True)
+class SwingWindow:
+    """Where the swing foot can still land: within ``speed``·(T − ``tau``) of its position ``s``
+    on each axis, for a touchdown at T = ln σ / ``lam`` (the module docstring)."""
+
+    s: tuple[float, float]
+    speed: float
+    tau: float
+    lam: float
+
+    def radius(self, t_ss):
+        """How far (m, per axis) the foot can still move before a touchdown at ``t_ss``."""
+        return self.speed * np.maximum(t_ss - self.tau, 0.0)
+
+    def contains(self, u: Sequence[float], t_ss: float) -> bool:
+        r = float(self.radius(t_ss))
+        return all(abs(a - c) <= r for a, c in zip(u, self.s, strict=True))
+
+
+# The σ grid: points over the whole range, then rounds of points around the best one so far.
+_GRID, _REFINE, _ROUNDS = 121, 41, 3
+
+
 def solve_step_qp(u_n: tuple[float, float], sigma_n: float, offset_n: tuple[float, float],
                   dcm0: tuple[float, float], box, sigma_box: tuple[float, float],
-                  w: StepAdaptWeights) -> tuple[float, tuple[float, float]]:
-    """(σ, (u_x, u_y)) minimising the module docstring's QP exactly.
+                  w: StepAdaptWeights, window: SwingWindow | None = None
+                  ) -> tuple[float, tuple[float, float]]:
+    """(σ, (u_x, u_y)) minimising the module docstring's QP.
 
-    For fixed σ each axis' best u is the clipped minimiser of w_u (u − u_n)² + w_b (c − u)² with
-    c = dcm0 σ − b_n; what is left is convex and quadratic in σ between the σ where some axis' u
-    meets a bound, so the minimum is the best of the per-interval minimisers.
+    For fixed σ each axis' best u is the minimiser of w_u (u − u_n)² + w_b (c − u)², c = dcm0 σ − b_n,
+    clipped to the reach box intersected with the swing ``window``; where the two do not meet,
+    u is the window's point nearest the box (the swing cannot reach it: it lands as close as it
+    can). The cost left over σ is continuous but not convex once the window binds, so σ is
+    searched on a grid and refined around the best point (to about 1e-6 of the σ range).
     """
     w_u, w_t, w_b = w.step, w.timing, w.offset
-    free = w_u * w_b / (w_u + w_b)
-    lo_s, hi_s = sigma_box
 
-    def best_u(axis: int, sigma: float) -> float:
-        c = dcm0[axis] * sigma - offset_n[axis]
-        lo, hi = box[axis]
-        return min(max((w_u * u_n[axis] + w_b * c) / (w_u + w_b), lo), hi)
-
-    def cost(sigma: float) -> float:
+    def evaluate(sigma: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
         total = w_t * (sigma - sigma_n) ** 2
+        us = []
         for axis in (0, 1):
-            u = best_u(axis, sigma)
-            total += w_u * (u - u_n[axis]) ** 2 + w_b * (dcm0[axis] * sigma - offset_n[axis] - u) ** 2
-        return total
-
-    # σ where an axis' unclipped u reaches a bound: (w_u u_n + w_b (dcm0 σ − b_n)) = (w_u + w_b) bound.
-    knots = [lo_s, hi_s]
-    for axis in (0, 1):
-        if abs(dcm0[axis]) > 1e-12:
-            for bound in box[axis]:
-                s = ((bound * (w_u + w_b) - w_u * u_n[axis]) / w_b + offset_n[axis]) / dcm0[axis]
-                if lo_s < s < hi_s:
-                    knots.append(s)
-    knots.sort()
-    candidates = []
-    for a, z in zip(knots[:-1], knots[1:], strict=True):
-        mid = 0.5 * (a + z)
-        # On this interval each axis' term is coef (dcm0 σ − r)² + const; set the σ-derivative to 0.
-        num, den = w_t * sigma_n, w_t
-        for axis in (0, 1):
+            c = dcm0[axis] * sigma - offset_n[axis]
             lo, hi = box[axis]
-            u_mid = best_u(axis, mid)
-            if lo < u_mid < hi:
-                coef, r = free, offset_n[axis] + u_n[axis]
-            else:
-                coef, r = w_b, offset_n[axis] + u_mid
-            num += coef * dcm0[axis] * r
-            den += coef * dcm0[axis] ** 2
-        candidates.append(min(max(num / den, a), z))
-    sigma = min(candidates, key=cost)
-    return sigma, (best_u(0, sigma), best_u(1, sigma))
+            lo, hi = np.full_like(sigma, lo), np.full_like(sigma, hi)
+            if window is not None:
+                r = window.radius(np.log(sigma) / window.lam)
+                w_lo, w_hi = window.s[axis] - r, window.s[axis] + r
+                apart = (w_lo > hi) | (w_hi < lo)
+                nearest = np.clip(np.clip(window.s[axis], lo, hi), w_lo, w_hi)
+                lo = np.where(apart, nearest, np.maximum(lo, w_lo))
+                hi = np.where(apart, nearest, np.minimum(hi, w_hi))
+            u = np.clip((w_u * u_n[axis] + w_b * c) / (w_u + w_b), lo, hi)
+            total += w_u * (u - u_n[axis]) ** 2 + w_b * (c - u) ** 2
+            us.append(u)
+        return total, us
+
+    lo_s, hi_s = sigma_box
+    sigma = np.linspace(lo_s, hi_s, _GRID)
+    for _ in range(_ROUNDS):
+        k = int(np.argmin(evaluate(sigma)[0]))
+        sigma = np.linspace(sigma[max(k - 1, 0)], sigma[min(k + 1, len(sigma) - 1)], _REFINE)
+    cost, us = evaluate(sigma)
+    k = int(np.argmin(cost))
+    return float(sigma[k]), (float(us[0][k]), float(us[1][k]))
