@@ -739,6 +739,31 @@ def test_motion_capture_is_part_of_the_link_when_the_estimator_reads_it(g1):
     assert side.summary()["stale_events"] == 1 and side.summary()["ride_through_events"] == 1
 
 
+def test_a_fresh_stream_costs_no_prediction_and_a_stall_catches_up(g1, monkeypatch):
+    """Proprioception at half the receive rate: no predictor step while the stream is fresh;
+    once it stalls, the prediction has taken one step per update since the last message."""
+    from romoco_drake.interfaces.predictor import ContactPredictor
+
+    steps, step = [], ContactPredictor.step
+
+    def counted(self, p, command, h):
+        steps.append(h)
+        return step(self, p, command, h)
+
+    monkeypatch.setattr(ContactPredictor, "step", counted)
+    side = ControllerSide(g1, np.full(g1.nu, 0.2))
+    q = _inside_limits(g1, 0.05)
+    for _ in range(25):  # a message every other update
+        side.advance(TICK, lambda utime: _proprioception(g1, utime, q))
+        side.advance(TICK)
+    assert steps == [] and side.output("link_stage")[0] == LinkStage.FRESH
+    side.advance(side.config.timeout_s + 0.005)
+    assert side.output("link_stage")[0] == LinkStage.RIDE_THROUGH
+    receiver = side.station.GetSubsystemByName("receiver")
+    age = receiver.proprioception.age(receiver.GetMyContextFromRoot(side.context))
+    assert abs(len(steps) - age / TICK) <= 1 and set(steps) == {TICK}
+
+
 def test_a_prediction_that_fails_is_held_where_it_last_was(g1, monkeypatch):
     """A predictor step that raises (a degenerate state, e.g. of a fallen robot) or blows up leaves
     the ports at the last good prediction, and the link's stages go on without an exception."""

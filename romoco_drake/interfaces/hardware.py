@@ -287,6 +287,16 @@ class BlindPrediction:
     base_wxyz: np.ndarray
 
 
+@dataclass(frozen=True)
+class MissedUpdate:
+    """A receive update without a new proprioception message, kept while the stream is still
+    fresh: what the prediction catches up on if it goes stale."""
+
+    command: np.ndarray  # the motor command being sent
+    base: np.ndarray | None  # the motion capture's last values (None before its first message)
+    base_fresh: bool  # whether they reset the predicted base (the stream is fresh)
+
+
 class MeasurementReceiver(LeafSystem):
     """Proprioception and motion-capture messages → the station's measurement ports.
 
@@ -299,17 +309,19 @@ class MeasurementReceiver(LeafSystem):
     | link            | out | 1        | the :class:`LinkStage` of the needed streams          |
     | stats           | out | 5        | rejected, stale events, entries to ride-through, stand, damping |
 
-    From the first update without a new proprioception message the receiver predicts the robot
-    (:class:`~romoco_drake.interfaces.predictor.ContactPredictor`): the last message's joints,
-    the base from the last motion-capture message (without one: the IMU's orientation and gyro,
-    the velocity that keeps the feet in contact still) and its contact flags, propagated one
-    update period at a time under the ``command`` input, with the base reset to the motion
-    capture's while that stream is fresh. Once the stream is stale (``timeout_s``) the outputs
-    carry the prediction (joints, contacts, the IMU turned, its gyro and accelerometer from the
-    predicted base motion), through ride-through and STAND; in DAMPING it stops where it was. A
-    new message ends it. A stale base stream with fresh proprioception is predicted at constant
-    velocity (:func:`predict_base_state`). The command input has no feedthrough: the outputs
-    are the state of the last update.
+    When proprioception goes stale (``timeout_s``) the receiver predicts the robot
+    (:class:`~romoco_drake.interfaces.predictor.ContactPredictor`) from the last message on: its
+    joints, the base from the motion capture of the first update after it (without any: the
+    IMU's orientation and gyro, the velocity that keeps the feet in contact still) and its
+    contact flags, propagated one update period per update under the ``command`` input, with the
+    base reset to the motion capture's while that stream is fresh. Nothing is predicted while
+    the stream is fresh: the updates without a new message keep their command and motion capture
+    (:class:`MissedUpdate`), and in the last update before the stream goes stale the prediction
+    starts and catches up on them. The outputs carry the prediction (joints, contacts, the IMU
+    turned, its gyro and accelerometer from the predicted base motion) through ride-through and
+    STAND; in DAMPING it stops where it was. A new message ends it. A stale base stream with
+    fresh proprioception is predicted at constant velocity (:func:`predict_base_state`). The
+    command input has no feedthrough: the outputs are the state of the last update.
     """
 
     def __init__(self, robot: RobotModel, config: LinkConfig, require_base_state: bool = False):
@@ -335,6 +347,7 @@ class MeasurementReceiver(LeafSystem):
                                 np.concatenate([start["base_pose"], start["base_velocity"]]))
         self.command_port = self.DeclareVectorInputPort("command", 5 * robot.nu)
         self._blind = self.DeclareAbstractState(Value[object](None))
+        self._missed = self.DeclareAbstractState(Value[object](()))
         self._link = self.DeclareDiscreteState([float(LinkStage.DAMPING)])
         self._stats = self.DeclareDiscreteState(5)
         layout = {"joint_state": (self.proprioception, 0, 2 * nj),
@@ -351,7 +364,7 @@ class MeasurementReceiver(LeafSystem):
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.receive_rate_hz, 0.0, self._update)
 
     def blind(self, context) -> BlindPrediction | None:
-        """The current prediction (None while proprioception arrives)."""
+        """The current prediction (None until the update before proprioception goes stale)."""
         return context.get_abstract_state(int(self._blind)).get_value()
 
     def _measured(self, context, inbox: Inbox) -> np.ndarray:
@@ -383,13 +396,13 @@ class MeasurementReceiver(LeafSystem):
         return np.concatenate([x[r.joint_q_index], x[r.nq + r.joint_v_index], wxyz, gyro, accelerometer,
                                np.array(blind.state.contact, dtype=float)])
 
-    def _start(self, context, state) -> BlindPrediction:
-        """The prediction from the last good messages (class docstring)."""
+    def _start(self, state, base: np.ndarray | None) -> BlindPrediction:
+        """The prediction from the last proprioception message and the motion capture ``base``
+        (class docstring)."""
         r, nj = self.robot, len(self.robot.joint_names)
         values = state.get_discrete_state().get_vector(int(self.proprioception.values)).value()
         imu, contact = values[2 * nj:2 * nj + 10], values[2 * nj + 10:] > 0.5
-        if self.base_state.age(context, state) < np.inf:
-            base = state.get_discrete_state().get_vector(int(self.base_state.values)).value()
+        if base is not None:
             x = plant_state(r, values[:2 * nj], base[:7], base[7:])
         else:
             wxyz = imu[:4] if np.all(np.isfinite(imu[:4])) else r.nominal.q[r.base_q_start:r.base_q_start + 4]
@@ -402,28 +415,47 @@ class MeasurementReceiver(LeafSystem):
         return BlindPrediction(self.predictor.start(x, contact), imu.copy(), base_wxyz)
 
     def _predict(self, context, state, stage: LinkStage) -> None:
-        """Starts, steps, or ends the prediction in this update (class docstring)."""
-        blind = self.blind(context)
+        """Keeps this update for a catch-up, or starts, steps or ends the prediction (class docstring)."""
+        blind, missed = self.blind(context), context.get_abstract_state(int(self._missed)).get_value()
+        abstract = state.get_mutable_abstract_state
         _, arrival, received = state.get_discrete_state().get_vector(int(self.proprioception.meta)).value()
         if not received or arrival == context.get_time():
             if blind is not None:
-                state.get_mutable_abstract_state(int(self._blind)).set_value(None)
+                abstract(int(self._blind)).set_value(None)
+            if missed:
+                abstract(int(self._missed)).set_value(())
             return
         if stage == LinkStage.DAMPING and blind is not None:
             return
-        blind = blind or self._start(context, state)
+        base = state.get_discrete_state().get_vector(int(self.base_state.values)).value().copy()
+        update = MissedUpdate(self.command_port.Eval(context).copy(),
+                              base if self.base_state.age(context, state) < np.inf else None,
+                              self.base_state.fresh(context, state, self.config.timeout_s))
+        # The outputs read the stream's age at any time before the next update: the prediction is
+        # there from the last update before it goes stale (half an update early against round-off).
+        h = 1.0 / self.config.receive_rate_hz
+        if self.proprioception.fresh(context, state, self.config.timeout_s - 1.5 * h):
+            abstract(int(self._missed)).set_value((*missed, update))
+            return
+        pending = (*missed, update)
+        if missed:
+            abstract(int(self._missed)).set_value(())
+        blind = blind or self._start(state, pending[0].base)
         p = blind.state
-        if self.base_state.fresh(context, state, self.config.timeout_s):
-            x = p.x.copy()
-            x[self._base_rows()] = state.get_discrete_state().get_vector(int(self.base_state.values)).value()
-            p = dataclasses.replace(p, x=x)
-        try:
-            p = self.predictor.step(p, self.command_port.Eval(context), 1.0 / self.config.receive_rate_hz)
-        except (RuntimeError, np.linalg.LinAlgError):  # a degenerate state, e.g. of a fallen robot
-            return
-        if not np.all(np.isfinite(p.x)):  # a prediction that blows up is held where it last was
-            return
-        state.get_mutable_abstract_state(int(self._blind)).set_value(dataclasses.replace(blind, state=p))
+        for u in pending:
+            reset = p
+            if u.base_fresh:
+                x = p.x.copy()
+                x[self._base_rows()] = u.base
+                reset = dataclasses.replace(p, x=x)
+            try:
+                stepped = self.predictor.step(reset, u.command, h)
+            except (RuntimeError, np.linalg.LinAlgError):  # a degenerate state, e.g. of a fallen robot
+                break
+            if not np.all(np.isfinite(stepped.x)):  # a prediction that blows up is held where it last was
+                break
+            p = stepped
+        abstract(int(self._blind)).set_value(dataclasses.replace(blind, state=p))
 
     def _update(self, context, state) -> None:
         rejected, stale_events, *entries = context.get_discrete_state(self._stats).value()
