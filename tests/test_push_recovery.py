@@ -76,6 +76,6 @@ def test_g1_survives_a_lateral_push_only_with_step_adaptation(adapt):
     """G1 at 0.4 m/s, 20 N·s to its right half-way through a right stance (the bench's cell
     right/0.5): with step adaptation it is still up 2 s later; with the planner's own steps it
     falls."""
-    scenario = pushed(walking_scenario("g1", adapt), 3.9181, 20.0, "right")
+    scenario = pushed(walking_scenario("g1", adapt), 3.6521, 20.0, "right")
     summary = run_scenario(dataclasses.replace(scenario, duration_s=6.0), stop_after_fall=0.1)
     assert summary["fell"] is not adapt

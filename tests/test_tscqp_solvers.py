@@ -113,3 +113,20 @@ def test_torque_limits_no_force_can_meet_are_relaxed():
         solution, warm = TscQp(robot, contact, solver=solver).compute(kin, demanding)
         assert solution.success and solution.relaxed and warm is None
         assert np.abs(solution.tau).max() > robot.effort_limits.max()
+
+
+def test_a_joint_moving_into_its_limit_is_stopped_within_the_horizon():
+    """The stance knee at its stop and still straightening at 2 rad/s: both solvers decelerate it at
+    least enough to stop within joint_limit_horizon (v̇ ≥ 2/h)."""
+    robot, contact, ticks = _recorded("g1_walk")
+    x, refs = ticks[Domain.LEFT][0]
+    x = x.copy()
+    joint = robot.plant.GetJointByName("left_knee_joint")
+    x[joint.position_start()] = joint.position_lower_limits()[0]
+    x[robot.nq + joint.velocity_start()] = -2.0
+    kin = RobotKinematics(robot, x)
+    for solver in ("daqp", "clarabel"):
+        qp = TscQp(robot, contact, solver=solver, joint_limit_horizon=0.05)
+        solution, _ = qp.compute(kin, refs)
+        assert solution.success and not solution.relaxed
+        assert solution.vdot[joint.velocity_start()] >= 2.0 / 0.05 - 1e-4

@@ -5,6 +5,7 @@
           J_h v̇ + J̇_h v = −k_h J_h v            (holonomic: contacts and internal loops)
           A_f λ_c ≤ b_f                           (friction pyramid, CoP, unilateral contact)
           |τ| ≤ τ_max                             (torque limits)
+          q_lo ≤ q + v h + ½ v̇ h² ≤ q_hi            (leg joint limits, horizon h)
 
 with ÿ^cmd = ÿ_d − K_p (y − y_d) − K_d (ẏ − ẏ_d). The small ε terms keep the QP strictly convex
 (it has a unique solution even when tasks are redundant). The small k_h damps constraint
@@ -64,7 +65,8 @@ class QpData:
 
     The first ``n_eq`` rows of A are equalities (lower = upper): the unactuated rows of the
     dynamics, then the holonomic constraints. The next nu rows are the torques τ = T x + c
-    within the effort limits, the rest the friction/CoP rows on the contact forces (lower −∞).
+    within the effort limits, then ``n_lim`` joint-limit rows on v̇, the rest the friction/CoP
+    rows on the contact forces (lower −∞).
     """
 
     H: np.ndarray
@@ -75,6 +77,7 @@ class QpData:
     n_eq: int
     T: np.ndarray
     c: np.ndarray
+    n_lim: int = 0
 
 
 class _ClarabelProgram:
@@ -176,6 +179,14 @@ class TscQp:
     actuated rows of the dynamics give τ = (M v̇ + C − J_hᵀ λ)_a explicitly. What is left are
     the unactuated rows as equalities and the torque limits as inequalities on (v̇, λ), which
     makes the QP about 40 % smaller than one over (v̇, τ, λ).
+
+    Joint limits: each actuated, unlocked joint's acceleration is bounded so that, at its present
+    velocity, it would stop at its position limits within ``joint_limit_horizon`` s. Without
+    them the QP plans through a limit the robot then meets: a pushed G1's stance knee straightened
+    to its stop while the QP still counted on it extending, so the pelvis pitch it then commanded
+    never came. A joint at or past a limit is only asked to stop moving into it within h, not to
+    come back (which the contacts and torque limits may not allow); if the rows still cannot all
+    hold, the relaxed solve drops the joint limits with the torque limits.
     """
 
     def __init__(self, robot: RobotModel, contact: ContactModel, solver: Literal["daqp", "clarabel"] = "daqp",
@@ -183,7 +194,8 @@ class TscQp:
                  constraint_damping: float = 20.0,
                  pivot_moment_weight: float = 1.0, load_split_weight: float = 1e-4,
                  clarabel_tolerance: float = 1e-6, angular_momentum_weight: float = 0.0,
-                 angular_momentum_damping: float = 10.0, ankle_gain: float = 0.0):
+                 angular_momentum_damping: float = 10.0, ankle_gain: float = 0.0,
+                 joint_limit_horizon: float = 0.05):
         if solver not in QP_SOLVERS:
             raise RomocoError(f"unknown QP solver '{solver}' (known: {', '.join(QP_SOLVERS)})")
         self.robot, self.contact, self.solver_name = robot, contact, solver
@@ -209,9 +221,19 @@ class TscQp:
         self._rows_a = np.argmax(B, axis=0)  # the velocity row each actuator drives, actuator order
         self._rows_u = np.flatnonzero(B.sum(axis=1) == 0.0)
         self._effort = robot.effort_limits
+        if not joint_limit_horizon > 0.0:
+            raise RomocoError(f"joint_limit_horizon must be positive, got {joint_limit_horizon}")
+        self._h_lim = joint_limit_horizon
+        plant = robot.plant
+        q_lo, q_hi = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
+        free = ~robot.locked_actuator_mask
+        q_idx, v_idx = robot.actuated_q_index[free], robot.actuated_v_index[free]
+        finite = np.isfinite(q_lo[q_idx]) & np.isfinite(q_hi[q_idx])
+        self._lim_q, self._lim_v = q_idx[finite], v_idx[finite]
+        self._lim_lo, self._lim_hi = q_lo[self._lim_q], q_hi[self._lim_q]
         # Warm start: a domain tag, then one active-set flag per inequality row (the most any domain has).
         friction_rows = sum(foot.A_S.shape[0] for foot in contact.feet.values())
-        self.warm_start_size = 1 + robot.nu + friction_rows
+        self.warm_start_size = 1 + robot.nu + len(self._lim_q) + friction_rows
 
     def formulate(self, kin: RobotKinematics, refs: TaskReferences) -> QpData:
         """The QP of this tick (module docstring), from the shared evaluation and the references.
@@ -250,7 +272,7 @@ class TscQp:
         H.flat[::n + 1] += self._regularization(n)
         g = -2.0 * (S.T @ s)
         # Rows: unactuated dynamics and the holonomic constraints on an orthonormal basis U of
-        # J_h's column space (equalities), torques, friction. The multi-point contact rows are
+        # J_h's column space (equalities), torques, joint limits, friction. The multi-point contact rows are
         # redundant (rank 6 of 9 for a plane foot): an interior-point solver reads the round-off
         # in redundant rows as infeasibility, an active-set one as a singular KKT system.
         u = self._rows_u
@@ -258,7 +280,8 @@ class TscQp:
         n_u, rank = len(u), U.shape[1]
         n_eq = n_u + rank
         n_fric = refs.A_f.shape[0]
-        A = np.zeros((n_eq + nu + n_fric, n))
+        n_lim = len(self._lim_v)
+        A = np.zeros((n_eq + nu + n_lim + n_fric, n))
         lower = np.empty(len(A))
         A[:n_u, :nv] = M[u]
         A[:n_u, nv:] = -Jh[:, u].T
@@ -267,13 +290,21 @@ class TscQp:
             A[n_u:n_eq, :nv] = U.T @ Jh
             lower[n_u:n_eq] = U.T @ (-refs.holonomic.Jdot_v - self.k_h * (Jh @ v))
         A[n_eq:n_eq + nu] = T
-        A[n_eq + nu:, f] = refs.A_f
+        lim = n_eq + nu + np.arange(n_lim)
+        A[lim, self._lim_v] = 1.0
+        A[n_eq + nu + n_lim:, f] = refs.A_f
         upper = lower.copy()
         lower[n_eq:n_eq + nu] = -self._effort - c
         upper[n_eq:n_eq + nu] = self._effort - c
-        lower[n_eq + nu:] = -np.inf
-        upper[n_eq + nu:] = refs.b_f
-        return QpData(H, g, A, lower, upper, n_eq, T, c)
+        h = self._h_lim
+        drift = kin.q[self._lim_q] + h * v[self._lim_v]
+        # At or past a limit the bound asks no more than to stop within h, not to come back.
+        stop = -v[self._lim_v] / h
+        lower[lim] = np.minimum(2.0 * (self._lim_lo - drift) / h**2, np.maximum(stop, 0.0))
+        upper[lim] = np.maximum(2.0 * (self._lim_hi - drift) / h**2, np.minimum(stop, 0.0))
+        lower[n_eq + nu + n_lim:] = -np.inf
+        upper[n_eq + nu + n_lim:] = refs.b_f
+        return QpData(H, g, A, lower, upper, n_eq, T, c, n_lim)
 
     def _extra_cost(self, kin: RobotKinematics, refs: TaskReferences, a_cmd: np.ndarray, n: int
                     ) -> tuple[np.ndarray, np.ndarray]:
@@ -342,10 +373,11 @@ class TscQp:
         x, active = workspace.solve(qp, flags)
         relaxed = False
         if x is None:
-            # No v̇ and forces meet every torque limit with the contacts held (a weak joint, such as
-            # DRACO's knee, pushed past what it can hold): solve again without the limits, the
-            # motors clip the torque, and the tick counts as relaxed rather than failed.
-            rows = slice(qp.n_eq, qp.n_eq + self.robot.nu)
+            # No v̇ and forces meet every torque and joint limit with the contacts held (a weak
+            # joint, such as DRACO's knee, pushed past what it can hold; a joint already past its
+            # limit): solve again without them, the motors clip the torque, and the tick counts as
+            # relaxed rather than failed.
+            rows = slice(qp.n_eq, qp.n_eq + self.robot.nu + qp.n_lim)
             qp.lower[rows], qp.upper[rows] = -np.inf, np.inf
             x, active = workspace.solve(qp, None)
             relaxed, active = True, None
