@@ -122,8 +122,8 @@ declare_ranges(ControllerConfig, rate_hz=RATE_HZ, angular_momentum_weight=Range(
 class StepAdaptationConfig:
     """Step location and timing adaptation over the planner's steps (rom/step_adapt.py), for a
     foot-placement law when the robot has ``walking.step_reach``. Off by default: on G1 it made
-    the 0 → 1 m/s velocity step fall (its steps reach the forward bound) and did not yet raise
-    the push it survives (README). The weights are the QP's on the foothold, on σ = e^{λT} and on
+    the 0 → 1 m/s velocity step fall (its steps reached the forward bound), before G1's reach
+    was taken from its leg; ``romoco bench push`` turns it on (README). The weights are the QP's on the foothold, on σ = e^{λT} and on
     the DCM offset; only their ratios matter, and only when a step would leave the reach."""
 
     enabled: bool = False
