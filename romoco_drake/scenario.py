@@ -110,12 +110,16 @@ class ControllerConfig:
     angular_momentum_weight: float = 0.0
     angular_momentum_damping: float = 10.0
     ankle_gain: float = 0.0
+    # The TSC-QP's leg joint limits: each joint stops within this many seconds of its position
+    # limits (control/tscqp.py; 0: off). ``romoco bench push`` uses 0.05.
+    joint_limit_horizon: float = 0.0
 
 
 # Task weights are O(1-10); 1e4 would override every task. Damping above 1e3/s outruns any
 # controller tick; a CoP shift 10× the DCM error is a bang-bang ankle.
 declare_ranges(ControllerConfig, rate_hz=RATE_HZ, angular_momentum_weight=Range(0.0, 1e4),
-               angular_momentum_damping=Range(0.0, 1e3, "1/s"), ankle_gain=Range(0.0, 10.0))
+               angular_momentum_damping=Range(0.0, 1e3, "1/s"), ankle_gain=Range(0.0, 10.0),
+               joint_limit_horizon=Range(0.0, 1.0, "s"))
 
 
 @dataclass
@@ -123,8 +127,9 @@ class StepAdaptationConfig:
     """Step location and timing adaptation over the planner's steps (rom/step_adapt.py), for a
     foot-placement law when the robot has ``walking.step_reach``. Off by default: on G1 it made
     the 0 → 1 m/s velocity step fall (its steps reached the forward bound), before G1's reach
-    was taken from its leg; ``romoco bench push`` turns it on (README). The weights are the QP's on the foothold, on σ = e^{λT} and on
-    the DCM offset; only their ratios matter, and only when a step would leave the reach."""
+    was taken from its leg; ``romoco bench push`` turns it on (README). The weights are the QP's
+    on the foothold, on σ = e^{λT} and on the DCM offset; only their ratios matter, and only when
+    a step would leave the reach."""
 
     enabled: bool = False
     step_weight: float = 1.0

@@ -35,18 +35,21 @@ START_S = 0.5  # standing before the walking command
 WALK_S = 3.0  # walking before the step the push falls in
 PUSH_S = 0.1  # push duration
 HOLD_S = 3.0  # survival window after the push start
+JOINT_LIMIT_HORIZON = 0.05  # s, the TSC-QP's leg joint limits (control/tscqp.py)
 CRITERION = f"no fall within {HOLD_S:g} s of the push start (base tilt, base height or body contact)"
 
 
 def walking_scenario(robot: str, adapt: bool = True, ankle_gain: float = 0.0,
                      angular_momentum_weight: float = 0.0, speed: float = SPEED) -> Scenario:
     """``diagrams/<robot>_walk.yaml`` walking forward at ``speed`` from START_S, step adaptation on or
-    off, with the TSC-QP's ankle gain and angular-momentum weight (control/tscqp.py)."""
+    off, with the TSC-QP's ankle gain and angular-momentum weight and its joint limits
+    (JOINT_LIMIT_HORIZON; control/tscqp.py)."""
     base = load_scenario(f"{robot}_walk")
     planner = dataclasses.replace(base.planner, step_adaptation=dataclasses.replace(
         base.planner.step_adaptation, enabled=adapt))
     controller = dataclasses.replace(base.controller, ankle_gain=ankle_gain,
-                                     angular_momentum_weight=angular_momentum_weight)
+                                     angular_momentum_weight=angular_momentum_weight,
+                                     joint_limit_horizon=JOINT_LIMIT_HORIZON)
     return dataclasses.replace(base, name=f"{robot}_push", planner=planner, controller=controller,
                                disturbances=[], command=[CommandPoint(0.0), CommandPoint(START_S, speed)])
 
