@@ -182,12 +182,12 @@ class TscQp:
 
     Joint limits (``joint_limit_horizon`` > 0; 0, the default, leaves them out): each actuated,
     unlocked joint's acceleration is bounded so that, at its present velocity, it would stop at
-    its position limits within ``joint_limit_horizon`` s. Without
-    them the QP plans through a limit the robot then meets: a pushed G1's stance knee straightened
-    to its stop while the QP still counted on it extending, so the pelvis pitch it then commanded
-    never came. A joint at or past a limit is only asked to stop moving into it within h, not to
-    come back (which the contacts and torque limits may not allow); if the rows still cannot all
-    hold, the relaxed solve drops the joint limits with the torque limits. Off by default: with
+    its position limits within ``joint_limit_horizon`` s. Without them the QP plans through a
+    limit the robot then meets: a pushed G1's stance knee straightened to its stop while the QP
+    still counted on it extending, so the pelvis pitch it then commanded never came. A joint at
+    or past a limit is only asked to stop moving into it within h, not to come back (which the
+    contacts and torque limits may not allow); if the rows still cannot all hold, the relaxed
+    solve drops the joint limits with the torque limits. Off by default: with
     them H1 on the invariant EKF tracked 0.3 m/s with a lateral rms error of 0.051-0.053 m/s
     against the walking test's 0.05.
     """
