@@ -377,7 +377,7 @@ def _cmd_bench_dropout(args) -> int:
 
 
 def _cmd_bench_push(args) -> int:
-    from romoco_drake.bench.push import DIRECTIONS, bench_push
+    from romoco_drake.bench.push import ANGULAR_MOMENTUM_WEIGHT, DIRECTIONS, bench_push
     from romoco_drake.robots.model import robot_names
     from romoco_drake.runner import stderr_progress
 
@@ -389,12 +389,14 @@ def _cmd_bench_push(args) -> int:
         raise RomocoError(f"--impulses must be in (0, 500] N·s, got {args.impulses}")
     if not all(0.0 <= ph < 1.0 for ph in phases):
         raise RomocoError(f"--phases must be in [0, 1), got {args.phases}")
-    if not (0.0 <= args.ankle_gain <= 10.0 and 0.0 <= args.angular_momentum_weight <= 1e4):
+    am_weight = args.angular_momentum_weight
+    am_weight = ANGULAR_MOMENTUM_WEIGHT if am_weight is None else am_weight
+    if not (0.0 <= args.ankle_gain <= 10.0 and 0.0 <= am_weight <= 1e4):
         raise RomocoError("--ankle-gain must be in [0, 10] and --angular-momentum-weight in [0, 1e4]")
     if not (0.0 <= args.speed <= 2.0 and 0.01 <= args.push_duration <= 1.0):
         raise RomocoError("--speed must be in [0, 2] m/s and --push-duration in [0.01, 1] s")
     result = bench_push(args.robot, impulses, phases, directions, adapt=not args.no_adapt,
-                        ankle_gain=args.ankle_gain, angular_momentum_weight=args.angular_momentum_weight,
+                        ankle_gain=args.ankle_gain, angular_momentum_weight=am_weight,
                         speed=args.speed, push_s=args.push_duration, sweep=_sweep(args),
                         progress=stderr_progress)
     if args.json:
@@ -653,8 +655,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-adapt", action="store_true",
                    help="without step adaptation (the planner's own steps)")
     p.add_argument("--ankle-gain", type=float, default=0.0, help="TSC-QP ankle strategy (0: off)")
-    p.add_argument("--angular-momentum-weight", type=float, default=0.0,
-                   help="TSC-QP angular-momentum damping task (0: off)")
+    p.add_argument("--angular-momentum-weight", type=float,
+                   help="TSC-QP angular-momentum damping task, per (N·m)² on roll and yaw and a quarter "
+                        "of it on pitch (default: 30; 0: off)")
     p.add_argument("--speed", type=float, default=0.4, help="forward walking speed (m/s)")
     p.add_argument("--push-duration", type=float, default=0.1, help="how long each push lasts (s)")
     p.add_argument("--json", action="store_true", help="print one JSON object (last line)")

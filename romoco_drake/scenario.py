@@ -109,6 +109,9 @@ class ControllerConfig:
     # line feet of H1 and Cassie both tracked worse (H1 vx rms error 0.035 → 0.064 m/s).
     angular_momentum_weight: float = 0.0
     angular_momentum_damping: float = 10.0
+    # Per-axis factors of that weight in the heading frame (roll, pitch, yaw); ``romoco bench push``
+    # uses [1, 0.25, 1].
+    angular_momentum_axes: list[float] = dataclasses.field(default_factory=lambda: [1.0, 1.0, 1.0])
     ankle_gain: float = 0.0
     # The TSC-QP's leg joint limits: each joint stops within this many seconds of its position
     # limits (control/tscqp.py; 0: off). ``romoco bench push`` uses 0.05.
@@ -119,6 +122,7 @@ class ControllerConfig:
 # controller tick; a CoP shift 10× the DCM error is a bang-bang ankle.
 declare_ranges(ControllerConfig, rate_hz=RATE_HZ, angular_momentum_weight=Range(0.0, 1e4),
                angular_momentum_damping=Range(0.0, 1e3, "1/s"), ankle_gain=Range(0.0, 10.0),
+               angular_momentum_axes=Range(0.0, 1.0, size=3),
                joint_limit_horizon=Range(0.0, 1.0, "s"))
 
 

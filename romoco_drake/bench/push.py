@@ -36,19 +36,27 @@ WALK_S = 3.0  # walking before the step the push falls in
 PUSH_S = 0.1  # push duration
 HOLD_S = 3.0  # survival window after the push start
 JOINT_LIMIT_HORIZON = 0.05  # s, the TSC-QP's leg joint limits (control/tscqp.py)
+# The TSC-QP's angular-momentum damping (hip strategy, control/tscqp.py): weight per (N·m)² and its
+# factors on roll, pitch and yaw. On G1 (16 cells at 20, 25 and 30 N·s) weight 0 left three lateral
+# cells under 20 N·s; 30 on every axis lifted them but felled forward at phase 0.5 at 20 N·s,
+# which a quarter of it on pitch (30 × 0.25) keeps.
+ANGULAR_MOMENTUM_WEIGHT = 30.0
+ANGULAR_MOMENTUM_AXES = (1.0, 0.25, 1.0)
 CRITERION = f"no fall within {HOLD_S:g} s of the push start (base tilt, base height or body contact)"
 
 
 def walking_scenario(robot: str, adapt: bool = True, ankle_gain: float = 0.0,
-                     angular_momentum_weight: float = 0.0, speed: float = SPEED) -> Scenario:
+                     angular_momentum_weight: float = ANGULAR_MOMENTUM_WEIGHT, speed: float = SPEED
+                     ) -> Scenario:
     """``diagrams/<robot>_walk.yaml`` walking forward at ``speed`` from START_S, step adaptation on or
-    off, with the TSC-QP's ankle gain and angular-momentum weight and its joint limits
-    (JOINT_LIMIT_HORIZON; control/tscqp.py)."""
+    off, with the TSC-QP's ankle gain, angular-momentum weight (on ANGULAR_MOMENTUM_AXES) and
+    joint limits (JOINT_LIMIT_HORIZON; control/tscqp.py)."""
     base = load_scenario(f"{robot}_walk")
     planner = dataclasses.replace(base.planner, step_adaptation=dataclasses.replace(
         base.planner.step_adaptation, enabled=adapt))
     controller = dataclasses.replace(base.controller, ankle_gain=ankle_gain,
                                      angular_momentum_weight=angular_momentum_weight,
+                                     angular_momentum_axes=list(ANGULAR_MOMENTUM_AXES),
                                      joint_limit_horizon=JOINT_LIMIT_HORIZON)
     return dataclasses.replace(base, name=f"{robot}_push", planner=planner, controller=controller,
                                disturbances=[], command=[CommandPoint(0.0), CommandPoint(START_S, speed)])
@@ -78,7 +86,8 @@ def pushed(scenario: Scenario, t: float, impulse: float, direction: str, push_s:
 
 
 def bench_push(robot: str = "g1", impulses=IMPULSES, phases=PHASES, directions=tuple(DIRECTIONS),
-               adapt: bool = True, ankle_gain: float = 0.0, angular_momentum_weight: float = 0.0,
+               adapt: bool = True, ankle_gain: float = 0.0,
+               angular_momentum_weight: float = ANGULAR_MOMENTUM_WEIGHT,
                speed: float = SPEED, push_s: float = PUSH_S, sweep: SweepOptions = IN_PROCESS,
                progress=None) -> dict:
     """The push table (module docstring): per cell the largest impulse survived, and per direction
@@ -104,6 +113,7 @@ def bench_push(robot: str = "g1", impulses=IMPULSES, phases=PHASES, directions=t
             break
     per_direction = {d: min(cells[(d, ph)]["survived"] for ph in phases) for d in directions}
     return {"robot": robot, "step_adaptation": adapt, "ankle_gain": ankle_gain,
-            "angular_momentum_weight": angular_momentum_weight, "speed_mps": speed, "push_s": push_s,
+            "angular_momentum_weight": angular_momentum_weight,
+            "angular_momentum_axes": list(ANGULAR_MOMENTUM_AXES), "speed_mps": speed, "push_s": push_s,
             "impulses": sorted(impulses), "step_s": round(step, 4), "criterion": CRITERION,
             "per_direction": per_direction, "cells": list(cells.values())}

@@ -28,7 +28,8 @@ CONTROLLERS.add("tscqp", lambda robot, contact, period, config: TscQp(
                     robot, contact, solver=config.solver,
                     angular_momentum_weight=config.angular_momentum_weight,
                     angular_momentum_damping=config.angular_momentum_damping, ankle_gain=config.ankle_gain,
-                    joint_limit_horizon=config.joint_limit_horizon),
+                    joint_limit_horizon=config.joint_limit_horizon,
+                    angular_momentum_axes=tuple(config.angular_momentum_axes)),
                 "task-space QP over v̇ and contact forces (RoMoCo §V-A)", walking=True, motor_command=False,
               qp_solver=True)
 CONTROLLERS.add("id", lambda robot, contact, period, config: InverseDynamics(robot, contact),

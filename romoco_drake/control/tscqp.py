@@ -167,7 +167,9 @@ class TscQp:
       rate task k̇_G = −``angular_momentum_damping`` k_G (A_G v̇ + Ȧ_G v on its angular rows), in
       every domain with a contact. Pelvis and swing tasks still set the posture; this damps the
       whole-body spin a push on the base leaves, which the pelvis tasks alone trade against
-      the legs.
+      the legs. ``angular_momentum_axes`` scales the weight per axis of the heading frame (roll,
+      pitch, yaw; the pelvis yaw): on G1 a full pitch weight held a forward-pushed robot upright
+      while its steps needed it to lean (``romoco bench push`` uses 0.25).
     - ankle strategy: in walking's single support the pivot-moment target is no longer zero but
       the moment of the stance force with its centre of pressure moved by ``ankle_gain`` × the
       DCM's horizontal error from the step's ALIP plan (``TaskReferences.com_plan``), toward the
@@ -198,7 +200,8 @@ class TscQp:
                  pivot_moment_weight: float = 1.0, load_split_weight: float = 1e-4,
                  clarabel_tolerance: float = 1e-6, angular_momentum_weight: float = 0.0,
                  angular_momentum_damping: float = 10.0, ankle_gain: float = 0.0,
-                 joint_limit_horizon: float = 0.0):
+                 joint_limit_horizon: float = 0.0,
+                 angular_momentum_axes: tuple[float, float, float] = (1.0, 1.0, 1.0)):
         if solver not in QP_SOLVERS:
             raise RomocoError(f"unknown QP solver '{solver}' (known: {', '.join(QP_SOLVERS)})")
         self.robot, self.contact, self.solver_name = robot, contact, solver
@@ -214,6 +217,14 @@ class TscQp:
         self.w_k, self.d_k, self.ankle_gain = angular_momentum_weight, angular_momentum_damping, ankle_gain
         if not (self.w_k >= 0.0 and self.d_k >= 0.0 and self.ankle_gain >= 0.0):
             raise RomocoError("angular momentum weight and damping and the ankle gain must be non-negative")
+        axes = np.asarray(angular_momentum_axes, dtype=float)
+        if not (axes.shape == (3,) and np.all(axes >= 0.0)):
+            raise RomocoError(f"angular_momentum_axes must be 3 non-negative numbers, "
+                              f"got {angular_momentum_axes}")
+        # Row scales of the heading-frame rows, or None when the weight is the same on every axis
+        # (then the frame does not matter and the world rows are used as they are).
+        self._am_scale = None if np.all(axes == axes[0]) else np.sqrt(axes / axes.max())
+        self.w_k *= float(axes.max())
         self._workspaces: dict[Domain, _ClarabelProgram | _DaqpWorkspace] = {}
         self._diagonals: dict[int, np.ndarray] = {}
         self._tasks = TaskStack(robot, gains)
@@ -329,9 +340,16 @@ class TscQp:
         if n_f and self.w_k > 0.0:
             A_G, Adot_v = kin.centroidal_momentum_matrix()
             root = math.sqrt(self.w_k)
+            rows, target = A_G[:3], -self.d_k * (A_G[:3] @ kin.v) - Adot_v[:3]
+            if self._am_scale is not None:
+                R = kin.R_base
+                yaw = math.atan2(R[1, 0], R[0, 0])
+                c, s = math.cos(yaw), math.sin(yaw)
+                to_heading = self._am_scale[:, None] * np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+                rows, target = to_heading @ rows, to_heading @ target
             S = np.zeros((3, n))
-            S[:, :nv] = root * A_G[:3]
-            blocks.append((S, root * (-self.d_k * (A_G[:3] @ kin.v) - Adot_v[:3])))
+            S[:, :nv] = root * rows
+            blocks.append((S, root * target))
         if not blocks:
             return np.zeros((0, n)), np.zeros(0)
         return np.vstack([S for S, _ in blocks]), np.concatenate([s for _, s in blocks])
