@@ -132,3 +132,32 @@ def test_a_joint_moving_into_its_limit_is_stopped_within_the_horizon():
         solution, _ = TscQp(robot, contact, solver=solver, joint_limit_horizon=0.01).compute(kin, refs)
         assert solution.success and not solution.relaxed
         assert solution.vdot[joint.velocity_start()] >= 2.0 / 0.01 - 1e-4
+
+
+def test_angular_momentum_axes_weigh_the_heading_frame():
+    """With the pelvis turned 0.7 rad, angular-momentum weights (1, 0.25, 1) add
+    2 w A_kᵀ R diag(1, 0.25, 1) Rᵀ A_k to the Hessian (R: the pelvis yaw), not the same
+    weights on world axes; equal factors add 2 w A_kᵀ A_k."""
+    robot, contact, ticks = _recorded("g1_walk")
+    x, refs = ticks[Domain.LEFT][0]
+    x = x.copy()
+    x[:4] = [np.cos(0.35), 0.0, 0.0, np.sin(0.35)]  # base quaternion (w, x, y, z): yaw 0.7
+    kin = RobotKinematics(robot, x)
+    nv, w = robot.nv, 30.0
+    A_k = kin.centroidal_momentum_matrix()[0][:3]
+    yaw = np.arctan2(kin.R_base[1, 0], kin.R_base[0, 0])
+    assert abs(yaw - 0.7) < 1e-9
+    c, s = np.cos(yaw), np.sin(yaw)
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    base = TscQp(robot, contact).formulate(kin, refs).H[:nv, :nv]
+
+    def added(axes):
+        qp = TscQp(robot, contact, angular_momentum_weight=w, angular_momentum_axes=axes).formulate(kin, refs)
+        return qp.H[:nv, :nv] - base
+
+    scale = np.abs(base).max()
+    heading = 2.0 * w * A_k.T @ R @ np.diag([1.0, 0.25, 1.0]) @ R.T @ A_k
+    world = 2.0 * w * A_k.T @ np.diag([1.0, 0.25, 1.0]) @ A_k
+    assert np.allclose(added((1.0, 0.25, 1.0)), heading, atol=1e-9 * scale)
+    assert not np.allclose(heading, world, atol=1e-3 * np.abs(world).max())
+    assert np.allclose(added((0.5, 0.5, 0.5)), w * A_k.T @ A_k, atol=1e-9 * scale)
