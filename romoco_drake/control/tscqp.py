@@ -39,7 +39,7 @@ from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.embedding.references import TaskReferences
 from romoco_drake.errors import RomocoError
 from romoco_drake.modes import Domain
-from romoco_drake.robots.kinematics import RobotKinematics
+from romoco_drake.robots.kinematics import RobotKinematics, heading_rotation
 from romoco_drake.robots.model import RobotModel
 
 QP_SOLVERS = ("daqp", "clarabel")
@@ -168,8 +168,9 @@ class TscQp:
       every domain with a contact. Pelvis and swing tasks still set the posture; this damps the
       whole-body spin a push on the base leaves, which the pelvis tasks alone trade against
       the legs. ``angular_momentum_axes`` scales the weight per axis of the heading frame (roll,
-      pitch, yaw; the pelvis yaw): on G1 a full pitch weight held a forward-pushed robot upright
-      while its steps needed it to lean (``romoco bench push`` uses 0.25).
+      pitch, yaw about the pelvis yaw): axis i weighs ``angular_momentum_weight`` × axes[i]. On G1
+      the full weight on pitch felled a forward push at mid-step that a quarter of it (what
+      ``romoco bench push`` uses) survives.
     - ankle strategy: in walking's single support the pivot-moment target is no longer zero but
       the moment of the stance force with its centre of pressure moved by ``ankle_gain`` × the
       DCM's horizontal error from the step's ALIP plan (``TaskReferences.com_plan``), toward the
@@ -221,8 +222,9 @@ class TscQp:
         if not (axes.shape == (3,) and np.all(axes >= 0.0)):
             raise RomocoError(f"angular_momentum_axes must be 3 non-negative numbers, "
                               f"got {angular_momentum_axes}")
-        # Row scales of the heading-frame rows, or None when the weight is the same on every axis
-        # (then the frame does not matter and the world rows are used as they are).
+        # w_k becomes the largest axis weight and the heading-frame rows are scaled by
+        # √(axes / max); None when every axis weighs the same (the frame then does not matter
+        # and the world rows are used as they are).
         self._am_scale = None if np.all(axes == axes[0]) else np.sqrt(axes / axes.max())
         self.w_k *= float(axes.max())
         self._workspaces: dict[Domain, _ClarabelProgram | _DaqpWorkspace] = {}
@@ -342,10 +344,7 @@ class TscQp:
             root = math.sqrt(self.w_k)
             rows, target = A_G[:3], -self.d_k * (A_G[:3] @ kin.v) - Adot_v[:3]
             if self._am_scale is not None:
-                R = kin.R_base
-                yaw = math.atan2(R[1, 0], R[0, 0])
-                c, s = math.cos(yaw), math.sin(yaw)
-                to_heading = self._am_scale[:, None] * np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+                to_heading = self._am_scale[:, None] * heading_rotation(kin.R_base).T
                 rows, target = to_heading @ rows, to_heading @ target
             S = np.zeros((3, n))
             S[:, :nv] = root * rows

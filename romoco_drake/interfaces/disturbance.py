@@ -21,6 +21,7 @@ from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import ExternallyAppliedSpatialForce, MultibodyPlant
 from pydrake.systems.framework import LeafSystem
 
+from romoco_drake.robots.kinematics import heading_rotation
 from romoco_drake.robots.model import RobotModel
 
 ARROW_M_PER_N = 0.005  # drawn arrow length per newton: a 100 N push is a 0.5 m arrow
@@ -53,13 +54,6 @@ def body_names(robot: RobotModel) -> list[str]:
     """The robot's body names, the ones a disturbance may push."""
     plant = robot.plant
     return sorted(plant.get_body(i).name() for i in plant.GetBodyIndices(robot.model_instance))
-
-
-def yaw_rotation(R_WB: np.ndarray) -> np.ndarray:
-    """R_WH: the heading frame H of a body with orientation ``R_WB`` (its yaw about world z)."""
-    yaw = math.atan2(R_WB[1, 0], R_WB[0, 0])
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 class DisturbanceSource(LeafSystem):
@@ -97,7 +91,7 @@ class DisturbanceSource(LeafSystem):
         push = self._pushes[i]
         f, tau = np.asarray(push.force, float), np.asarray(push.torque, float)
         if push.frame == "heading":
-            R_WH = yaw_rotation(self.body_poses_port.Eval(context)[self._base].rotation().matrix())
+            R_WH = heading_rotation(self.body_poses_port.Eval(context)[self._base].rotation().matrix())
             f, tau = R_WH @ f, R_WH @ tau
         return f, tau
 

@@ -25,6 +25,7 @@ of C v are Ȧ_G v (:meth:`RobotKinematics.centroidal_momentum_matrix`).
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -37,6 +38,13 @@ from romoco_drake.robots.model import RobotModel
 
 _ORIGIN = np.zeros(3)
 
+
+
+def heading_rotation(R_WB: np.ndarray) -> np.ndarray:
+    """R_WH: the heading frame H of a body with orientation ``R_WB`` (its yaw about world z)."""
+    yaw = math.atan2(R_WB[1, 0], R_WB[0, 0])
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 class RobotKinematics:
     """The controller plant at one state; dynamics terms evaluated once, on first use.
