@@ -312,12 +312,13 @@ class TscQp:
         upper = lower.copy()
         lower[n_eq:n_eq + nu] = -self._effort - c
         upper[n_eq:n_eq + nu] = self._effort - c
-        h = self._h_lim
-        drift = kin.q[self._lim_q] + h * v[self._lim_v]
-        # At or past a limit the bound asks no more than to stop within h, not to come back.
-        stop = -v[self._lim_v] / h
-        lower[lim] = np.minimum(2.0 * (self._lim_lo - drift) / h**2, np.maximum(stop, 0.0))
-        upper[lim] = np.maximum(2.0 * (self._lim_hi - drift) / h**2, np.minimum(stop, 0.0))
+        if n_lim:  # joint_limit_horizon > 0
+            h = self._h_lim
+            drift = kin.q[self._lim_q] + h * v[self._lim_v]
+            # At or past a limit the bound asks no more than to stop within h, not to come back.
+            stop = -v[self._lim_v] / h
+            lower[lim] = np.minimum(2.0 * (self._lim_lo - drift) / h**2, np.maximum(stop, 0.0))
+            upper[lim] = np.maximum(2.0 * (self._lim_hi - drift) / h**2, np.minimum(stop, 0.0))
         lower[n_eq + nu + n_lim:] = -np.inf
         upper[n_eq + nu + n_lim:] = refs.b_f
         return QpData(H, g, A, lower, upper, n_eq, T, c, n_lim)
