@@ -63,11 +63,19 @@ def positive(hi: float = math.inf, unit: str = "") -> Range:
     return Range(0.0, hi, unit, lo_open=True)
 
 
+# Component clocks (controllers, estimators, sensors): 1 Hz is the slowest loop that still closes
+# anything; 10 kHz the fastest motor loop hardware runs. A clock need not divide the plant step:
+# G1 walking on a 2 ms step tracks alike at 300, 500 and 2000 Hz (measured), a faster controller
+# just sees the same state again.
+RATE_HZ = Range(1.0, 10000.0, "Hz")
+
+
 RANGES: dict[type, dict[str, Range]] = {}
 
 
 def declare_ranges(schema: type, **ranges: Range) -> None:
-    """Declares the ranges of ``schema``'s numeric fields (checked by :func:`check_ranges`)."""
+    """Declares the ranges of ``schema``'s numeric fields (checked by :func:`check_ranges`); a
+    subclass inherits its bases' ranges and may add or override fields."""
     names = {f.name for f in dataclasses.fields(schema)}
     unknown = set(ranges) - names
     if unknown:
@@ -79,7 +87,7 @@ def check_ranges(config: Any, where: str | Path, key: str = "") -> None:
     """Checks ``config`` (a dataclass instance) and every dataclass in it against their declared
     ranges; the first value out of range raises ConfigError naming ``where`` and its key."""
     if dataclasses.is_dataclass(config):
-        table = RANGES.get(type(config), {})
+        table = ranges_of(type(config))
         hints = typing.get_type_hints(type(config)) if table else {}
         for field in dataclasses.fields(config):
             value = getattr(config, field.name)
@@ -93,6 +101,14 @@ def check_ranges(config: Any, where: str | Path, key: str = "") -> None:
     elif isinstance(config, dict):
         for k, item in config.items():
             check_ranges(item, where, _join(key, k))
+
+
+def ranges_of(schema: type) -> dict[str, Range]:
+    """The ranges of ``schema``'s fields: its own table over those of its bases."""
+    table: dict[str, Range] = {}
+    for cls in reversed(schema.__mro__):
+        table.update(RANGES.get(cls, {}))
+    return table
 
 
 def _list_depth(tp: Any) -> int:

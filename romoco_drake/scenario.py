@@ -24,6 +24,7 @@ from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, Ve
 
 from romoco_drake.config import (
     RANGES,
+    RATE_HZ,
     Range,
     check_ranges,
     declare_ranges,
@@ -80,11 +81,6 @@ STATUS_PERIOD = 0.01  # s, controller status messages on LCM links (for logs)
 # round-off (final base height to 1e-13 m); with the direct loop a step behind they differed
 # by up to 0.013 m/s in the averaged velocity.
 LINK_TICK_OFFSET = 1e-4  # s, less than any plant step
-# Controller, estimator and sensor clocks: 1 Hz is the slowest loop that still closes anything;
-# 10 kHz the fastest motor loop hardware runs. A clock need not divide the plant step: G1
-# walking on a 2 ms step tracks alike at 300, 500 and 2000 Hz (measured), a faster controller
-# just sees the same state again.
-RATE_HZ = Range(1.0, 10000.0, "Hz")
 MAX_DURATION_S = 3600.0  # one hour of simulated time: longer is a typo, not a study
 
 
