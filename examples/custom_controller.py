@@ -6,7 +6,9 @@
 A walking controller is any object with ``warm_start_size`` and ``solve(kin, refs, previous,
 warm_start) -> SolverResult`` (``romoco_drake.control.controller.WholeBodySolver``); the
 ``WholeBodyController`` system runs it each tick with the shared kinematics and the embedding's
-task references, and handles its failures (damping safe mode, counted). Real motor drivers
+task references, and handles its failures (damping safe mode, counted). Its registry factory
+takes ``(robot, config)``, ``config`` being the settings dataclass it registers with: here the
+TSC-QP's, so the scenario's ``controller:`` section takes every TSC-QP setting. Real motor drivers
 limit how fast the torque may change; this one clips the TSC-QP's torque to
 ``max_rate`` N·m/s from the last command sent.
 """
@@ -15,7 +17,8 @@ import numpy as np
 
 from romoco_drake.control.controller import SolverResult
 from romoco_drake.control.registry import CONTROLLERS
-from romoco_drake.control.tscqp import TscQp
+from romoco_drake.control.tscqp import TscQp, TscqpConfig
+from romoco_drake.embedding.references import contact_model
 from romoco_drake.runner import run_scenario
 from romoco_drake.scenario import load_scenario, with_overrides
 
@@ -23,11 +26,11 @@ from romoco_drake.scenario import load_scenario, with_overrides
 class SlewLimitedTscQp:
     """TSC-QP whose feedforward torque moves at most ``max_rate`` N·m/s per tick."""
 
-    def __init__(self, robot, contact, period: float, max_rate: float = 10000.0):
-        self.inner = TscQp(robot, contact)
+    def __init__(self, robot, config: TscqpConfig, max_rate: float = 10000.0):
+        self.inner = TscQp.from_config(robot, contact_model(robot), config)
         self.warm_start_size = self.inner.warm_start_size
         self.nu = robot.nu
-        self.max_step = max_rate * period
+        self.max_step = max_rate / config.rate_hz
 
     def solve(self, kin, refs, previous, warm_start) -> SolverResult:
         result = self.inner.solve(kin, refs, previous, warm_start)
@@ -42,9 +45,8 @@ class SlewLimitedTscQp:
 # Registered once per process (a script run twice in one process, as tests do, finds it there).
 if "tscqp_slew" not in CONTROLLERS:
     CONTROLLERS.add("tscqp_slew",
-                    lambda robot, contact, period, config: SlewLimitedTscQp(robot, contact, period),
-                    "TSC-QP with a torque slew-rate limit (examples/custom_controller.py)",
-                    walking=True, motor_command=False)
+                    SlewLimitedTscQp, "TSC-QP with a torque slew-rate limit (examples/custom_controller.py)",
+                    config=TscqpConfig)
 
 
 def main(duration: float = 4.0) -> dict:

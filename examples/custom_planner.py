@@ -14,8 +14,9 @@ Importing this file registers the law as planner `hlip_clamped`, so the command 
 
 import numpy as np
 
+from romoco_drake.planners.registry import PLANNERS, register_law
 from romoco_drake.robots.model import load_robot
-from romoco_drake.rom.planners import PLANNERS, HlipLaw, PlannerParams
+from romoco_drake.rom.planners import HlipLaw, PlannerParams
 from romoco_drake.runner import run_scenario
 from romoco_drake.scenario import load_scenario, with_overrides
 
@@ -40,8 +41,7 @@ class ClampedHlipLaw(HlipLaw):
 
 # Registered once per process (a script run twice in one process, as tests do, finds it there).
 if ClampedHlipLaw.name not in PLANNERS:
-    PLANNERS.add(ClampedHlipLaw.name, ClampedHlipLaw, "H-LIP with steps clamped to a kinematic box "
-                 "(examples/custom_planner.py)", gains=ClampedHlipLaw.supported_gains, law=True)
+    register_law(ClampedHlipLaw, "H-LIP with steps clamped to a kinematic box (examples/custom_planner.py)")
 
 
 def main(duration: float = 5.0) -> dict:

@@ -2,15 +2,18 @@
 
     python examples/walk_in_python.py [robot] [planner] [out_dir]
 
-No YAML: the scenario is a dataclass. The summary is the same dictionary `romoco run --json`
-prints; the PNGs are the same as `romoco run --plot DIR`.
+No YAML: the scenario is a dataclass, each component's settings the dataclass its registry
+entry declares (``TscqpConfig`` for ``tscqp``, ``FootPlacementConfig`` for the laws). The
+summary is the same dictionary `romoco run --json` prints; the PNGs are the same as `romoco run --plot DIR`.
 """
 
 import sys
 from pathlib import Path
 
+from romoco_drake.control.tscqp import TscqpConfig
+from romoco_drake.planners.settings import FootPlacementConfig
 from romoco_drake.runner import run_scenario
-from romoco_drake.scenario import CommandPoint, ControllerConfig, PlannerConfig, Scenario
+from romoco_drake.scenario import CommandPoint, Scenario
 
 
 def main(robot: str = "g1", planner: str = "hlip", out_dir: str = "walk_plots",
@@ -19,8 +22,8 @@ def main(robot: str = "g1", planner: str = "hlip", out_dir: str = "walk_plots",
         robot=robot,
         name=f"{robot}_{planner}_example",
         time_step=0.002,
-        controller=ControllerConfig(name="tscqp", rate_hz=500.0),
-        planner=PlannerConfig(name=planner),
+        controller=TscqpConfig(rate_hz=500.0),
+        planner=FootPlacementConfig(name=planner),
         # Stand for a second, walk forward, then sideways.
         command=[CommandPoint(1.0, vx=0.3), CommandPoint(4.0, vy=0.15)],
     )

@@ -16,13 +16,13 @@ import numpy as np
 from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 
+from romoco_drake.control.tscqp import TscqpConfig
+from romoco_drake.estimation.settings import EstimatorSettings
 from romoco_drake.interfaces.hardware import link_summary
 from romoco_drake.interfaces.lcm_codec import ESTOP_CHANNEL, Estop, encode_estop
 from romoco_drake.interfaces.robot_sim import robot_summary
 from romoco_drake.scenario import (
     CommandPoint,
-    ControllerConfig,
-    EstimatorConfig,
     Scenario,
     build_diagram,
     initial_positions,
@@ -31,8 +31,8 @@ from romoco_drake.scenario import (
 
 def main(duration: float = 4.0) -> dict:
     scenario = Scenario(robot="g1", name="g1_over_lcm", time_step=0.002,
-                        controller=ControllerConfig(name="tscqp", rate_hz=500.0),
-                        estimator=EstimatorConfig(name="kalman"),
+                        controller=TscqpConfig(rate_hz=500.0),
+                        estimator=EstimatorSettings(name="kalman"),
                         command=[CommandPoint(0.5, vx=0.3)])
     lcm = DrakeLcm("memq://")
     built = build_diagram(scenario, link="via_lcm", lcm=lcm)

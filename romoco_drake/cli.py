@@ -15,8 +15,8 @@ from romoco_drake.errors import RomocoError
 def _cmd_list(args) -> int:
     from romoco_drake.control.registry import CONTROLLERS
     from romoco_drake.estimation.registry import ESTIMATORS
+    from romoco_drake.planners.registry import PLANNERS
     from romoco_drake.robots.model import robot_names
-    from romoco_drake.rom.planners import PLANNERS
     from romoco_drake.scenario import scenario_names
 
     registries = {"planners": PLANNERS, "controllers": CONTROLLERS, "estimators": ESTIMATORS}
@@ -105,13 +105,13 @@ def _follow_sliders(sliders, plant, diagram, context, period: float = 0.05) -> N
 
 
 def _cmd_run(args) -> int:
-    from romoco_drake.control.registry import CONTROLLERS
+    from romoco_drake.control.registry import traits
     from romoco_drake.interfaces.hardware import LINK_COUNTERS
     from romoco_drake.runner import run_scenario, stderr_progress
     from romoco_drake.scenario import load_scenario, with_overrides
 
-    scenario = with_overrides(load_scenario(args.scenario), args.planner, args.controller, args.command,
-                              args.estimator, args.solver, args.push, args.dropout)
+    scenario = with_overrides(load_scenario(args.scenario, args.overlay or ()), args.planner, args.controller,
+                              args.command, args.estimator, args.solver, args.push, args.dropout)
     if args.via_lcm and args.hardware:
         raise RomocoError("--via-lcm and --hardware exclude each other")
     link = "via_lcm" if args.via_lcm else "hardware" if args.hardware else "sim"
@@ -121,7 +121,7 @@ def _cmd_run(args) -> int:
         raise RomocoError("--teleop needs --meshcat (the page is the command source)")
     if args.teleop and args.command is not None:
         raise RomocoError("--teleop and --command exclude each other (the page gives the command)")
-    if args.teleop and not CONTROLLERS[scenario.controller.name].facts["walking"]:
+    if args.teleop and not traits(scenario.controller.name).walking:
         raise RomocoError(f"--teleop needs a walking controller, not '{scenario.controller.name}'")
     meshcat = _live_meshcat(args.meshcat)
     summary = run_scenario(scenario, duration=args.duration, meshcat=meshcat,
@@ -268,11 +268,11 @@ def _cmd_bench_embedding(args) -> int:
 
 def _cmd_bench_matrix(args) -> int:
     from romoco_drake.bench.walking import WALKING_ROBOTS, bench_matrix, walking_robots
-    from romoco_drake.control.registry import CONTROLLERS
-    from romoco_drake.rom.planners import PLANNERS
+    from romoco_drake.control.registry import CONTROLLERS, traits
+    from romoco_drake.planners.registry import PLANNERS
     from romoco_drake.runner import stderr_progress
 
-    walking_controllers = [name for name, entry in CONTROLLERS.items() if entry.facts["walking"]]
+    walking_controllers = [name for name in CONTROLLERS if traits(name).walking]
     robots = _names(args.robots, WALKING_ROBOTS, "robot", walking_robots())
     planners = _names(args.planners, ("hlip", "mlip", "dcm"), "planner", PLANNERS)
     controllers = _names(args.controllers, ("tscqp",), "walking controller", walking_controllers)
@@ -377,7 +377,7 @@ def _cmd_bench_dropout(args) -> int:
 
 
 def _cmd_bench_push(args) -> int:
-    from romoco_drake.bench.push import ANGULAR_MOMENTUM_WEIGHT, DIRECTIONS, bench_push
+    from romoco_drake.bench.push import DIRECTIONS, OVERLAYS, bench_push
     from romoco_drake.robots.model import robot_names
     from romoco_drake.runner import stderr_progress
 
@@ -389,22 +389,17 @@ def _cmd_bench_push(args) -> int:
         raise RomocoError(f"--impulses must be in (0, 500] N·s, got {args.impulses}")
     if not all(0.0 <= ph < 1.0 for ph in phases):
         raise RomocoError(f"--phases must be in [0, 1), got {args.phases}")
-    am_weight = args.angular_momentum_weight
-    am_weight = ANGULAR_MOMENTUM_WEIGHT if am_weight is None else am_weight
-    if not (0.0 <= args.ankle_gain <= 10.0 and 0.0 <= am_weight <= 1e4):
-        raise RomocoError("--ankle-gain must be in [0, 10] and --angular-momentum-weight in [0, 1e4]")
     if not (0.0 <= args.speed <= 2.0 and 0.01 <= args.push_duration <= 1.0):
         raise RomocoError("--speed must be in [0, 2] m/s and --push-duration in [0.01, 1] s")
-    result = bench_push(args.robot, impulses, phases, directions, adapt=not args.no_adapt,
-                        ankle_gain=args.ankle_gain, angular_momentum_weight=am_weight,
+    overlays = () if args.no_overlay else (args.overlay or OVERLAYS)
+    result = bench_push(args.robot, impulses, phases, directions, overlays,
                         speed=args.speed, push_s=args.push_duration, sweep=_sweep(args),
                         progress=stderr_progress)
     if args.json:
         print(json.dumps(result))
         return 0
-    adapt = "on" if result["step_adaptation"] else "off"
     print(f"{result['robot']}: largest impulse survived (N·s), walking {result['speed_mps']} m/s, "
-          f"{result['push_s']} s pushes on the base, step adaptation {adapt}")
+          f"{result['push_s']} s pushes on the base, overlays: {', '.join(result['overlays']) or 'none'}")
     print(f"survival: {result['criterion']}; phase: fraction of the {result['step_s']} s step")
     print("direction  " + "".join(f"phase {ph:<5g}" for ph in phases) + "  min")
     for d in directions:
@@ -553,6 +548,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--teleop", action="store_true",
                    help="with --meshcat: drive the robot from the page (sliders, buttons, gamepad) at real "
                         "time until Ctrl-C or --duration")
+    p.add_argument("--overlay", action="append", metavar="NAME",
+                   help="merge diagrams/overlays/NAME.yaml (or a YAML path) onto the scenario; repeatable, "
+                        "applied in order")
     p.add_argument("--planner", help="override the scenario's planner (see romoco list)")
     p.add_argument("--controller", help="override the scenario's controller (see romoco list)")
     p.add_argument("--command", metavar="T:VX,VY,WZ;...",
@@ -652,12 +650,10 @@ def make_parser() -> argparse.ArgumentParser:
                    help="N·s, comma-separated, tried in increasing order")
     p.add_argument("--phases", default="0,0.25,0.5,0.75", help="push start as fractions of the step")
     p.add_argument("--directions", help="comma-separated (default: forward,backward,left,right)")
-    p.add_argument("--no-adapt", action="store_true",
-                   help="without step adaptation (the planner's own steps)")
-    p.add_argument("--ankle-gain", type=float, default=0.0, help="TSC-QP ankle strategy (0: off)")
-    p.add_argument("--angular-momentum-weight", type=float,
-                   help="TSC-QP angular-momentum damping task, per (N·m)² on roll and yaw and a quarter "
-                        "of it on pitch (default: 30; 0: off)")
+    p.add_argument("--overlay", action="append", metavar="NAME",
+                   help="settings merged onto <robot>_walk (diagrams/overlays/NAME.yaml or a path); "
+                        "repeatable (default: push_recovery)")
+    p.add_argument("--no-overlay", action="store_true", help="the shipped <robot>_walk settings as they are")
     p.add_argument("--speed", type=float, default=0.4, help="forward walking speed (m/s)")
     p.add_argument("--push-duration", type=float, default=0.1, help="how long each push lasts (s)")
     p.add_argument("--json", action="store_true", help="print one JSON object (last line)")

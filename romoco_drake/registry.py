@@ -16,12 +16,19 @@ from romoco_drake.errors import RomocoError
 
 @dataclass(frozen=True)
 class Entry:
-    """One registered component: its factory, a one-line description and kind-specific facts."""
+    """One registered component: its factory, a one-line description, its settings dataclass
+    (``config``: the scenario section it is configured by, None for kinds without one) and
+    kind-specific facts."""
 
     name: str
     factory: Callable[..., Any]
     description: str = ""
     facts: dict[str, Any] = field(default_factory=dict)
+    config: type | None = None
+
+    def default_config(self) -> Any:
+        """The entry's settings with every default (``name`` set to the entry's)."""
+        return self.config(name=self.name)
 
 
 class Registry(Mapping[str, Entry]):
@@ -31,10 +38,12 @@ class Registry(Mapping[str, Entry]):
         self.kind = kind
         self._entries: dict[str, Entry] = {}
 
-    def add(self, name: str, factory: Callable[..., Any], description: str = "", **facts: Any) -> None:
+    def add(self, name: str, factory: Callable[..., Any], description: str = "", config: type | None = None,
+            **facts: Any) -> None:
+        """Registers ``name``; ``config`` is its settings dataclass (a dataclass with a ``name`` field)."""
         if name in self._entries:
             raise ValueError(f"{self.kind} '{name}' is registered twice")
-        self._entries[name] = Entry(name, factory, description, facts)
+        self._entries[name] = Entry(name, factory, description, facts, config)
 
     def __getitem__(self, name: str) -> Entry:
         """The entry called ``name``; an unknown name is a one-line RomocoError (see :meth:`check`)."""

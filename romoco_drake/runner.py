@@ -20,7 +20,6 @@ from romoco_drake.interfaces.robot_sim import make_robot_sim, robot_summary
 from romoco_drake.metrics import finite_or_none, momentum_summary, velocity_tracking
 from romoco_drake.planners.command import CommandSource, segments_from_log
 from romoco_drake.planners.heading import base_yaw
-from romoco_drake.planners.vimpc import VimpcPlanner
 from romoco_drake.robots.model import load_robot
 from romoco_drake.scenario import (
     MAX_DURATION_S,
@@ -159,6 +158,7 @@ def run_scenario(
     summary = {
         "link": link,
         "scenario": scenario.name,
+        "overlays": list(scenario.overlays),
         "robot": scenario.robot,
         "controller": scenario.controller.name,
         "estimator": scenario.estimator.name,
@@ -335,14 +335,9 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, 
     schedule = loop.state_machine.schedule(loop.state_machine.GetMyContextFromRoot(context))
     controller_context = loop.controller.GetMyContextFromRoot(context)
     failures, safe_ticks, _, relaxed = loop.controller.stats_port.Eval(controller_context)
-    mpc = {}
-    if isinstance(loop.planner, VimpcPlanner):
-        planner_context = loop.planner.GetMyContextFromRoot(context)
-        solves, failed, fallback = loop.planner.mpc_stats_port.Eval(planner_context)
-        mpc = {"mpc_solves": int(solves), "mpc_failures": int(failed), "mpc_fallback_updates": int(fallback),
-               "vimpc_inertia": scenario.vimpc.inertia}
+    planner = loop.planner.summary(loop.planner.GetMyContextFromRoot(context))
     return {
-        "planner": scenario.planner.name if mpc else loop.planner.law.name,
+        "planner": planner.pop("planner"),
         "velocity_rms_error": finite_or_none(tracking["velocity_rms_error"]),
         "mean_velocity": finite_or_none(tracking["mean_velocity"]),
         "steps": schedule.steps,
@@ -352,7 +347,7 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, 
         "safe_mode_entries": schedule.safe_mode_entries,
         "safe_mode_ticks": int(safe_ticks),
         "controller_tick_ms": _tick_stats(ticks),
-    } | mpc | _momentum(built, context, scenario, plot_dir, times, tracking, until)
+    } | planner | _momentum(built, context, scenario, plot_dir, times, tracking, until)
 
 
 def _tick_stats(ticks: np.ndarray) -> dict:

@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Any
 
 import numpy as np
 from pydrake.geometry import Meshcat
@@ -23,18 +24,20 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, VectorLogSink
 
 from romoco_drake.config import (
+    LINK_TICK_OFFSET,
     RANGES,
-    RATE_HZ,
     Range,
     check_ranges,
     declare_ranges,
+    load_section,
     load_typed,
     load_yaml_file,
     positive,
 )
 from romoco_drake.control.controller import WholeBodyController
 from romoco_drake.control.momentum_log import MomentumLog
-from romoco_drake.control.registry import CONTROLLERS
+from romoco_drake.control.registry import CONTROLLERS, traits
+from romoco_drake.control.settings import ControllerSettings
 from romoco_drake.control.tscqp import QP_SOLVERS
 from romoco_drake.embedding.references import EmbeddingCore
 from romoco_drake.embedding.system import OutputEmbedding
@@ -43,6 +46,7 @@ from romoco_drake.estimation.ground_truth import GroundTruthEstimator
 from romoco_drake.estimation.kalman_estimator import KalmanEstimator
 from romoco_drake.estimation.registry import ESTIMATORS
 from romoco_drake.estimation.rom_state import RomStateFromRobot
+from romoco_drake.estimation.settings import EstimatorSettings
 from romoco_drake.interfaces.disturbance import Disturbance, body_names
 from romoco_drake.interfaces.dropout import STREAM_CHANNELS, Dropout
 from romoco_drake.interfaces.hardware import (
@@ -61,103 +65,21 @@ from romoco_drake.interfaces.teleop import RADIO_PERIOD, EstopGate, MeshcatRadio
 from romoco_drake.planners.command import CommandLimiter, CommandSegment, CommandSource
 from romoco_drake.planners.foot_placement import FootPlacementPlanner
 from romoco_drake.planners.heading import HeadingHold
+from romoco_drake.planners.registry import PLANNERS, step_adapter
+from romoco_drake.planners.settings import FootPlacementConfig, PlannerSettings
 from romoco_drake.planners.state_machine import GaitStateMachine
 from romoco_drake.planners.vimpc import INERTIA_MODES, VimpcConfig, VimpcPlanner
+from romoco_drake.registry import Registry
 from romoco_drake.robots.kinematics import RobotKinematicsSystem
 from romoco_drake.robots.model import RobotModel, load_robot, robot_names
 from romoco_drake.robots.source import DIAGRAMS_DIR
-from romoco_drake.rom.planners import PLANNERS, FootPlacementLaw, PlannerParams, make_planner
-from romoco_drake.rom.step_adapt import StepAdapter, StepAdaptWeights
+from romoco_drake.rom.planners import FootPlacementLaw
 from romoco_drake.rom.types import WalkCommand
 
 STATE_LOG_PERIOD = 0.01  # s, the state samples summaries and plots are computed from
 LINKS = ("sim", "hardware", "via_lcm")
 STATUS_PERIOD = 0.01  # s, controller status messages on LCM links (for logs)
-# The controller ticks this long after the plant's step (on LCM links, after the robot's
-# message, hardware.PUBLISH_DELAY), as a controller woken by the robot's state message does:
-# it acts on the measurement of that step. Ticking on the step itself reads the state before
-# it, one plant step (2 ms on G1) of extra delay. The direct simulation ticks the same way, so
-# sim and LCM runs are the same closed loop: `romoco run g1_walk` and `--via-lcm` agree to
-# round-off (final base height to 1e-13 m); with the direct loop a step behind they differed
-# by up to 0.013 m/s in the averaged velocity.
-LINK_TICK_OFFSET = 1e-4  # s, less than any plant step
 MAX_DURATION_S = 3600.0  # one hour of simulated time: longer is a typo, not a study
-
-
-@dataclass
-class ControllerConfig:
-    """A controller (see ``romoco list``), its rate, and the TSC-QP's QP solver.
-
-    ``solver``: ``daqp`` (default), a dual active-set solver on a workspace kept across ticks,
-    exact for this small dense QP and about 30× faster than ``clarabel``, the reference
-    (``MathematicalProgram`` solved by Drake's Clarabel, an interior-point method), which
-    alone would not fit a 1 kHz tick in Python.
-    """
-
-    name: str = "standing"
-    rate_hz: float = 1000.0
-    solver: Literal["daqp", "clarabel"] = "daqp"
-    # The TSC-QP's balance terms beyond foot placement (control/tscqp.py): the hip strategy's
-    # centroidal angular-momentum damping task (weight per (N·m)², rate 1/s) and the ankle
-    # strategy's CoP shift per metre of DCM error. Off by default: on G1's plane feet (1.0 and 0.1)
-    # they tracked g1_walk's velocities better but the angular-momentum task made G1 fall on
-    # starting to walk after a 10 cm drop and the ankle made it fall in the 0 → 1 m/s step; on the
-    # line feet of H1 and Cassie both tracked worse (H1 vx rms error 0.035 → 0.064 m/s).
-    angular_momentum_weight: float = 0.0
-    angular_momentum_damping: float = 10.0
-    # Per-axis factors of that weight in the heading frame (roll, pitch, yaw); ``romoco bench push``
-    # uses [1, 0.25, 1].
-    angular_momentum_axes: list[float] = dataclasses.field(default_factory=lambda: [1.0, 1.0, 1.0])
-    ankle_gain: float = 0.0
-    # The TSC-QP's leg joint limits: each joint stops within this many seconds of its position
-    # limits (control/tscqp.py; 0: off). ``romoco bench push`` uses 0.05.
-    joint_limit_horizon: float = 0.0
-
-
-# Task weights are O(1-10); 1e4 would override every task. Damping above 1e3/s outruns any
-# controller tick; a CoP shift 10× the DCM error is a bang-bang ankle.
-declare_ranges(ControllerConfig, rate_hz=RATE_HZ, angular_momentum_weight=Range(0.0, 1e4),
-               angular_momentum_damping=Range(0.0, 1e3, "1/s"), ankle_gain=Range(0.0, 10.0),
-               angular_momentum_axes=Range(0.0, 1.0, size=3),
-               joint_limit_horizon=Range(0.0, 1.0, "s"))
-
-
-@dataclass
-class StepAdaptationConfig:
-    """Step location and timing adaptation over the planner's steps (rom/step_adapt.py), for a
-    foot-placement law when the robot has ``walking.step_reach``. Off by default: on G1 it made
-    the 0 → 1 m/s velocity step fall (its steps reached the forward bound), before G1's reach
-    was taken from its leg; ``romoco bench push`` turns it on (README). The weights are the QP's
-    on the foothold, on σ = e^{λT} and on the DCM offset; only their ratios matter, and only when
-    a step would leave the reach."""
-
-    enabled: bool = False
-    step_weight: float = 1.0
-    timing_weight: float = 0.01
-    offset_weight: float = 10.0
-
-
-# Positive weights (a zero one makes the QP's minimiser non-unique); 1e6 apart is already a
-# hard priority.
-declare_ranges(StepAdaptationConfig, step_weight=Range(1e-6, 1e6),
-               timing_weight=Range(1e-6, 1e6), offset_weight=Range(1e-6, 1e6))
-
-
-@dataclass
-class PlannerConfig:
-    """A foot-placement planner (see ``romoco list``), its feedback gain and step adaptation."""
-
-    name: str = "hlip"
-    gain: Literal["deadbeat", "converging", "lqr"] = "deadbeat"
-    alpha: float = 0.5
-    # Double-support time (s) of the laws whose ROM has one; None: the robot's walking.t_ds. The
-    # RoMoCo paper's planner comparison (Fig. 8) runs every law at 0, ALIP's only gait.
-    t_ds: float | None = None
-    step_adaptation: StepAdaptationConfig = dataclasses.field(default_factory=StepAdaptationConfig)
-
-
-# The converging gain's contraction factor per step (0: deadbeat; 1 would never converge).
-declare_ranges(PlannerConfig, alpha=Range(0.0, 1.0, hi_open=True), t_ds=Range(0.0, 1.0, "s"))
 
 
 @dataclass
@@ -177,21 +99,6 @@ declare_ranges(CommandPoint, t=Range(0.0, MAX_DURATION_S, "s"), vx=Range(-10.0, 
 
 
 @dataclass
-class EstimatorConfig:
-    """``ground_truth``: encoders plus the base pose/velocity ports (exact in simulation, motion
-    capture on hardware); ``kalman`` (linear, takes the IMU's on-board orientation as given, flat
-    ground) and ``invariant_ekf`` (estimates the orientation too, no flat-ground assumption):
-    encoders, IMU and contact switches only. The filters' yaw drifts; commands are in the
-    estimated heading frame (see ``HeadingHold``)."""
-
-    name: str = "ground_truth"
-    rate_hz: float | None = None  # filter update rate; None: the controller's rate
-
-
-declare_ranges(EstimatorConfig, rate_hz=RATE_HZ)
-
-
-@dataclass
 class Scenario:
     """One simulation: robot, plant step, components and default duration."""
 
@@ -199,11 +106,11 @@ class Scenario:
     description: str = ""
     duration_s: float = 5.0
     time_step: float = 0.001
-    estimator: EstimatorConfig = dataclasses.field(default_factory=EstimatorConfig)
-    controller: ControllerConfig = dataclasses.field(default_factory=ControllerConfig)
-    planner: PlannerConfig = dataclasses.field(default_factory=PlannerConfig)
-    # The VI-MPC's settings, read when planner.name is vimpc.
-    vimpc: VimpcConfig = dataclasses.field(default_factory=VimpcConfig)
+    # The components, each section parsed by its registry entry's settings dataclass
+    # (load_scenario): a key the named component does not read is a load error.
+    estimator: EstimatorSettings = dataclasses.field(default_factory=EstimatorSettings)
+    controller: ControllerSettings = dataclasses.field(default_factory=ControllerSettings)
+    planner: PlannerSettings = dataclasses.field(default_factory=FootPlacementConfig)
     # Piecewise-constant velocity command; empty means stand.
     command: list[CommandPoint] = dataclasses.field(default_factory=list)
     # Extra height of the base above the nominal pose at t = 0 (m): a drop test.
@@ -214,8 +121,9 @@ class Scenario:
     disturbances: list[Disturbance] = dataclasses.field(default_factory=list)
     # Lost LCM messages (interfaces/dropout.py); only with both link ends simulated (--via-lcm).
     dropouts: list[Dropout] = dataclasses.field(default_factory=list)
-    # Filled in by load_scenario, not read from YAML.
+    # Filled in by load_scenario, not read from YAML: the file's name and the overlays applied.
     name: str = ""
+    overlays: list[str] = dataclasses.field(default_factory=list)
 
 
 # time_step: the controller ticks LINK_TICK_OFFSET after a plant step, before the next one, so
@@ -225,18 +133,6 @@ class Scenario:
 declare_ranges(Scenario, duration_s=positive(MAX_DURATION_S, "s"),
                time_step=Range(LINK_TICK_OFFSET, 0.05, "s", lo_open=True),
                initial_height_offset=Range(0.0, 2.0, "m"))
-# VimpcConfig (planners/vimpc.py) is the scenario's ``vimpc`` section; its table lives here with
-# the other scenario tables. The MPC replans at up to 1 kHz over up to 30 knots of 1-200 ms
-# (defaults: 10 knots of 50 ms at the paper's 200 Hz). The solve grows with the cube of the
-# knots (measured on DRACO: 30 knots ~20 ms a solve, 50 knots ~0.1 s, and 0.8 s over a 25 s
-# horizon), so more is a run that never ends, not a better plan. Weights are a diagonal cost,
-# ≥ 0 (r > 0: the QP needs a positive definite input cost); k1, k2 are eq. 14's gains, of
-# order 1; f_max is the normal force bound (10 kN: well past any humanoid's weight).
-declare_ranges(VimpcConfig, rate_hz=Range(1.0, 1000.0, "Hz"), knots=Range(1, 30), dt=Range(0.001, 0.2, "s"),
-               q=Range(0.0, 1e8, size=12), r=Range(0.0, 1e8, lo_open=True, size=12),
-               q_terminal=Range(0.0, 1e8, size=12), k1=Range(0.0, 10.0), k2=Range(0.0, 10.0),
-               max_step=positive(1.0, "m"), f_max=positive(1e4, "N"), max_age=positive(1.0, "s"))
-
 # Disturbance (interfaces/disturbance.py) is the scenario's ``disturbances`` entry; its table lives
 # here. A push starts within the run's clock and lasts up to 10 s (longer is a steady force, not a
 # push); each force component is bounded by 5 kN (over 10x a humanoid's weight, a crash not a
@@ -251,21 +147,90 @@ def scenario_names() -> list[str]:
     return sorted(p.stem for p in DIAGRAMS_DIR.glob("*.yaml"))
 
 
-def load_scenario(name_or_path: str) -> Scenario:
-    """Loads ``diagrams/<name>.yaml`` or a YAML file path."""
+OVERLAYS_DIR = DIAGRAMS_DIR / "overlays"
+# The component sections: each is parsed by the settings dataclass of the entry its ``name`` picks.
+COMPONENTS = (("controller", CONTROLLERS, ControllerSettings), ("planner", PLANNERS, PlannerSettings),
+              ("estimator", ESTIMATORS, EstimatorSettings))
+
+
+def overlay_names() -> list[str]:
+    return sorted(p.stem for p in OVERLAYS_DIR.glob("*.yaml"))
+
+
+def _read_yaml(name_or_path: str, folder: Path, kind: str, known: list[str]) -> tuple[Path, dict]:
+    """The mapping in ``folder/<name>.yaml`` or a YAML file path."""
     path = Path(name_or_path)
     if path.suffix not in (".yaml", ".yml"):
-        path = DIAGRAMS_DIR / f"{name_or_path}.yaml"
+        path = folder / f"{name_or_path}.yaml"
         if not path.exists():
-            known = ", ".join(scenario_names())
-            raise RomocoError(f"unknown scenario '{name_or_path}' (known: {known})")
+            raise RomocoError(f"unknown {kind} '{name_or_path}' (known: {', '.join(known)})")
     data = load_yaml_file(path)
-    if isinstance(data, dict) and "name" in data:
-        raise ConfigError(path, "name", "unknown key (the scenario's name is its file name)")
-    scenario = load_typed(path, Scenario, data)
-    scenario.name = path.stem
-    validate_scenario(scenario, path)
+    if not isinstance(data, dict):
+        raise ConfigError(path, "<top>", f"expected a mapping, got {type(data).__name__}")
+    return path, data
+
+
+def merge_overlay(base: dict, overlay: dict) -> dict:
+    """``overlay`` deep-merged onto ``base``: mappings merge key by key, anything else (numbers,
+    lists, a section's ``name``) replaces. Neither argument is changed."""
+    merged = dict(base)
+    for key, value in overlay.items():
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):
+            merged[key] = merge_overlay(merged[key], value)
+        else:
+            merged[key] = value
+    return merged
+
+
+def load_scenario(name_or_path: str, overlays: Sequence[str] = ()) -> Scenario:
+    """Loads ``diagrams/<name>.yaml`` (or a YAML file path) with each overlay
+    (``diagrams/overlays/<name>.yaml`` or a path) deep-merged onto it in order, then checked as
+    a whole: an error names the scenario file and the overlays it was merged with."""
+    path, data = _read_yaml(name_or_path, DIAGRAMS_DIR, "scenario", scenario_names())
+    applied = []
+    for overlay in overlays:
+        overlay_path, patch = _read_yaml(overlay, OVERLAYS_DIR, "overlay", overlay_names())
+        for key in ("name", "overlays"):
+            if key in patch:
+                raise ConfigError(overlay_path, key,
+                                  "unknown key (an overlay changes scenario settings only)")
+        data = merge_overlay(data, patch)
+        applied.append(overlay_path.stem)
+    where = f"{path} + {', '.join(applied)}" if applied else path
+    for key in ("name", "overlays"):
+        if key in data:
+            raise ConfigError(where, key, f"unknown key (the scenario's {key} come from the files it is "
+                              "loaded from)")
+    sections = {key: data.pop(key, None) for key, _, _ in COMPONENTS}
+    scenario = load_typed(where, Scenario, data)
+    for key, registry, base in COMPONENTS:
+        setattr(scenario, key, load_component(where, key, registry, base, sections[key]))
+    scenario.name, scenario.overlays = path.stem, applied
+    validate_scenario(scenario, where)
     return scenario
+
+
+def load_component(where: str | Path, key: str, registry: Registry, base: type, section) -> Any:
+    """The scenario section ``key`` parsed by the settings dataclass of the entry it names (a
+    plugin registered without one gets ``base``); ranges checked. A key the entry does not read
+    is a one-line ConfigError naming the component and listing its keys."""
+    section = {} if section is None else section
+    if not isinstance(section, dict):
+        raise ConfigError(where, key, f"expected a mapping, got {type(section).__name__}")
+    default = next(f.default for f in dataclasses.fields(base) if f.name == "name")
+    name = section.get("name", default)
+    if not isinstance(name, str) or name not in registry:
+        raise ConfigError(where, f"{key}.name",
+                          f"unknown {registry.kind} '{name}' (known: {', '.join(registry)})")
+    schema = registry[name].config or base
+    keys = [f.name for f in dataclasses.fields(schema)]
+    for k in section:
+        if k not in keys:
+            raise ConfigError(where, f"{key}.{k}",
+                              f"{registry.kind} '{name}' has no setting '{k}' (its keys: {', '.join(keys)})")
+    config = load_section(where, schema, {**section, "name": name}, key)
+    check_ranges(config, where, key)
+    return config
 
 
 def validate_scenario(scenario: Scenario, source: str | Path | None = None) -> None:
@@ -279,25 +244,21 @@ def validate_scenario(scenario: Scenario, source: str | Path | None = None) -> N
     if scenario.robot not in robot_names():
         known = ", ".join(robot_names())
         raise ConfigError(where, "robot", f"unknown robot '{scenario.robot}' (known: {known})")
-    for key, name, registry in (("controller.name", scenario.controller.name, CONTROLLERS),
-                                ("planner.name", scenario.planner.name, PLANNERS),
-                                ("estimator.name", scenario.estimator.name, ESTIMATORS)):
-        if name not in registry:
-            raise ConfigError(where, key, f"unknown {registry.kind} '{name}' (known: {', '.join(registry)})")
-    gains = PLANNERS[scenario.planner.name].facts["gains"]
-    if PLANNERS[scenario.planner.name].facts["law"] and scenario.planner.gain not in gains:
-        raise ConfigError(where, "planner.gain", f"planner '{scenario.planner.name}' supports gains "
-                          f"{', '.join(gains)}, not '{scenario.planner.gain}'")
-    if scenario.controller.solver not in QP_SOLVERS:
-        raise ConfigError(where, "controller.solver", f"'{scenario.controller.solver}' is not one of: "
-                          f"{', '.join(QP_SOLVERS)}")
-    solves_qp = CONTROLLERS[scenario.controller.name].facts.get("qp_solver")
-    if scenario.controller.solver != "daqp" and not solves_qp:
-        raise ConfigError(where, "controller.solver", f"the QP solver is the TSC-QP's; controller "
-                          f"'{scenario.controller.name}' solves no QP")
-    if scenario.vimpc.inertia not in INERTIA_MODES:
-        raise ConfigError(where, "vimpc.inertia", f"'{scenario.vimpc.inertia}' is not one of: "
-                          f"{', '.join(INERTIA_MODES)}")
+    for key, registry, base in COMPONENTS:
+        config = getattr(scenario, key)
+        if not isinstance(config, base):
+            raise ConfigError(where, key, f"expected {base.__name__} settings, got {type(config).__name__}")
+        if config.name not in registry:
+            raise ConfigError(where, f"{key}.name",
+                              f"unknown {registry.kind} '{config.name}' (known: {', '.join(registry)})")
+        schema = registry[config.name].config or base
+        if not isinstance(config, schema):
+            raise ConfigError(where, key, f"{registry.kind} '{config.name}' takes {schema.__name__} "
+                              f"settings, got {type(config).__name__}")
+    _check_planner(scenario, where)
+    solver = getattr(scenario.controller, "solver", "daqp")
+    if solver not in QP_SOLVERS:
+        raise ConfigError(where, "controller.solver", f"'{solver}' is not one of: {', '.join(QP_SOLVERS)}")
     check_ranges(scenario, where)
     if scenario.estimator.name == "kalman" and not scenario.sensors.orientation_output:
         raise ConfigError(where, "sensors.orientation_output", "the kalman estimator takes the IMU's "
@@ -310,6 +271,23 @@ def validate_scenario(scenario: Scenario, source: str | Path | None = None) -> N
         if dropout.stream not in STREAM_CHANNELS:
             raise ConfigError(where, f"dropouts[{i}].stream",
                               f"'{dropout.stream}' is not one of: {', '.join(STREAM_CHANNELS)}")
+
+
+def _check_planner(scenario: Scenario, where: str | Path) -> None:
+    """The law's gain is one it supports; step adaptation needs the robot's reach; the VI-MPC's
+    inertia mode exists (a scenario built in Python skips the typed load's Literal check)."""
+    config = scenario.planner
+    if isinstance(config, FootPlacementConfig):
+        gains = PLANNERS[config.name].facts["gains"]
+        if config.gain not in gains:
+            raise ConfigError(where, "planner.gain", f"planner '{config.name}' supports gains "
+                              f"{', '.join(gains)}, not '{config.gain}'")
+        if config.step_adaptation.enabled and load_robot(scenario.robot).config.walking.step_reach is None:
+            raise ConfigError(where, "planner.step_adaptation.enabled", f"robot '{scenario.robot}' has no "
+                              "walking.step_reach: its steps cannot be adapted (set it in the robot's YAML)")
+    if isinstance(config, VimpcConfig) and config.inertia not in INERTIA_MODES:
+        raise ConfigError(where, "planner.inertia",
+                          f"'{config.inertia}' is not one of: {', '.join(INERTIA_MODES)}")
 
 
 def _check_disturbances(scenario: Scenario, where: str | Path) -> None:
@@ -336,7 +314,7 @@ def check_duration(duration: float) -> None:
 
 def uses_motor_command(scenario: Scenario) -> bool:
     """Whether the scenario's controller commands the motors' position loops (not torques)."""
-    return CONTROLLERS[scenario.controller.name].facts["motor_command"]
+    return traits(scenario.controller.name).motor_command
 
 
 @dataclass
@@ -435,23 +413,21 @@ def with_overrides(scenario: Scenario, planner: str | None = None, controller: s
                    command: str | None = None, estimator: str | None = None, solver: str | None = None,
                    pushes: list[str] | None = None, dropouts: list[str] | None = None) -> Scenario:
     """``scenario`` with the CLI's --planner/--controller/--command/--estimator/--solver applied
-    (names checked), each --push appended to its disturbances and each --dropout to its dropouts."""
+    (names checked), each --push appended to its disturbances and each --dropout to its dropouts.
+
+    A new component keeps the settings the old one had under the same keys (``rate_hz``, a
+    TSC-QP's terms when switching to ``wbc``) and takes its own defaults for the rest."""
+    for key, name in (("estimator", estimator), ("planner", planner), ("controller", controller)):
+        if name is not None:
+            scenario = dataclasses.replace(scenario, **{key: _switch(key, getattr(scenario, key), name)})
     if solver is not None:
         if solver not in QP_SOLVERS:
             raise RomocoError(f"unknown QP solver '{solver}' (known: {', '.join(QP_SOLVERS)})")
+        if not hasattr(scenario.controller, "solver"):
+            raise RomocoError(f"--solver: the QP solver is the TSC-QP's; controller "
+                              f"'{scenario.controller.name}' solves no QP")
         scenario = dataclasses.replace(scenario, controller=dataclasses.replace(scenario.controller,
                                                                                 solver=solver))
-    if estimator is not None:
-        ESTIMATORS.check(estimator)
-        estimator_config = dataclasses.replace(scenario.estimator, name=estimator)
-        scenario = dataclasses.replace(scenario, estimator=estimator_config)
-    if planner is not None:
-        PLANNERS.check(planner)
-        scenario = dataclasses.replace(scenario, planner=dataclasses.replace(scenario.planner, name=planner))
-    if controller is not None:
-        CONTROLLERS.check(controller)
-        scenario = dataclasses.replace(
-            scenario, controller=dataclasses.replace(scenario.controller, name=controller))
     if command is not None:
         scenario = dataclasses.replace(scenario, command=parse_command(command))
     if pushes:
@@ -461,6 +437,17 @@ def with_overrides(scenario: Scenario, planner: str | None = None, controller: s
         lost = [parse_dropout(text) for text in dropouts]
         scenario = dataclasses.replace(scenario, dropouts=[*scenario.dropouts, *lost])
     return scenario
+
+
+def _switch(key: str, config, name: str):
+    """The settings of component ``name`` in section ``key``, carrying over ``config``'s shared keys."""
+    _, registry, base = next(c for c in COMPONENTS if c[0] == key)
+    schema = registry[registry.check(name)].config or base
+    if type(config) is schema:
+        return dataclasses.replace(config, name=name)
+    own = {f.name for f in dataclasses.fields(schema)} - {"name"}
+    kept = {f.name: getattr(config, f.name) for f in dataclasses.fields(config) if f.name in own}
+    return schema(name=name, **kept)
 
 
 def command_segments(scenario: Scenario, robot: RobotModel) -> list[CommandSegment]:
@@ -505,7 +492,7 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
                           "use --via-lcm")
     if teleop and meshcat is None:
         raise RomocoError("--teleop needs --meshcat (the page is the command source)")
-    if teleop and not CONTROLLERS[scenario.controller.name].facts["walking"]:
+    if teleop and not traits(scenario.controller.name).walking:
         raise RomocoError(f"--teleop needs a walking controller, not '{scenario.controller.name}'")
     robot = load_robot(scenario.robot)
     builder = DiagramBuilder()
@@ -527,13 +514,13 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
                 robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link, motor_pd=motor_pd,
                 disturbances=scenario.disturbances, dropouts=scenario.dropouts))
             plant_station = robot_sim.GetSubsystemByName("station")
-    estimator = _add_estimator(builder, scenario, robot, station, link != "hardware", offset)
+    estimator = _add_estimator(builder, scenario, robot, station, link != "hardware")
     kinematics = builder.AddNamedSystem("kinematics", RobotKinematicsSystem(robot))
     builder.Connect(estimator.state_output, kinematics.state_port)
     walking = command = command_log = None
-    entry = CONTROLLERS[scenario.controller.name]
-    if not entry.facts["walking"]:
-        controller = builder.AddNamedSystem("controller", entry.factory(robot, period, offset))
+    if not traits(scenario.controller.name).walking:
+        controller = builder.AddNamedSystem("controller", CONTROLLERS[scenario.controller.name].factory(
+            robot, scenario.controller))
         builder.Connect(kinematics.kinematics_port, controller.kinematics_port)
         builder.Connect(controller.actuation_output, station.GetInputPort("actuation"))
     else:
@@ -583,26 +570,18 @@ def _add_page_display(builder: DiagramBuilder, meshcat: Meshcat, robot: RobotMod
 
 
 def _add_estimator(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, station,
-                   known_start: bool, offset: float):
+                   known_start: bool):
     """The scenario's estimator, fed by the station; it starts at the sim's initial base position
     when that is known (simulation), else at its own default."""
     entry = ESTIMATORS[scenario.estimator.name]
     qb = robot.base_q_start
     start = initial_positions(robot, scenario)[qb + 4:qb + 7] if known_start else None
-    rate = scenario.estimator.rate_hz or scenario.controller.rate_hz
-    estimator = builder.AddNamedSystem("estimator", entry.factory(robot, 1.0 / rate, start, offset))
+    config = dataclasses.replace(scenario.estimator,
+                                 rate_hz=scenario.estimator.rate_hz or scenario.controller.rate_hz)
+    estimator = builder.AddNamedSystem("estimator", entry.factory(robot, config, start))
     for port in entry.facts["inputs"]:
         builder.Connect(station.GetOutputPort(port), estimator.GetInputPort(port))
     return estimator
-
-
-def step_adapter(scenario: Scenario, robot: RobotModel) -> StepAdapter | None:
-    """The scenario's step adapter for ``robot`` (None when off or the robot has no step reach)."""
-    cfg, reach = scenario.planner.step_adaptation, robot.config.walking.step_reach
-    if not cfg.enabled or reach is None:
-        return None
-    return StepAdapter(reach, robot.total_mass,
-                       StepAdaptWeights(cfg.step_weight, cfg.timing_weight, cfg.offset_weight))
 
 
 def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, state,
@@ -611,35 +590,32 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     """Command limiter → state machine → planner → output embedding → whole-body controller, all
     at ``period``; the last three and the ROM state read the shared ``kinematics``. With ``estop``
     (a port of ROMOCO_ESTOP bytes) the controller's mode passes an :class:`EstopGate`."""
-    mpc = law is None and not PLANNERS[scenario.planner.name].facts["law"]
-    if law is None and not mpc:
-        cfg = scenario.planner
-        t_ds = robot.config.walking.t_ds if cfg.t_ds is None else cfg.t_ds
-        law = make_planner(cfg.name, PlannerParams(mass=robot.total_mass, t_ds=t_ds, gain=cfg.gain,
-                                                   alpha=cfg.alpha))
+    if law is None:
+        planner_system = PLANNERS[scenario.planner.name].factory(robot, scenario.planner)
+    else:
+        laws = isinstance(scenario.planner, FootPlacementConfig)
+        adapter = step_adapter(robot, scenario.planner) if laws else None
+        planner_system = FootPlacementPlanner(law, adapter)
     limiter = builder.AddNamedSystem("command_limiter", CommandLimiter(
         robot.config.walking.command_limits, period, offset))
     builder.Connect(command.command_port, limiter.command_in_port)
     heading = builder.AddNamedSystem("heading", HeadingHold(robot, period, offset=offset))
     builder.Connect(limiter.command_port, heading.command_in_port)
     builder.Connect(state, heading.state_port)
-    t_ds = robot.config.walking.t_ds if mpc else law.t_ds
-    machine = builder.AddNamedSystem("state_machine", GaitStateMachine(robot, period, t_ds, offset=offset))
+    machine = builder.AddNamedSystem("state_machine", GaitStateMachine(robot, period, planner_system.t_ds,
+                                                                       offset=offset))
     rom_state = builder.AddNamedSystem("rom_state", RomStateFromRobot(robot))
     core = EmbeddingCore(robot)
-    if mpc:
-        planner = builder.AddNamedSystem("planner", VimpcPlanner(robot, core.contact, scenario.vimpc, offset))
-        builder.Connect(kinematics.kinematics_port, planner.kinematics_port)
-        builder.Connect(machine.mode_port, planner.mode_port)
-    else:
-        adapter = step_adapter(scenario, robot)
-        planner = builder.AddNamedSystem("planner", FootPlacementPlanner(law, adapter))
-        builder.Connect(rom_state.rom_state_port, planner.rom_state_port)
-        if adapter is not None:
-            builder.Connect(planner.planner_output_port, machine.planner_output_port)
-            builder.Connect(rom_state.swing_foot_port, planner.swing_foot_port)
+    planner = builder.AddNamedSystem("planner", planner_system)
+    signals = {"rom_state": rom_state.rom_state_port, "swing_foot": rom_state.swing_foot_port,
+               "gait_phase": machine.gait_phase_port, "command": heading.command_port,
+               "kinematics": kinematics.kinematics_port, "mode": machine.mode_port}
+    for name in planner.loop_inputs:
+        builder.Connect(signals[name], planner.GetInputPort(name))
+    if planner.adapts_timing:
+        builder.Connect(planner.planner_output_port, machine.planner_output_port)
     embedding = builder.AddNamedSystem("embedding", OutputEmbedding(robot, period, core, offset))
-    solver = CONTROLLERS[scenario.controller.name].factory(robot, core.contact, period, scenario.controller)
+    solver = CONTROLLERS[scenario.controller.name].factory(robot, scenario.controller)
     controller = builder.AddNamedSystem("controller",
                                         WholeBodyController(robot, period, solver, offset=offset))
     kin = kinematics.kinematics_port
@@ -650,8 +626,6 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     builder.Connect(station.GetOutputPort("link_stage"), machine.link_stage_port)
     builder.Connect(kin, rom_state.kinematics_port)
     builder.Connect(machine.gait_phase_port, rom_state.gait_phase_port)
-    builder.Connect(machine.gait_phase_port, planner.gait_phase_port)
-    builder.Connect(heading.command_port, planner.command_port)
     builder.Connect(kin, embedding.kinematics_port)
     builder.Connect(planner.planner_output_port, embedding.planner_output_port)
     builder.Connect(machine.gait_phase_port, embedding.gait_phase_port)
@@ -673,7 +647,7 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     tick_log = LogVectorOutput(controller.tick_ms_port, builder, period)
     error_log = LogVectorOutput(embedding.tracking_error_port, builder, STATE_LOG_PERIOD)
     momentum_log = None
-    if CONTROLLERS[scenario.controller.name].facts.get("momentum_log"):
+    if traits(scenario.controller.name).momentum_log:
         recorder = builder.AddNamedSystem("momentum_log", MomentumLog(robot, period, offset))
         builder.Connect(kin, recorder.kinematics_port)
         builder.Connect(embedding.task_references_port, recorder.task_references_port)

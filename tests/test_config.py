@@ -6,13 +6,13 @@ import pytest
 import yaml
 
 from romoco_drake.control.registry import CONTROLLERS
+from romoco_drake.control.settings import ControllerSettings
 from romoco_drake.errors import ConfigError, RomocoError
 from romoco_drake.estimation.registry import ESTIMATORS
+from romoco_drake.planners.settings import FootPlacementConfig
 from romoco_drake.robots.model import RobotModel, load_robot_config_file
 from romoco_drake.robots.source import ROBOTS_DIR
 from romoco_drake.scenario import (
-    ControllerConfig,
-    PlannerConfig,
     Scenario,
     build_diagram,
     load_scenario,
@@ -38,7 +38,21 @@ def _scenario(**overrides):
     [
         (_scenario(robot="atlas"), "robot", "unknown robot 'atlas'"),
         (_scenario(duraton_s=2.0), "duraton_s", "unknown key"),
-        (_scenario(controller={"name": "standing", "rate": 1.0}), "controller.rate", "unknown key"),
+        (_scenario(controller={"name": "standing", "rate": 1.0}), "controller.rate",
+         "controller 'standing' has no setting 'rate' (its keys: name, rate_hz)"),
+        (_scenario(controller={"name": "id", "angular_momentum": {"weight": 1.0}}),
+         "controller.angular_momentum",
+         "controller 'id' has no setting 'angular_momentum' (its keys: name, rate_hz, load_split_weight"),
+        (_scenario(controller={"name": "tscqp", "angular_momentum": {"weigth": 1.0}}),
+         "controller.angular_momentum.weigth", "unknown key"),
+        (_scenario(controller={"name": "momentum", "gains": {"kp": -1.0}}), "controller.gains.kp",
+         "must be in"),
+        (_scenario(planner={"name": "vimpc", "gain": "lqr"}), "planner.gain",
+         "planner 'vimpc' has no setting"),
+        (_scenario(planner={"name": "vimpc", "knots": 100}), "planner.knots", "must be in [1, 30]"),
+        (_scenario(planner={"name": "hlip", "step_adaptation": {"enabled": True}}, robot="draco"),
+         "planner.step_adaptation.enabled", "robot 'draco' has no walking.step_reach"),
+        (_scenario(vimpc={"inertia": "network"}), "vimpc", "unknown key"),
         (_scenario(controller={"name": "mpc"}), "controller.name", "unknown controller 'mpc'"),
         (_scenario(planner={"name": "lipm"}), "planner.name", "unknown planner 'lipm' (known: alip, hlip"),
         (_scenario(planner={"name": "alip_general", "gain": "lqr"}), "planner.gain", "supports gains"),
@@ -48,7 +62,8 @@ def _scenario(**overrides):
         (_scenario(sensors={"contact_debounce_s": -0.001}), "sensors.contact_debounce_s", "must be in"),
         (_scenario(sensors={"gyro_bias_walk": -1.0}), "sensors.gyro_bias_walk", "must be in"),
         (_scenario(controller={"name": "tscqp", "solver": "osqp"}), "controller.solver", "not one of: daqp"),
-        (_scenario(controller={"name": "id", "solver": "clarabel"}), "controller.solver", "solves no QP"),
+        (_scenario(controller={"name": "id", "solver": "clarabel"}), "controller.solver",
+         "controller 'id' has no setting 'solver'"),
         (_scenario(duration_s="long"), "duration_s", "expected a number"),
         (_scenario(duration_s=-1.0), "duration_s", "must be positive"),
         ({"duration_s": 1.0}, "robot", "missing required key"),
@@ -65,11 +80,15 @@ def test_bad_scenario_names_file_and_key(tmp_path, data, key, words):
 
 def test_scenario_built_in_python_is_validated_like_yaml():
     """build_diagram checks a Scenario made in code against the same registries."""
-    scenario = Scenario(robot="g1", controller=ControllerConfig(name="mpc"))
+    scenario = Scenario(robot="g1", controller=ControllerSettings(name="mpc"))
     with pytest.raises(ConfigError, match=r"^<scenario g1>: controller.name: unknown controller 'mpc'"):
         build_diagram(scenario)
-    scenario = Scenario(robot="g1", planner=PlannerConfig(name="lipm"), controller=ControllerConfig("tscqp"))
+    scenario = Scenario(robot="g1", planner=FootPlacementConfig(name="lipm"))
     with pytest.raises(ConfigError, match=r"planner.name: unknown planner 'lipm'"):
+        validate_scenario(scenario)
+    # The settings must be the chosen component's own: a bare ControllerSettings has no TSC-QP terms.
+    scenario = Scenario(robot="g1", controller=ControllerSettings(name="tscqp"))
+    with pytest.raises(ConfigError, match=r"controller: controller 'tscqp' takes TscqpConfig settings"):
         validate_scenario(scenario)
 
 
@@ -83,6 +102,16 @@ def test_every_registered_component_is_listed_and_buildable():
         with_overrides(Scenario(robot="g1"), controller="mpc")
     with pytest.raises(RomocoError, match="unknown QP solver 'osqp'"):
         with_overrides(Scenario(robot="g1"), solver="osqp")
+    with pytest.raises(RomocoError, match="controller 'standing' solves no QP"):
+        with_overrides(Scenario(robot="g1"), solver="clarabel")
+
+
+def test_switching_component_keeps_shared_settings():
+    """--controller wbc on a TSC-QP scenario keeps its rate and terms; --controller id drops them."""
+    tscqp = with_overrides(load_scenario("g1_walk", ["push_recovery"]), controller="wbc").controller
+    assert tscqp.name == "wbc" and tscqp.rate_hz == 500.0 and tscqp.angular_momentum.weight == 30.0
+    ident = with_overrides(load_scenario("g1_walk", ["push_recovery"]), controller="id").controller
+    assert ident.name == "id" and ident.rate_hz == 500.0 and not hasattr(ident, "angular_momentum")
 
 
 def test_unknown_scenario_name():

@@ -18,11 +18,13 @@ import yaml
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
+from romoco_drake.control.registry import CONTROLLERS
 from romoco_drake.errors import ConfigError, RomocoError
+from romoco_drake.planners.registry import PLANNERS
 from romoco_drake.robots.model import RobotModel, load_robot_config_file
 from romoco_drake.robots.source import DIAGRAMS_DIR, ROBOTS_DIR
 from romoco_drake.runner import run_scenario
-from romoco_drake.scenario import LinkConfig, SensorConfig, VimpcConfig, load_scenario
+from romoco_drake.scenario import LinkConfig, SensorConfig, load_scenario
 
 RUN_S = 0.1  # simulated seconds per run
 EXAMPLE_WALL_S = 30  # a run this long (wall) is a hang
@@ -46,8 +48,11 @@ VALUES = st.one_of(
 def _scenario_data(name: str) -> dict:
     """A shipped scenario with every optional section written out, so each field gets mutated."""
     data = yaml.safe_load((DIAGRAMS_DIR / f"{name}.yaml").read_text())
-    for key, config in (("sensors", SensorConfig()), ("link", LinkConfig()), ("vimpc", VimpcConfig())):
+    for key, config in (("sensors", SensorConfig()), ("link", LinkConfig())):
         data.setdefault(key, dataclasses.asdict(config))
+    for key, registry, default in (("controller", CONTROLLERS, "standing"), ("planner", PLANNERS, "hlip")):
+        section = data.get(key, {})
+        data[key] = dataclasses.asdict(registry[section.get("name", default)].default_config()) | section
     data.setdefault("initial_height_offset", 0.0)
     data.setdefault("estimator", {}).setdefault("rate_hz", 500.0)
     if "command" in data:  # walk from the start: a short run reaches the planner's solves

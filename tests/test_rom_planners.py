@@ -14,7 +14,7 @@ from romoco_drake.rom.dcm import dcm_s2s
 from romoco_drake.rom.hlip import hlip_s2s
 from romoco_drake.rom.lip import ds_flow, omega, ss_flow
 from romoco_drake.rom.mlip import mlip_domain_flow, mlip_s2s
-from romoco_drake.rom.planners import PLANNERS, PlannerParams, foot_placement_laws, make_planner
+from romoco_drake.rom.planners import LAWS, PlannerParams, foot_placement_laws, make_planner
 from romoco_drake.rom.s2s import converging_gain, lqr_gain
 from romoco_drake.rom.types import SIDES, PlannerOutput, WalkCommand, other_side
 
@@ -223,9 +223,9 @@ UNSUPPORTED_GAINS = [("alip", "lqr"), ("dcm", "lqr"), ("alip_general", "convergi
 
 
 def test_make_planner_rejects_unknown_names_and_the_mpc():
-    with pytest.raises(RomocoError, match="planner 'vimpc' is a system of its own"):
+    with pytest.raises(RomocoError, match="unknown foot-placement law 'vimpc'"):
         make_planner("vimpc", PlannerParams(mass=30.0))
-    with pytest.raises(RomocoError, match=r"unknown planner 'lipm' \(known: alip, hlip"):
+    with pytest.raises(RomocoError, match=r"unknown foot-placement law 'lipm' \(known: alip, hlip"):
         make_planner("lipm", PlannerParams(mass=30.0))
 
 
@@ -239,7 +239,7 @@ def test_make_planner_rejects_unsupported_gains(name, gain):
 def test_make_planner_rejects_bad_params(name):
     bad = [(PlannerParams(mass=0.0), "mass"), (PlannerParams(mass=math.nan), "mass"),
            (PlannerParams(mass=30.0, t_ds=-0.1), "t_ds")]
-    if "converging" in PLANNERS[name].facts["gains"]:
+    if "converging" in LAWS[name].facts["gains"]:
         bad += [(PlannerParams(mass=30.0, gain="converging", alpha=a), "alpha") for a in (-0.1, 1.0)]
     for params, what in bad:
         with pytest.raises(RomocoError, match=what):
@@ -316,7 +316,7 @@ S2S_LAWS = {
     "mlip": lambda z0, t, t_ds, g: (mlip_s2s(z0, t, t_ds, g), np.eye(2), mlip_s2s(z0, t, t_ds, g)),
     "dcm": _dcm_reference,
 }
-LAW_GAINS = [(name, gain) for name in foot_placement_laws() for gain in PLANNERS[name].facts["gains"]]
+LAW_GAINS = [(name, gain) for name in foot_placement_laws() for gain in LAWS[name].facts["gains"]]
 
 
 def _battery(rng: np.random.Generator, n: int):

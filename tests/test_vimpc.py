@@ -90,10 +90,10 @@ def test_draco_walks_forward_under_the_vimpc_and_the_wbc():
     """Closed loop, network inertia: 4 s of walking at 0.1 then 0.2 m/s, upright and on command."""
     scenario = dataclasses.replace(load_scenario("draco_walk"), duration_s=5.0,
                                    command=[CommandPoint(1.0, vx=0.1), CommandPoint(2.5, vx=0.2)])
-    assert scenario.vimpc.inertia == "network" and scenario.controller.name == "wbc"
+    assert scenario.planner.inertia == "network" and scenario.controller.name == "wbc"
     out = run_scenario(scenario)
     assert not out["fell"], out["fall_reason"]
-    assert out["steps"] >= 8 and out["mpc_solves"] > 0.9 * 4.0 * scenario.vimpc.rate_hz
+    assert out["steps"] >= 8 and out["mpc_solves"] > 0.9 * 4.0 * scenario.planner.rate_hz
     assert out["mpc_failures"] == 0 and out["qp_failures"] == 0
     assert max(out["velocity_rms_error"][:2]) <= 0.1, out["velocity_rms_error"]
     assert out["mean_velocity"][0] > 0.5 * (1.5 * 0.1 + 2.5 * 0.2) / 5.0  # half the commanded mean

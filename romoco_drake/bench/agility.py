@@ -84,7 +84,7 @@ def agility_scenario(robot: str, inertia: str, motion: str, rate: float, top: fl
     return dataclasses.replace(base, name=f"{robot}_agility_{motion}_{inertia}",
                                command=ramp(direction, rate, top),
                                duration_s=START_S + top / rate + GIVE_UP_S + AVERAGE_WINDOW_S,
-                               vimpc=dataclasses.replace(base.vimpc, inertia=inertia))
+                               planner=dataclasses.replace(base.planner, inertia=inertia))
 
 
 def agility_job(scenario: Scenario, motion: str, also: Callable | None = None) -> dict:

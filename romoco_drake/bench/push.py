@@ -1,7 +1,9 @@
 """``romoco bench push``: the largest push a walking robot survives, per direction and gait phase.
 
 The robot stands for ``START_S``, then walks forward at ``speed`` (default ``SPEED``; the
-scenario's ``<robot>_walk`` setup, command replaced). Once it has walked ``WALK_S`` the base
+scenario's ``<robot>_walk`` setup with ``overlays`` merged on, default ``OVERLAYS``: the
+settings of ``diagrams/overlays/push_recovery.yaml``, which ``romoco run <robot>_walk --overlay
+push_recovery`` runs too; command replaced). Once it has walked ``WALK_S`` the base
 gets a ``push_s`` (default ``PUSH_S``) push of impulse J (N·s; force J / ``push_s``) in the
 heading frame, forward, backward, left or right, starting at a fraction of a step (the gait
 phase: 0 is the support switch). The step clock comes from one unpushed run: steps are periodic
@@ -14,6 +16,7 @@ survived before it (0: none).
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 from pydrake.systems.analysis import Simulator
 
@@ -35,31 +38,16 @@ START_S = 0.5  # standing before the walking command
 WALK_S = 3.0  # walking before the step the push falls in
 PUSH_S = 0.1  # push duration
 HOLD_S = 3.0  # survival window after the push start
-JOINT_LIMIT_HORIZON = 0.05  # s, the TSC-QP's leg joint limits (control/tscqp.py)
-# The TSC-QP's angular-momentum damping (hip strategy, control/tscqp.py): weight per (N·m)² and its
-# factors on roll, pitch and yaw. On G1 (16 cells at 20, 25 and 30 N·s) weight 0 left three lateral
-# cells under 20 N·s; 30 on every axis lifted them but felled forward at phase 0.5 at 20 N·s,
-# which a quarter of it on pitch (30 × 0.25) keeps.
-ANGULAR_MOMENTUM_WEIGHT = 30.0
-ANGULAR_MOMENTUM_AXES = (1.0, 0.25, 1.0)
+OVERLAYS = ("push_recovery",)  # diagrams/overlays/: the bench's settings, runnable by anyone
 CRITERION = f"no fall within {HOLD_S:g} s of the push start (base tilt, base height or body contact)"
 
 
-def walking_scenario(robot: str, adapt: bool = True, ankle_gain: float = 0.0,
-                     angular_momentum_weight: float = ANGULAR_MOMENTUM_WEIGHT, speed: float = SPEED
-                     ) -> Scenario:
-    """``diagrams/<robot>_walk.yaml`` walking forward at ``speed`` from START_S, step adaptation on or
-    off, with the TSC-QP's ankle gain, angular-momentum weight (on ANGULAR_MOMENTUM_AXES) and
-    joint limits (JOINT_LIMIT_HORIZON; control/tscqp.py)."""
-    base = load_scenario(f"{robot}_walk")
-    planner = dataclasses.replace(base.planner, step_adaptation=dataclasses.replace(
-        base.planner.step_adaptation, enabled=adapt))
-    controller = dataclasses.replace(base.controller, ankle_gain=ankle_gain,
-                                     angular_momentum_weight=angular_momentum_weight,
-                                     angular_momentum_axes=list(ANGULAR_MOMENTUM_AXES),
-                                     joint_limit_horizon=JOINT_LIMIT_HORIZON)
-    return dataclasses.replace(base, name=f"{robot}_push", planner=planner, controller=controller,
-                               disturbances=[], command=[CommandPoint(0.0), CommandPoint(START_S, speed)])
+def walking_scenario(robot: str, overlays: Sequence[str] = OVERLAYS, speed: float = SPEED) -> Scenario:
+    """``diagrams/<robot>_walk.yaml`` with ``overlays`` merged on, walking forward at ``speed`` from
+    START_S."""
+    base = load_scenario(f"{robot}_walk", overlays)
+    return dataclasses.replace(base, name=f"{robot}_push", disturbances=[],
+                               command=[CommandPoint(0.0), CommandPoint(START_S, speed)])
 
 
 def step_clock(scenario: Scenario) -> tuple[float, float]:
@@ -86,13 +74,12 @@ def pushed(scenario: Scenario, t: float, impulse: float, direction: str, push_s:
 
 
 def bench_push(robot: str = "g1", impulses=IMPULSES, phases=PHASES, directions=tuple(DIRECTIONS),
-               adapt: bool = True, ankle_gain: float = 0.0,
-               angular_momentum_weight: float = ANGULAR_MOMENTUM_WEIGHT,
-               speed: float = SPEED, push_s: float = PUSH_S, sweep: SweepOptions = IN_PROCESS,
-               progress=None) -> dict:
+               overlays: Sequence[str] = OVERLAYS, speed: float = SPEED, push_s: float = PUSH_S,
+               sweep: SweepOptions = IN_PROCESS, progress=None) -> dict:
     """The push table (module docstring): per cell the largest impulse survived, and per direction
-    the smallest of those over the phases."""
-    scenario = walking_scenario(robot, adapt, ankle_gain, angular_momentum_weight, speed)
+    the smallest of those over the phases. The result names the overlays and echoes the planner
+    and controller settings they gave."""
+    scenario = walking_scenario(robot, overlays, speed)
     start, step = step_clock(scenario)
     cells = {(d, ph): {"direction": d, "phase": ph, "push_time_s": round(start + ph * step, 4),
                        "survived": 0.0, "fell_at": None, "fall_time_s": None}
@@ -112,8 +99,9 @@ def bench_push(robot: str = "g1", impulses=IMPULSES, phases=PHASES, directions=t
         if not alive:
             break
     per_direction = {d: min(cells[(d, ph)]["survived"] for ph in phases) for d in directions}
-    return {"robot": robot, "step_adaptation": adapt, "ankle_gain": ankle_gain,
-            "angular_momentum_weight": angular_momentum_weight,
-            "angular_momentum_axes": list(ANGULAR_MOMENTUM_AXES), "speed_mps": speed, "push_s": push_s,
+    return {"robot": robot, "overlays": list(scenario.overlays),
+            "planner": dataclasses.asdict(scenario.planner),
+            "controller": dataclasses.asdict(scenario.controller),
+            "speed_mps": speed, "push_s": push_s,
             "impulses": sorted(impulses), "step_s": round(step, 4), "criterion": CRITERION,
             "per_direction": per_direction, "cells": list(cells.values())}

@@ -34,7 +34,7 @@ from romoco_drake.bench.walking import WALKING_ROBOTS, bench_tick, walk_scenario
 from romoco_drake.control.registry import CONTROLLERS
 from romoco_drake.errors import RomocoError
 from romoco_drake.metrics import velocity_tracking
-from romoco_drake.rom.planners import PLANNERS
+from romoco_drake.planners.registry import PLANNERS
 from romoco_drake.runner import log_samples, run_scenario
 from romoco_drake.scenario import Scenario, load_scenario, scenario_names, with_overrides
 

@@ -100,7 +100,7 @@ def bench_tick(scenario: Scenario, warmup: float = 2.0, ticks: int = 500) -> dic
     names = ("estimator", "kinematics", "state_machine", "planner", "embedding", "controller")
     times: dict[str, list[int]] = {n: [] for n in (*names, "plant_step")}
     machine = loop.state_machine
-    mpc = loop.planner if isinstance(loop.planner, VimpcPlanner) else None
+    mpc = loop.planner if isinstance(loop.planner, VimpcPlanner) else None  # its solve is timed apart
     qp_ns: list[int] = []
     if mpc is not None:
         times["mpc_update"] = []

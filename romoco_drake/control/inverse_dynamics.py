@@ -47,9 +47,13 @@ forces may still leave their friction cones or pull on the ground when the tasks
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from romoco_drake.config import Range, declare_ranges
 from romoco_drake.control.controller import SolverResult, torque_command
+from romoco_drake.control.settings import ControllerSettings
 from romoco_drake.control.tasks import (
     DEFAULT_TASK_GAINS,
     TaskGain,
@@ -65,6 +69,23 @@ from romoco_drake.embedding.references import TaskReferences
 from romoco_drake.modes import Domain
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
+
+
+@dataclass
+class IdConfig(ControllerSettings):
+    """Inverse dynamics' settings (``name: id``): ``load_split_weight`` (per N²) on the
+    double-support force target, ``pivot_moment_weight`` on the single-support pivot moment, and
+    ``constraint_damping`` (1/s) on the holonomic rows' velocity drift."""
+
+    name: str = "id"
+    load_split_weight: float = 1e-3
+    pivot_moment_weight: float = 1.0
+    constraint_damping: float = 20.0
+
+
+# Weights as the tasks' (1e4 overrides them all); constraint damping above 1e3/s outruns any tick.
+declare_ranges(IdConfig, load_split_weight=Range(0.0, 1e4), pivot_moment_weight=Range(0.0, 1e4),
+               constraint_damping=Range(0.0, 1e3, "1/s"))
 
 
 class InverseDynamics:

@@ -54,8 +54,10 @@ from typing import Literal
 import numpy as np
 from pydrake.multibody.tree import JacobianWrtVariable
 
+from romoco_drake.config import Range, declare_ranges, positive
 from romoco_drake.control.controller import SolverResult
 from romoco_drake.control.inverse_dynamics import InverseDynamics
+from romoco_drake.control.settings import ControllerSettings
 from romoco_drake.control.tasks import (
     DEFAULT_TASK_GAINS,
     TaskGain,
@@ -205,6 +207,26 @@ class PositionIK:
             hol = self.core.contact.constraints(self._iterate, refs.domain)
             t = tasks.evaluate(dataclasses.replace(refs, y=out.y, J=out.J, Jdot_v=out.Jdot_v), q)
         return PositionIkSolution(q, self.velocity.solve(kin, refs, feedback=False), k, residual)
+
+
+@dataclass
+class IkConfig(ControllerSettings):
+    """The IK controllers' settings (``name: velik`` or ``posik``).
+
+    ``feedforward``: τ_ff from inverse dynamics with the joint PD's K_p scaled by
+    ``position_gain_scale``, or gravity compensation with the full K_p (the RoMoCo paper's
+    eq. 17); ``max_lead`` (rad): how far q_d may lead q (None: 0.02 with inverse dynamics, 0.2
+    with gravity).
+    """
+
+    name: str = "velik"
+    feedforward: Literal["inverse_dynamics", "gravity"] = "inverse_dynamics"
+    position_gain_scale: float = 0.25
+    max_lead: float | None = None
+
+
+# A PD scaled past its own gains, or a setpoint more than a radian ahead, is no IK any more.
+declare_ranges(IkConfig, position_gain_scale=Range(0.0, 1.0, lo_open=True), max_lead=positive(1.0, "rad"))
 
 
 class IkSolver:

@@ -71,13 +71,16 @@ alone, so level 1 is skipped.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import daqp
 import numpy as np
 
+from romoco_drake.config import Range, declare_ranges, positive
 from romoco_drake.control.controller import SolverResult, torque_command
 from romoco_drake.control.hqp import Level, null_space, solve_hierarchy
+from romoco_drake.control.settings import ControllerSettings
 from romoco_drake.control.tasks import DEFAULT_TASK_GAINS, GRAVITY, TaskGain, TaskStack
 from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.embedding.outputs import leg_chain, sole_frame
@@ -148,6 +151,31 @@ class MomentumSolution:
     hdot: np.ndarray
     failed: str | None
     relaxed: str | None = None  # what was given up to answer: a limit group or a skipped level
+
+
+@dataclass
+class MomentumConfig(ControllerSettings):
+    """The momentum controller's settings (``name: momentum``): ``gains`` (:class:`MomentumGains`),
+    level 0's ``friction_margin`` and ``cop_margin`` (m) inside each sole's wrench cone, and the
+    locked joints' range rows (stop within ``limit_horizon`` s, ``limit_margin`` rad inside)."""
+
+    name: str = "momentum"
+    gains: MomentumGains = dataclasses.field(default_factory=MomentumGains)
+    friction_margin: float = 0.1
+    cop_margin: float = 0.01
+    limit_horizon: float = 0.1
+    limit_margin: float = 0.02
+
+
+# Gains beyond 1e4 (1/s², 1/s) outrun a 1 kHz tick; weights as the XO paper's (≤ 1e6 apart is a
+# hard priority already); a friction margin of 1 leaves no friction, a CoP margin past 0.1 m no sole.
+declare_ranges(MomentumGains, kp=Range(0.0, 1e4, "1/s²"), kd=Range(0.0, 1e3, "1/s"),
+               k_angular=Range(0.0, 1e3, "1/s"), angular_weight=Range(0.0, 1e6),
+               posture_kp=Range(0.0, 1e4, "1/s²"), posture_kd=Range(0.0, 1e3, "1/s"),
+               wrench_weight=Range(0.0, 1e6), angular_task_weight=Range(0.0, 1e6),
+               lateral_task_weight=Range(0.0, 1e6))
+declare_ranges(MomentumConfig, friction_margin=Range(0.0, 1.0, hi_open=True), cop_margin=Range(0.0, 0.1, "m"),
+               limit_horizon=positive(1.0, "s"), limit_margin=Range(0.0, 0.5, "rad"))
 
 
 class MomentumHqp:

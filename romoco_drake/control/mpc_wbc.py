@@ -20,11 +20,14 @@ the contacts are equality rows here.
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
-from romoco_drake.control.tscqp import TscQp
+from romoco_drake.config import Range, declare_ranges
+from romoco_drake.control.tscqp import TscQp, TscqpConfig
 from romoco_drake.embedding.references import TaskReferences
 from romoco_drake.robots.kinematics import RobotKinematics
 
@@ -37,6 +40,32 @@ def foot_wrench_map(points: np.ndarray, center: np.ndarray) -> np.ndarray:
         W[:3, 3 * j:3 * j + 3] = [[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]]
         W[3:, 3 * j:3 * j + 3] = np.eye(3)
     return W
+
+
+@dataclass
+class MpcTrackingConfig:
+    """The MPC-tracking cost blocks (:class:`MpcWbc`): ``wrench_weight`` per N² (moments in N·m
+    count alike) against the tasks' (per (m/s²)², weights ~1-10); ``com_weight``, ``com_kp``
+    (1/s²), ``com_kd`` (1/s): the horizontal CoM row toward the MPC's reference."""
+
+    wrench_weight: float = 1e-3
+    com_weight: float = 1.0
+    com_kp: float = 50.0
+    com_kd: float = 10.0
+
+
+# Weights as the TSC-QP's tasks (1e4 would override all of them); gains below 1e4/s² (a 10 ms
+# time constant is faster than the MPC's own 50 ms knots).
+declare_ranges(MpcTrackingConfig, wrench_weight=Range(0.0, 1e4), com_weight=Range(0.0, 1e4),
+               com_kp=Range(0.0, 1e4, "1/s²"), com_kd=Range(0.0, 1e3, "1/s"))
+
+
+@dataclass
+class WbcConfig(TscqpConfig):
+    """The MPC-tracking WBC's settings (``name: wbc``): the TSC-QP's, plus ``mpc_tracking``."""
+
+    name: str = "wbc"
+    mpc_tracking: MpcTrackingConfig = dataclasses.field(default_factory=MpcTrackingConfig)
 
 
 class MpcWbc(TscQp):

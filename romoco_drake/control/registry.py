@@ -1,48 +1,86 @@
-"""The controller registry: every controller a scenario can name, and how to build it.
+"""The controller registry: every controller a scenario can name, its settings and how to build it.
 
-Walking controllers (``walking=True``) are whole-body solvers run by
-:class:`~romoco_drake.control.controller.WholeBodyController`; their factory takes
-``(robot, contact, period, config)`` with ``config`` the scenario's controller section and
-returns the solver. ``momentum_log`` adds the XO paper's momentum record to the run
-(:class:`~romoco_drake.control.momentum_log.MomentumLog`). ``motor_command`` says the
-controller commands the motors' own position loops (q_d, v_d, τ_ff, K_p, K_d) rather than
-torques. ``qp_solver`` says the scenario's ``controller.solver`` picks its QP solver.
-``standing`` is the stand-only joint PD, a system of its own.
+Each entry declares its settings dataclass (``config``, a
+:class:`~romoco_drake.control.settings.ControllerSettings`); the scenario's ``controller:``
+section is parsed by it, and the factory takes ``(robot, config)``. A walking controller's
+factory returns the whole-body solver that
+:class:`~romoco_drake.control.controller.WholeBodyController` runs each tick; ``standing``'s
+returns its own system. The entry's ``traits`` (:class:`ControllerTraits`) say how the loop wires
+it. Plugins register the same way (``romoco_drake.registry.load_plugins``).
 """
 
 from __future__ import annotations
 
-from romoco_drake.control.inverse_dynamics import InverseDynamics
-from romoco_drake.control.inverse_kinematics import IkSolver
-from romoco_drake.control.momentum import MomentumHqp
-from romoco_drake.control.mpc_wbc import MpcWbc
+from dataclasses import dataclass
+
+from romoco_drake.config import LINK_TICK_OFFSET
+from romoco_drake.control.inverse_dynamics import IdConfig, InverseDynamics
+from romoco_drake.control.inverse_kinematics import IkConfig, IkSolver
+from romoco_drake.control.momentum import MomentumConfig, MomentumHqp
+from romoco_drake.control.mpc_wbc import MpcWbc, WbcConfig
+from romoco_drake.control.settings import ControllerSettings
 from romoco_drake.control.standing import StandingController
-from romoco_drake.control.tscqp import TscQp
+from romoco_drake.control.tscqp import TscQp, TscqpConfig
+from romoco_drake.embedding.references import contact_model
 from romoco_drake.registry import Registry
 
+
+@dataclass(frozen=True)
+class ControllerTraits:
+    """How the loop wires a controller.
+
+    ``walking``: a whole-body solver run by ``WholeBodyController`` in the walking loop (else a
+    system of its own that stands); ``motor_command``: it commands the motors' own position loops
+    (q_d, v_d, τ_ff, K_p, K_d) rather than torques; ``momentum_log``: the run records the XO
+    paper's momentum quantities (:class:`~romoco_drake.control.momentum_log.MomentumLog`).
+    """
+
+    walking: bool = True
+    motor_command: bool = False
+    momentum_log: bool = False
+
+
+def traits(name: str) -> ControllerTraits:
+    """The traits of the controller called ``name`` (plugins without traits: a torque walker)."""
+    return CONTROLLERS[name].facts.get("traits", ControllerTraits())
+
+
+def _ik(robot, config: IkConfig):
+    kind = "velocity" if config.name == "velik" else "position"
+    return IkSolver(robot, 1.0 / config.rate_hz, kind, contact_model(robot), feedforward=config.feedforward,
+                    position_gain_scale=config.position_gain_scale, max_lead=config.max_lead)
+
+
+def _momentum(robot, config: MomentumConfig):
+    return MomentumHqp(robot, contact_model(robot), config.gains, friction_margin=config.friction_margin,
+                       cop_margin=config.cop_margin, limit_horizon=config.limit_horizon,
+                       limit_margin=config.limit_margin)
+
+
+def _wbc(robot, config: WbcConfig):
+    track = config.mpc_tracking
+    return MpcWbc.from_config(robot, contact_model(robot), config, wrench_weight=track.wrench_weight,
+                              com_weight=track.com_weight, com_kp=track.com_kp, com_kd=track.com_kd)
+
+
 CONTROLLERS = Registry("controller")
-CONTROLLERS.add("standing", lambda robot, period, offset: StandingController(robot, period, offset),
+CONTROLLERS.add("standing", lambda robot, config: StandingController(robot, 1.0 / config.rate_hz,
+                                                                      LINK_TICK_OFFSET),
                 "joint PD about the nominal pose plus gravity compensation (stands only)",
-                walking=False, motor_command=False)
-CONTROLLERS.add("tscqp", lambda robot, contact, period, config: TscQp(
-                    robot, contact, solver=config.solver,
-                    angular_momentum_weight=config.angular_momentum_weight,
-                    angular_momentum_damping=config.angular_momentum_damping, ankle_gain=config.ankle_gain,
-                    joint_limit_horizon=config.joint_limit_horizon,
-                    angular_momentum_axes=tuple(config.angular_momentum_axes)),
-                "task-space QP over v̇ and contact forces (RoMoCo §V-A)", walking=True, motor_command=False,
-              qp_solver=True)
-CONTROLLERS.add("id", lambda robot, contact, period, config: InverseDynamics(robot, contact),
-                "inverse dynamics by orthogonal decomposition (RoMoCo §V-B)", walking=True,
-                motor_command=False)
-CONTROLLERS.add("velik", lambda robot, contact, period, config: IkSolver(robot, period, "velocity", contact),
-                "velocity IK in the constraint null space, joint PD (RoMoCo §V-C)", walking=True,
-                motor_command=True)
-CONTROLLERS.add("posik", lambda robot, contact, period, config: IkSolver(robot, period, "position", contact),
-                "position IK by Newton-Raphson, joint PD (RoMoCo §V-C)", walking=True, motor_command=True)
-CONTROLLERS.add("momentum", lambda robot, contact, period, config: MomentumHqp(robot, contact),
+                config=ControllerSettings, traits=ControllerTraits(walking=False))
+CONTROLLERS.add("tscqp", lambda robot, config: TscQp.from_config(robot, contact_model(robot), config),
+                "task-space QP over v̇ and contact forces (RoMoCo §V-A)", config=TscqpConfig)
+CONTROLLERS.add("id", lambda robot, config: InverseDynamics(
+                    robot, contact_model(robot), constraint_damping=config.constraint_damping,
+                    pivot_moment_weight=config.pivot_moment_weight,
+                    load_split_weight=config.load_split_weight),
+                "inverse dynamics by orthogonal decomposition (RoMoCo §V-B)", config=IdConfig)
+CONTROLLERS.add("velik", _ik, "velocity IK in the constraint null space, joint PD (RoMoCo §V-C)",
+                config=IkConfig, traits=ControllerTraits(motor_command=True))
+CONTROLLERS.add("posik", _ik, "position IK by Newton-Raphson, joint PD (RoMoCo §V-C)",
+                config=IkConfig, traits=ControllerTraits(motor_command=True))
+CONTROLLERS.add("momentum", _momentum,
                 "hierarchical centroidal-momentum QPs in the contact null space (XO paper §III)",
-                walking=True, motor_command=False, momentum_log=True)
-CONTROLLERS.add("wbc", lambda robot, contact, period, config: MpcWbc(robot, contact, solver=config.solver),
-                "TSC-QP tracking a wrench MPC's contact wrenches and CoM (VI-MPC paper §III.E)",
-                walking=True, motor_command=False, qp_solver=True)
+                config=MomentumConfig, traits=ControllerTraits(momentum_log=True))
+CONTROLLERS.add("wbc", _wbc, "TSC-QP tracking a wrench MPC's contact wrenches and CoM (VI-MPC paper §III.E)",
+                config=WbcConfig)

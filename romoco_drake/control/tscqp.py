@@ -19,6 +19,7 @@ reference, ``MathematicalProgram`` with Drake's Clarabel (:class:`_ClarabelProgr
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Literal
@@ -27,7 +28,9 @@ import daqp
 import numpy as np
 from pydrake.solvers import ClarabelSolver, MathematicalProgram, SolverOptions
 
+from romoco_drake.config import Range, declare_ranges
 from romoco_drake.control.controller import SolverResult, torque_command
+from romoco_drake.control.settings import ControllerSettings
 from romoco_drake.control.tasks import (
     DEFAULT_TASK_GAINS,
     GRAVITY,
@@ -46,6 +49,64 @@ QP_SOLVERS = ("daqp", "clarabel")
 _DOMAIN_CODES = {d: float(i + 1) for i, d in enumerate(Domain)}  # warm start tag; 0: none yet
 _DAQP_INF = 1e30  # DAQP ignores bounds at or beyond this magnitude
 _DAQP_EQUALITY, _DAQP_ACTIVE_UPPER, _DAQP_ACTIVE_LOWER = 5, 1, 3  # its constraint-sense flags
+
+
+@dataclass
+class AngularMomentumConfig:
+    """The hip strategy (:class:`TscQp`): ``weight`` per (N·m)² on k̇_G = −``damping`` k_G (1/s),
+    scaled per heading-frame axis (roll, pitch, yaw) by ``axes``. Off at weight 0: on G1's plane
+    feet (weight 1) it tracked g1_walk's velocities better but made G1 fall on starting to walk
+    after a 10 cm drop; on the line feet of H1 and Cassie it tracked worse."""
+
+    weight: float = 0.0
+    damping: float = 10.0
+    axes: list[float] = dataclasses.field(default_factory=lambda: [1.0, 1.0, 1.0])
+
+
+# Task weights are O(1-10); 1e4 would override every task. Damping above 1e3/s outruns any tick.
+declare_ranges(AngularMomentumConfig, weight=Range(0.0, 1e4), damping=Range(0.0, 1e3, "1/s"),
+               axes=Range(0.0, 1.0, size=3))
+
+
+@dataclass
+class AnkleConfig:
+    """The ankle strategy (:class:`TscQp`): the stance CoP shift per metre of DCM error. Off at 0:
+    on G1 (0.1) it made the 0 → 1 m/s step fall; on H1 and Cassie (line feet) it tracked worse
+    (H1 vx rms error 0.035 → 0.064 m/s)."""
+
+    gain: float = 0.0
+
+
+# A CoP shift 10× the DCM error is a bang-bang ankle.
+declare_ranges(AnkleConfig, gain=Range(0.0, 10.0))
+
+
+@dataclass
+class JointLimitConfig:
+    """Leg joint limits (:class:`TscQp`): each joint stops within ``horizon`` s of its position
+    limits; 0, the default, leaves the rows out."""
+
+    horizon: float = 0.0
+
+
+declare_ranges(JointLimitConfig, horizon=Range(0.0, 1.0, "s"))
+
+
+@dataclass
+class TscqpConfig(ControllerSettings):
+    """The TSC-QP's settings (scenario ``controller:`` with ``name: tscqp``).
+
+    ``solver``: ``daqp`` (default), a dual active-set solver on a workspace kept across ticks,
+    exact for this small dense QP and about 30× faster than ``clarabel``, the reference
+    (``MathematicalProgram`` solved by Drake's Clarabel), which alone would not fit a 1 kHz tick
+    in Python. The sections are the balance terms beyond foot placement.
+    """
+
+    name: str = "tscqp"
+    solver: Literal["daqp", "clarabel"] = "daqp"
+    angular_momentum: AngularMomentumConfig = dataclasses.field(default_factory=AngularMomentumConfig)
+    ankle: AnkleConfig = dataclasses.field(default_factory=AnkleConfig)
+    joint_limits: JointLimitConfig = dataclasses.field(default_factory=JointLimitConfig)
 
 
 @dataclass(frozen=True)
@@ -250,6 +311,14 @@ class TscQp:
         # Warm start: a domain tag, then one active-set flag per inequality row (the most any domain has).
         friction_rows = sum(foot.A_S.shape[0] for foot in contact.feet.values())
         self.warm_start_size = 1 + robot.nu + len(self._lim_q) + friction_rows
+
+    @classmethod
+    def from_config(cls, robot: RobotModel, contact: ContactModel, config: TscqpConfig, **kwargs):
+        """The TSC-QP a scenario's ``controller:`` section describes (``kwargs``: the subclass's own)."""
+        am = config.angular_momentum
+        return cls(robot, contact, solver=config.solver, angular_momentum_weight=am.weight,
+                   angular_momentum_damping=am.damping, angular_momentum_axes=tuple(am.axes),
+                   ankle_gain=config.ankle.gain, joint_limit_horizon=config.joint_limits.horizon, **kwargs)
 
     def formulate(self, kin: RobotKinematics, refs: TaskReferences) -> QpData:
         """The QP of this tick (module docstring), from the shared evaluation and the references.

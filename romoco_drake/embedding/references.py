@@ -128,6 +128,18 @@ class StandState(SharedValue):
     yaw: float  # pelvis heading target: the feet's mean heading at entry
 
 
+@functools.cache
+def contact_model(robot: RobotModel) -> ContactModel:
+    """The contact model the loop's embedding and controller share for ``robot`` (built once).
+
+    Without an ankle roll joint the leg cannot set the stance foot's roll moment, and a
+    flat-foot contact would tie the pelvis roll to the lateral CoM: the controller models such
+    feet as their toe-heel line (the simulation keeps the whole sole).
+    """
+    line = not WalkingOutputs(robot).has_ankle_roll and not robot.is_point_foot
+    return ContactModel(robot, line_contact=line, cop_margin=COP_MARGIN if robot.is_line_foot else 0.0)
+
+
 class EmbeddingCore:
     """Evaluates task references for a robot on the controller plant (no AutoDiff)."""
 
@@ -136,12 +148,7 @@ class EmbeddingCore:
         self.walking = WalkingOutputs(robot)
         self.standing = StandingOutputs(robot)
         self.in_air = InAirOutputs(robot)
-        # Without an ankle roll joint the leg cannot set the stance foot's roll moment, and a
-        # flat-foot contact would tie the pelvis roll to the lateral CoM: the controller models
-        # such feet as their toe-heel line (the simulation keeps the whole sole).
-        line = not self.walking.has_ankle_roll and not robot.is_point_foot
-        self.contact = contact or ContactModel(robot, line_contact=line,
-                                               cop_margin=COP_MARGIN if robot.is_line_foot else 0.0)
+        self.contact = contact or contact_model(robot)
         self.swing_height = robot.config.walking.swing_height
         self.swing_freeze = robot.config.walking.swing_target_freeze
         self.nominal_com_height = float(robot.nominal.p_WCoM[2])

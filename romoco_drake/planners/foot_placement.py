@@ -37,6 +37,11 @@ class FootPlacementPlanner(LeafSystem):
     def __init__(self, law: FootPlacementLaw, adapter: StepAdapter | None = None):
         super().__init__()
         self.law, self.adapter = law, adapter
+        # What the loop wires (planners/registry.py): the swing foot and the adapted step times
+        # only with an adapter.
+        self.t_ds = law.t_ds
+        self.adapts_timing = adapter is not None
+        self.loop_inputs = ("rom_state", "gait_phase", "command") + (("swing_foot",) if adapter else ())
         self.rom_state_port = self.DeclareVectorInputPort("rom_state", ROM_STATE_SIZE)
         self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
@@ -44,6 +49,10 @@ class FootPlacementPlanner(LeafSystem):
         self.planner_output_port = self.DeclareAbstractOutputPort(
             "planner_output", lambda: AbstractValue.Make(self._plan_default()), self._calc_plan
         )
+
+    def summary(self, context) -> dict:
+        """The run summary's planner keys: the law's name."""
+        return {"planner": self.law.name}
 
     def _plan_default(self) -> PlannerOutput:
         cmd = WalkCommand()

@@ -45,12 +45,14 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
+from romoco_drake.config import Range, declare_ranges, positive
 from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.embedding.outputs import sole_frame
 from romoco_drake.errors import RomocoError
 from romoco_drake.inertia.ccinn import load_ccinn, predict_inertia_horizon, rpy_from_rotations
 from romoco_drake.inertia.wbo import load_wbo
 from romoco_drake.modes import Mode
+from romoco_drake.planners.settings import PlannerSettings
 from romoco_drake.robots.centroidal import centroidal_inertia
 from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_value
 from romoco_drake.robots.model import RobotModel
@@ -70,8 +72,8 @@ INERTIA_MODES = ("nominal", "updated", "network")
 
 
 @dataclass
-class VimpcConfig:
-    """The VI-MPC planner's settings (scenario key ``vimpc``).
+class VimpcConfig(PlannerSettings):
+    """The VI-MPC planner's settings (scenario ``planner:`` with ``name: vimpc``).
 
     ``inertia``: the paper's cases 1-3 (module docstring). ``q``, ``r``, ``q_terminal``: the
     diagonal weights of eq. 18 on x = [Θ, p_c, ω, ṗ_c] and u = [τ_L, f_L, τ_R, f_R].
@@ -82,6 +84,7 @@ class VimpcConfig:
     (s): how long a reference outlives a failed solve.
     """
 
+    name: str = "vimpc"
     inertia: Literal["nominal", "updated", "network"] = "network"
     rate_hz: float = 200.0
     knots: int = 10
@@ -105,6 +108,18 @@ class VimpcConfig:
     max_age: float = 0.02
 
 
+# The MPC replans at up to 1 kHz over up to 30 knots of 1-200 ms (defaults: 10 knots of 50 ms at
+# the paper's 200 Hz). The solve grows with the cube of the knots (measured on DRACO: 30 knots
+# ~20 ms a solve, 50 knots ~0.1 s, and 0.8 s over a 25 s horizon), so more is a run that never
+# ends, not a better plan. Weights are a diagonal cost, ≥ 0 (r > 0: the QP needs a positive
+# definite input cost); k1, k2 are eq. 14's gains, of order 1; f_max is the normal force bound
+# (10 kN: well past any humanoid's weight).
+declare_ranges(VimpcConfig, rate_hz=Range(1.0, 1000.0, "Hz"), knots=Range(1, 30), dt=Range(0.001, 0.2, "s"),
+               q=Range(0.0, 1e8, size=12), r=Range(0.0, 1e8, lo_open=True, size=12),
+               q_terminal=Range(0.0, 1e8, size=12), k1=Range(0.0, 10.0), k2=Range(0.0, 10.0),
+               max_step=positive(1.0, "m"), f_max=positive(1e4, "N"), max_age=positive(1.0, "s"))
+
+
 class VimpcPlanner(LeafSystem):
     """Footholds every evaluation, the wrench MPC at ``config.rate_hz`` (module docstring)."""
 
@@ -118,6 +133,8 @@ class VimpcPlanner(LeafSystem):
         self.robot, self.contact, self.config = robot, contact, config
         walk = robot.config.walking
         self.t_ds, self.swing_height = walk.t_ds, walk.swing_height
+        self.adapts_timing = False  # what the loop wires (planners/registry.py)
+        self.loop_inputs = ("kinematics", "gait_phase", "command", "mode")
         half = _sole_half_extent(robot)
         self.mpc = SrbMpc(robot.total_mass, MpcWeights(np.array(config.q), np.array(config.r),
                                                        np.array(config.q_terminal)),
@@ -149,6 +166,13 @@ class VimpcPlanner(LeafSystem):
         self.planner_output_port = self.DeclareAbstractOutputPort(
             "planner_output", lambda: AbstractValue.Make(PlannerOutput.placeholder()), self._calc_plan)
         self.mpc_stats_port = self.DeclareStateOutputPort("mpc_stats", self._stats)
+
+    def summary(self, context) -> dict:
+        """The run summary's planner keys: solves, failed solves, updates on the fallback, the
+        inertia mode."""
+        solves, failed, fallback = self.mpc_stats_port.Eval(context)
+        return {"planner": self.config.name, "mpc_solves": int(solves), "mpc_failures": int(failed),
+                "mpc_fallback_updates": int(fallback), "vimpc_inertia": self.config.inertia}
 
     # ------------------------------------------------------------------ the MPC tick
     def _update(self, context, state) -> None:

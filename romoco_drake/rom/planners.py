@@ -338,32 +338,21 @@ class AlipGeneralLaw(FootPlacementLaw):
         return u_x, u_y, orbit, (vx * t, p_start + vy * t - p_star)
 
 
-PLANNERS = Registry("planner")
+LAWS = Registry("foot-placement law")
 for _law, _description in (
         (AlipLaw, "ALIP: momentum at the end of the next step on the orbit (Gong & Grizzle)"),
         (HlipLaw, "H-LIP: S2S feedback, constant-velocity double support (Xiong & Ames)"),
         (MlipLaw, "MLIP: S2S feedback, ZMP rolled to the new foot in double support"),
         (DcmLaw, "DCM: S2S feedback on the divergent component only"),
         (AlipGeneralLaw, "general-foot ALIP for large flat feet and heavy limbs (XO paper)")):
-    PLANNERS.add(_law.name, _law, _description, gains=_law.supported_gains, law=True)
-
-
-def _vimpc_is_a_system(params: PlannerParams) -> FootPlacementLaw:
-    raise RomocoError("planner 'vimpc' is a system of its own (romoco_drake.planners.vimpc), not a "
-                      "foot-placement law")
-
-
-# The VI-MPC plans footholds and contact wrenches in a system of its own (it needs the robot's
-# state and an inertia model, beyond a ROM state); the scenario wires it in the law's place.
-PLANNERS.add("vimpc", _vimpc_is_a_system, "VI-MPC: convex SRB MPC with variable inertia, Raibert footholds "
-             "(DRACO paper; pair with controller wbc)", gains=(), law=False)
+    LAWS.add(_law.name, _law, _description, gains=_law.supported_gains)
 
 
 def foot_placement_laws() -> list[str]:
-    """The planners that are foot-placement laws (:func:`make_planner` builds them)."""
-    return [name for name, entry in PLANNERS.items() if entry.facts["law"]]
+    """The foot-placement laws (:func:`make_planner` builds them)."""
+    return list(LAWS)
 
 
 def make_planner(name: str, params: PlannerParams) -> FootPlacementLaw:
     """The law called ``name`` (one of :func:`foot_placement_laws`)."""
-    return PLANNERS[name].factory(params)
+    return LAWS[name].factory(params)

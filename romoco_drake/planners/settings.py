@@ -1,0 +1,57 @@
+"""The settings every planner shares, and those of the foot-placement laws.
+
+A scenario's ``planner:`` section is parsed by the dataclass its registry entry declares
+(:mod:`~romoco_drake.planners.registry`): the laws' :class:`FootPlacementConfig`, the VI-MPC's
+:class:`~romoco_drake.planners.vimpc.VimpcConfig`, a plugin's own.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Literal
+
+from romoco_drake.config import Range, declare_ranges
+
+
+@dataclass
+class PlannerSettings:
+    """``name``: the registry entry (``romoco list``)."""
+
+    name: str = "hlip"
+
+
+@dataclass
+class StepAdaptationConfig:
+    """Step location and timing adaptation over the planner's steps (rom/step_adapt.py), for a
+    foot-placement law when the robot has ``walking.step_reach``. The weights are the QP's on
+    the foothold, on σ = e^{λT} and on the DCM offset; only their ratios matter, and only when a
+    step would leave the reach."""
+
+    enabled: bool = False
+    step_weight: float = 1.0
+    timing_weight: float = 0.01
+    offset_weight: float = 10.0
+
+
+# Positive weights (a zero one makes the QP's minimiser non-unique); 1e6 apart is already a
+# hard priority.
+declare_ranges(StepAdaptationConfig, step_weight=Range(1e-6, 1e6),
+               timing_weight=Range(1e-6, 1e6), offset_weight=Range(1e-6, 1e6))
+
+
+@dataclass
+class FootPlacementConfig(PlannerSettings):
+    """A foot-placement law (alip, hlip, mlip, dcm, alip_general), its feedback gain and step
+    adaptation. ``t_ds``: double-support time (s) of the laws whose ROM has one; None: the
+    robot's ``walking.t_ds`` (the RoMoCo paper's planner comparison, Fig. 8, runs every law at
+    0, ALIP's only gait)."""
+
+    gain: Literal["deadbeat", "converging", "lqr"] = "deadbeat"
+    alpha: float = 0.5
+    t_ds: float | None = None
+    step_adaptation: StepAdaptationConfig = dataclasses.field(default_factory=StepAdaptationConfig)
+
+
+# The converging gain's contraction factor per step (0: deadbeat; 1 would never converge).
+declare_ranges(FootPlacementConfig, alpha=Range(0.0, 1.0, hi_open=True), t_ds=Range(0.0, 1.0, "s"))
