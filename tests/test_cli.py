@@ -72,7 +72,7 @@ def test_run_text_summary():
         (["run", "nope"], "unknown scenario 'nope'"),
         (["show", "atlas", "--no-wait"], "unknown robot 'atlas'"),
         (["run", "g1_stand", "--duration", "-1"], "--duration must be positive"),
-        (["bench", "rom", "--planner", "lipp"], "unknown planner 'lipp'"),
+        (["bench", "rom", "--planner", "lipp"], "unknown foot-placement law 'lipp'"),
         (["run", "g1_walk", "--planner", "lipp"], "unknown planner 'lipp'"),
         (["run", "g1_walk", "--controller", "mpc"], "unknown controller 'mpc'"),
         (["run", "g1_walk", "--command", "1:0.3,0"], "is not t:vx,vy,wz"),
@@ -106,7 +106,9 @@ def test_bad_scenario_file_is_one_line_exit_2(tmp_path):
     path.write_text("robot: g1\ncontroller: {name: standing, rate_hzz: 100}\n")
     out = romoco("run", str(path))
     assert out.returncode == 2 and "Traceback" not in out.stderr
-    assert f"{path}: controller.rate_hzz: unknown key" in out.stderr
+    expected = ("controller.rate_hzz: controller 'standing' has no setting 'rate_hzz' "
+                "(its keys: name, rate_hz)")
+    assert f"{path}: {expected}" in out.stderr
 
 
 def test_bench_rom_json_and_plots(tmp_path):
