@@ -16,11 +16,12 @@ from scipy.integrate import solve_ivp
 from romoco_drake.rom import alip, alip_general
 from romoco_drake.rom.dcm import dcm_matrix, dcm_s2s, dcm_transform
 from romoco_drake.rom.hlip import hlip_s2s
-from romoco_drake.rom.lip import GRAVITY, IMPACT_B, ds_flow, ds_matrix, omega, predict, ss_flow, ss_matrix
+from romoco_drake.rom.lip import IMPACT_B, ds_flow, ds_matrix, omega, predict, ss_flow, ss_matrix
 from romoco_drake.rom.mlip import mlip_domain_flow, mlip_matrices, mlip_s2s
 from romoco_drake.rom.planners import PlannerParams, make_planner
 from romoco_drake.rom.s2s import converging_gain, deadbeat_gain, lqr_gain
 from romoco_drake.rom.types import WalkCommand
+from romoco_drake.spatial import GRAVITY
 
 RTOL = 1e-9
 SEEDS = range(6)

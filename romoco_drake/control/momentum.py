@@ -78,7 +78,7 @@ import numpy as np
 
 from romoco_drake.control.controller import SolverResult, torque_command
 from romoco_drake.control.hqp import Level, null_space, solve_hierarchy
-from romoco_drake.control.tasks import DEFAULT_TASK_GAINS, GRAVITY, TaskGain, TaskStack
+from romoco_drake.control.tasks import DEFAULT_TASK_GAINS, TaskGain, TaskStack
 from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.embedding.outputs import leg_chain, sole_frame
 from romoco_drake.embedding.references import TaskReferences
@@ -86,6 +86,7 @@ from romoco_drake.errors import RomocoError
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.wrench_cone import rectangle_wrench_cone
+from romoco_drake.spatial import GRAVITY
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,7 @@ from romoco_drake.errors import RomocoError
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.polygon import convex_hull_2d
+from romoco_drake.spatial import skew, wrench_map
 
 SIDES = ("left", "right")
 # Contact domain -> feet in contact.
@@ -94,30 +95,6 @@ def contact_frame_state(kin: RobotKinematics, origin: np.ndarray, heading: float
     px, py, pz = (kin.p_com - origin).tolist()
     Lx, Ly, Lz = kin.angular_momentum_about(origin).tolist()
     return np.array([c * px + s * py, c * py - s * px, pz, c * Lx + s * Ly, c * Ly - s * Lx, Lz])
-
-
-def _skew(p: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -p[2], p[1]], [p[2], 0.0, -p[0]], [-p[1], p[0], 0.0]])
-
-
-def _skew_stack(p: np.ndarray) -> np.ndarray:
-    """[p_i]× for each row p_i of p (k×3): (k, 3, 3)."""
-    S = np.zeros((len(p), 3, 3))
-    S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -p[:, 2], p[:, 1], -p[:, 0]
-    S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = p[:, 2], -p[:, 1], p[:, 0]
-    return S
-
-
-def wrench_map(points: np.ndarray) -> np.ndarray:
-    """G (6 × 3k) with [f; m] = G [f_1; …; f_k]: f = Σ f_i, m = Σ p_i × f_i.
-
-    ``points`` (3×k) are the force application points relative to the moment reference
-    point, in the frame the forces and the wrench are expressed in. Rank 6 for three
-    non-collinear points; rank 5 for points on a line through the reference point (no
-    moment about the line), the line-foot case.
-    """
-    k = points.shape[1]
-    return np.vstack([np.tile(np.eye(3), k), np.hstack([_skew(p) for p in points.T])])
 
 
 def support_halfplanes(robot: RobotModel, side: str, line: bool | None = None
@@ -261,10 +238,10 @@ class ContactModel:
             h.append((r + (R @ foot.p_FS + p)[:, None]).ravel(order="F"))
             Jw, Jv = J6[:3], J6[3:]
             # −[r]× J_ω for all points at once: (k, 3, 3) @ (3, nv).
-            J.append((_skew_stack(-r.T) @ Jw + Jv).reshape(-1, self.robot.nv))
-            W = _skew(Jw @ kin.v)
+            J.append((skew(-r.T) @ Jw + Jv).reshape(-1, self.robot.nv))
+            W = skew(Jw @ kin.v)
             # a_c + α × r + ω × (ω × r), one row a point.
-            Jdv.append((bias[3:] + r.T @ (_skew(bias[:3]) + W @ W).T).ravel())
+            Jdv.append((bias[3:] + r.T @ (skew(bias[:3]) + W @ W).T).ravel())
         if self.robot.num_internal_constraints():
             internal = self.robot.internal_constraints(kin.context)
             h.append(internal.h)

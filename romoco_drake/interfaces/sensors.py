@@ -28,6 +28,7 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from romoco_drake.config import Range, declare_ranges
 from romoco_drake.errors import RomocoError
 from romoco_drake.robots.model import RobotModel
+from romoco_drake.spatial import quaternion_exp
 
 
 @dataclass
@@ -100,11 +101,9 @@ def specific_force(R_WB: np.ndarray, a_WBo_W: np.ndarray, g_W: np.ndarray) -> np
 
 def perturb_quaternion(q_WB: np.ndarray, theta_B: np.ndarray) -> np.ndarray:
     """q_WB ⊗ exp(θ_B/2): ``q_WB`` (w x y z) rotated by the small rotation vector θ_B in B."""
-    angle = np.linalg.norm(theta_B)
-    if angle == 0.0:
+    if np.linalg.norm(theta_B) == 0.0:
         return q_WB.copy()
-    dq = np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * theta_B / angle])
-    return Quaternion(wxyz=q_WB).multiply(Quaternion(wxyz=dq)).wxyz()
+    return Quaternion(wxyz=q_WB).multiply(Quaternion(wxyz=quaternion_exp(theta_B))).wxyz()
 
 
 def _unit(q: np.ndarray) -> np.ndarray | None:

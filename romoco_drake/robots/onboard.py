@@ -34,6 +34,7 @@ import numpy as np
 from romoco_drake.errors import RomocoError
 from romoco_drake.robots.meshes import read_stl
 from romoco_drake.rom.polygon import convex_hull_2d
+from romoco_drake.spatial import GRAVITY
 
 LOWEST_BAND = 5e-4  # m: geometry this close to a foot's lowest point is sole (a 15 mm ball's
 # cap is then 8 mm across: still a point)
@@ -41,7 +42,6 @@ LINE_WIDTH = 0.015  # m: a sole narrower than this is a line (and shorter too: a
 CROUCH = 0.92  # nominal CoM height / straight-leg CoM height
 KP_PER_EFFORT = 2.0  # (N·m/rad) per N·m of effort limit: G1's 88 N·m hips get 176
 KD_PER_KP = 1.0 / 40.0
-GRAVITY = 9.81
 
 
 @dataclass

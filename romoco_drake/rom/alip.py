@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import math
 
-from romoco_drake.rom.lip import GRAVITY, omega
+from romoco_drake.rom.lip import omega
+from romoco_drake.spatial import GRAVITY
 
 
 def symmetric_orbit_momentum(v: float, t_step: float, z0: float, g: float = GRAVITY) -> float:

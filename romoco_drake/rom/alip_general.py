@@ -10,7 +10,8 @@ from __future__ import annotations
 import math
 
 from romoco_drake.rom.alip import symmetric_orbit_momentum
-from romoco_drake.rom.lip import GRAVITY, omega
+from romoco_drake.rom.lip import omega
+from romoco_drake.spatial import GRAVITY
 
 
 def predicted_momentum_y(p_x: float, l_cy: float, t_left: float, mass: float, height: float,

@@ -6,8 +6,9 @@ import math
 
 import numpy as np
 
-from romoco_drake.rom.lip import GRAVITY, omega
+from romoco_drake.rom.lip import omega
 from romoco_drake.rom.s2s import StepToStep
+from romoco_drake.spatial import GRAVITY
 
 
 def dcm_transform(z0: float, g: float = GRAVITY) -> np.ndarray:

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-GRAVITY = 9.81
+from romoco_drake.spatial import GRAVITY
 
 # The support switch moves the pivot by the step u: x⁺ = x⁻ + IMPACT_B u (eq. 3).
 IMPACT_B = np.array([-1.0, 0.0])

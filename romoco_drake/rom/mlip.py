@@ -12,8 +12,9 @@ import math
 
 import numpy as np
 
-from romoco_drake.rom.lip import GRAVITY, omega
+from romoco_drake.rom.lip import omega
 from romoco_drake.rom.s2s import StepToStep
+from romoco_drake.spatial import GRAVITY
 
 
 def mlip_matrices(z0: float, g: float = GRAVITY) -> tuple[np.ndarray, np.ndarray]:

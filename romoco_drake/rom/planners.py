@@ -23,10 +23,11 @@ from romoco_drake.registry import Registry
 from romoco_drake.rom import alip, alip_general
 from romoco_drake.rom.dcm import dcm_s2s
 from romoco_drake.rom.hlip import hlip_s2s
-from romoco_drake.rom.lip import GRAVITY, omega
+from romoco_drake.rom.lip import omega
 from romoco_drake.rom.mlip import mlip_s2s
 from romoco_drake.rom.s2s import StepToStep, converging_gain, lqr_gain
 from romoco_drake.rom.types import PlannerOutput, WalkCommand, other_side
+from romoco_drake.spatial import GRAVITY
 
 DsModel = Literal["none", "hold_velocity", "zmp_ramp"]
 

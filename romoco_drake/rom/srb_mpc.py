@@ -37,10 +37,10 @@ import daqp
 import numpy as np
 
 from romoco_drake.rom.wrench_cone import rectangle_wrench_cone
+from romoco_drake.spatial import GRAVITY_W, skew
 
 STATE_SIZE = 12
 INPUT_SIZE = 12
-GRAVITY = np.array([0.0, 0.0, -9.81])
 
 _DAQP_INF = 1e30  # DAQP ignores bounds at or beyond this magnitude
 _DAQP_FLAGS = {
@@ -106,16 +106,6 @@ def euler_rate_map_inverse(theta: np.ndarray) -> np.ndarray:
     return out
 
 
-def skew(v: np.ndarray) -> np.ndarray:
-    """[v]× for one (3,) or a batch (..., 3) of vectors."""
-    v = np.asarray(v, dtype=float)
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
-    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
-    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
-    return out
-
-
 def yaw_rotation(yaw: np.ndarray) -> np.ndarray:
     """Rz(ψ) for a batch (...) of yaw angles, shape (..., 3, 3)."""
     c, s = np.cos(yaw), np.sin(yaw)
@@ -145,7 +135,7 @@ def discrete_dynamics(mass: float, dt: float, x_ref: np.ndarray, inertia: np.nda
             B[6:9, c + 3:c + 6] = dt * inertia_inv @ skew(feet[i] - x_ref[3:6])
             B[9:12, c + 3:c + 6] = dt / mass * np.eye(3)
     d = np.zeros(STATE_SIZE)
-    d[9:12] = dt * GRAVITY
+    d[9:12] = dt * GRAVITY_W
     return A, B, d
 
 
@@ -291,9 +281,9 @@ class SrbMpc:
         k = self._steps
         free = np.empty((N, STATE_SIZE))
         free[:, 0:3] = x0[0:3] + integral[1:] @ x0[6:9]
-        free[:, 3:6] = x0[3:6] + k * dt * x0[9:12] + (dt * dt * k * (k - 1) / 2.0) * GRAVITY
+        free[:, 3:6] = x0[3:6] + k * dt * x0[9:12] + (dt * dt * k * (k - 1) / 2.0) * GRAVITY_W
         free[:, 6:9] = x0[6:9]
-        free[:, 9:12] = x0[9:12] + k * dt * GRAVITY
+        free[:, 9:12] = x0[9:12] + k * dt * GRAVITY_W
         return free
 
     def _t_integral(self, x_ref: np.ndarray) -> np.ndarray:
