@@ -18,7 +18,7 @@ from romoco_drake.spatial import GRAVITY
 
 
 def mlip_matrices(z0: float, g: float = GRAVITY) -> tuple[np.ndarray, np.ndarray]:
-    """A_ct and B_ct of eq. 9."""
+    """A_ct and B_ct of eq. 9; reference for tests of mlip_domain_flow and mlip_s2s."""
     A = np.array([[0.0, 1.0 / z0, 0.0], [g, 0.0, -g], [0.0, 0.0, 0.0]])
     return A, np.array([0.0, 0.0, 1.0])
 

@@ -21,7 +21,7 @@ import numpy as np
 from romoco_drake.errors import RomocoError
 from romoco_drake.registry import Registry
 from romoco_drake.rom import alip, alip_general
-from romoco_drake.rom.dcm import dcm_s2s
+from romoco_drake.rom.dcm import dcm_s2s, dcm_transform
 from romoco_drake.rom.hlip import hlip_s2s
 from romoco_drake.rom.lip import omega
 from romoco_drake.rom.mlip import mlip_s2s
@@ -234,7 +234,7 @@ class DcmLaw(S2SLaw):
         return dcm_s2s(z0, t_ss, self.t_ds, self.params.g)
 
     def _coords(self, z0):
-        return np.array([[1.0, 1.0 / (omega(z0, self.params.g) * z0)]])
+        return dcm_transform(z0, self.params.g)[1:]
 
     def _report_s2s(self, z0, t_ss):
         return mlip_s2s(z0, t_ss, self.t_ds, self.params.g)
@@ -278,13 +278,11 @@ class AlipLaw(FootPlacementLaw):
         orbit_lat = (own[0] * uy + nxt[0] * uy_next, own[1] * uy + nxt[1] * uy_next)
         l_lat_next = own[1] * uy_next + nxt[1] * uy  # the orbit's L/m at the end of the next step
         l_sag = consts.l_sag * cmd.vx
-        # alip.target_momentum and alip.alip_step with the step-time constants hoisted.
         alpha, c, ks = self._alpha, consts.cosh_t, consts.ks_t
         (sag_p, sag_l), (lat_p, lat_l) = pre
-        l_x = l_sag + alpha * (sag_l - l_sag)
-        l_y = l_lat_next + alpha * (lat_l - orbit_lat[1])
-        u_x = (c * sag_l + ks * sag_p - l_x) / ks
-        u_y = (c * lat_l + ks * lat_p - l_y) / ks
+        l_x = alip.target_momentum(sag_l, l_sag, l_sag, alpha)
+        l_y = alip.target_momentum(lat_l, orbit_lat[1], l_lat_next, alpha)
+        u_x, u_y = alip.alip_step(sag_p, sag_l, l_x, c, ks), alip.alip_step(lat_p, lat_l, l_y, c, ks)
         return u_x, u_y, ((p1[0] * ux, p1[1] * ux), orbit_lat), (ux, uy)
 
 
@@ -328,10 +326,10 @@ class AlipGeneralLaw(FootPlacementLaw):
         l_cy_d = consts.l_cy_per_vx * vx
         p_star = alip_general.lateral_offset(vy, t, cmd.step_width, stance_side)
         l_cx_d = consts.l_cx_per_p * p_star + consts.l_cx_per_vy * vy
-        # eq. 15 and 19 (alip_general.post_impact_com_x/y) on the contact momenta m L/m.
+        # Eq. 15 and 19 on the contact momenta m L/m: the foot lands p̂⁻ − p⁺ ahead.
         c, mks = consts.cosh_t, consts.mks_t
-        u_x = sag_p - (l_cy_d - c * (m * sag_l)) / mks
-        u_y = lat_p + (l_cx_d - c * (-m * lat_l)) / mks
+        u_x = sag_p - alip_general.post_impact_com_x(l_cy_d, m * sag_l, c, mks)
+        u_y = lat_p - alip_general.post_impact_com_y(l_cx_d, -m * lat_l, c, mks)
         # The current step's orbit: it began at the offset planned in the other stance.
         p_start = alip_general.lateral_offset(vy, t, cmd.step_width, other_side(stance_side))
         l_cx_orbit = consts.l_cx_per_p * p_start + consts.l_cx_per_vy * vy
