@@ -207,7 +207,10 @@ class SimulatedSensors(LeafSystem):
         # [b_g (3), b_a (3), yaw error (1), switches (2), debounce timers (2)]
         self._state_index = self.DeclareDiscreteState(
             np.concatenate([self.gyro_bias, self.accel_bias, np.zeros(5)]))
+        self.DeclarePeriodicDiscreteUpdateEvent(dt, 0.0, self._sample)
+        self._declare_ports(plant, nj)
 
+    def _declare_ports(self, plant: MultibodyPlant, nj: int) -> None:
         self.plant_state_input = self.DeclareVectorInputPort("plant_state", plant.num_multibody_states())
         self.accelerations_input = self.DeclareAbstractInputPort(
             "body_spatial_accelerations", plant.get_body_spatial_accelerations_output_port().Allocate())
@@ -222,7 +225,6 @@ class SimulatedSensors(LeafSystem):
         self.foot_contact_output = self.DeclareVectorOutputPort(
             "foot_contact", 2, lambda c, out: out.SetFromVector(self._sensor_state(c)[7:9]),
             prerequisites_of_calc={self.xd_ticket()})
-        self.DeclarePeriodicDiscreteUpdateEvent(dt, 0.0, self._sample)
         self.base_pose_output = self.DeclareVectorOutputPort(
             "base_pose", 7, self._base_pose, prerequisites_of_calc={state})
         self.base_velocity_output = self.DeclareVectorOutputPort(

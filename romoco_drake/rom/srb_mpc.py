@@ -248,7 +248,17 @@ class SrbMpc:
         H.reshape(na, 6, na, 6)[np.arange(na), :, np.arange(na), :] += r_blocks
         H *= 2.0
         g = 2.0 * np.einsum("kri,kr->i", qS, free - x_ref[1:])
+        y, flag, iterations = self._solve_qp(H, g, na)
+        if y is None:
+            return self._failure(free, x0, f"daqp: {_DAQP_FLAGS.get(flag, f'exit flag {flag}')}", iterations)
+        u = np.zeros((N * 2, 6))
+        u[active] = np.einsum("aij,aj->ai", to_world, y.reshape(na, 6))
+        x = free + np.einsum("kri,i->kr", S, y)
+        return MpcSolution(u.reshape(N, INPUT_SIZE), np.vstack([x0, x]), True, "solved", iterations)
 
+    def _solve_qp(self, H: np.ndarray, g: np.ndarray, na: int) -> tuple[np.ndarray | None, int, int]:
+        """min ½ yᵀ H y + gᵀ y on the DAQP workspace kept for ``na`` (knot, foot) pairs:
+        (y, or None when it failed, the exit flag, the iterations)."""
         workspace = self._workspaces.get(na)
         if workspace is None:
             C = np.kron(np.eye(na), self._rows)
@@ -266,14 +276,8 @@ class SrbMpc:
         if flag < 0:
             # A failed solve leaves a working set that would poison the next warm start.
             del self._workspaces[na]
-            return self._failure(free, x0, f"daqp: {_DAQP_FLAGS.get(flag, f'exit flag {flag}')}",
-                                 int(info["iterations"]))
-        y = np.asarray(y)
-        u = np.zeros((N * 2, 6))
-        u[active] = np.einsum("aij,aj->ai", to_world, y.reshape(na, 6))
-        x = free + np.einsum("kri,i->kr", S, y)
-        return MpcSolution(u.reshape(N, INPUT_SIZE), np.vstack([x0, x]), True, "solved",
-                           int(info["iterations"]))
+            return None, flag, int(info["iterations"])
+        return np.asarray(y), flag, int(info["iterations"])
 
     def _free_response(self, x0: np.ndarray, integral: np.ndarray) -> np.ndarray:
         """x_1..x_N (N, 12) with u = 0: ω constant, Θ integrates T⁻¹ω, the CoM falls."""
