@@ -12,7 +12,7 @@ from __future__ import annotations
 import functools
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -161,22 +161,24 @@ def _orbit_basis(s2s: StepToStep) -> tuple[Plane, Plane, Plane]:
 
 
 class S2SLaw(FootPlacementLaw):
-    """u = u* + K (C x̂⁻ − x*) on a linear S2S map (eq. 7); C maps (p, L/m) to the law's state."""
+    """u = u* + K (C x̂⁻ − x*) on a linear S2S map (eq. 7); C maps (p, L/m) to the law's state.
 
-    @abstractmethod
-    def _s2s(self, z0: float, t_ss: float) -> StepToStep:
-        """The law's S2S map."""
+    ``s2s_map(z0, t_ss, t_ds, g)`` is the law's map, ``report_map`` the (p, L/m) map whose orbit
+    is reported (``s2s_map`` when None). Double support rolls the ZMP unless a law says otherwise.
+    """
+
+    ds_model = "zmp_ramp"
+    supported_gains = ("deadbeat", "converging", "lqr")
+    s2s_map: Callable[[float, float, float, float], StepToStep]
+    report_map: Callable[[float, float, float, float], StepToStep] | None = None
 
     def _coords(self, z0: float) -> np.ndarray:
         return np.eye(2)
 
-    def _report_s2s(self, z0: float, t_ss: float) -> StepToStep:
-        """The (p, L/m) S2S map whose orbit is reported."""
-        return self._s2s(z0, t_ss)
-
     def _build_constants(self, z0: float, t_ss: float) -> _S2SMaps:
-        s2s = self._s2s(z0, t_ss)
         p = self.params
+        s2s = self.s2s_map(z0, t_ss, self.t_ds, p.g)
+        report = s2s if self.report_map is None else self.report_map(z0, t_ss, self.t_ds, p.g)
         if p.gain == "lqr":
             gain = lqr_gain(s2s, np.diag(p.lqr_q), p.lqr_r)
         else:
@@ -186,7 +188,7 @@ class S2SLaw(FootPlacementLaw):
             lam=lam, k=z0 * lam,
             gain=tuple(map(float, gain @ self._coords(z0))),
             orbit_gain=tuple(float(gain @ row) for row in _orbit_basis(s2s)),
-            report=_orbit_basis(self._report_s2s(z0, t_ss)),
+            report=_orbit_basis(report),
         )
 
     def _place(self, pre, stance_side, cmd):
@@ -207,37 +209,27 @@ class HlipLaw(S2SLaw):
 
     name = "hlip"
     ds_model = "hold_velocity"
-    supported_gains = ("deadbeat", "converging", "lqr")
-
-    def _s2s(self, z0, t_ss):
-        return hlip_s2s(z0, t_ss, self.t_ds, self.params.g)
+    s2s_map = staticmethod(hlip_s2s)
 
 
 class MlipLaw(S2SLaw):
     """MLIP: double support rolls the ZMP from the stance pivot to the new foot."""
 
     name = "mlip"
-    ds_model = "zmp_ramp"
-    supported_gains = ("deadbeat", "converging", "lqr")
-
-    def _s2s(self, z0, t_ss):
-        return mlip_s2s(z0, t_ss, self.t_ds, self.params.g)
+    s2s_map = staticmethod(mlip_s2s)
 
 
 class DcmLaw(S2SLaw):
-    """DCM: regulate only the unstable mode ξ = p + L/(λ z0); the CoM follows it (stable mode)."""
+    """DCM: regulate only the unstable mode ξ = p + L/(λ z0) of MLIP's map; the CoM follows it
+    (stable mode), and the orbit reported is MLIP's."""
 
     name = "dcm"
-    ds_model = "zmp_ramp"
-
-    def _s2s(self, z0, t_ss):
-        return dcm_s2s(z0, t_ss, self.t_ds, self.params.g)
+    supported_gains = ("deadbeat", "converging")
+    s2s_map = staticmethod(dcm_s2s)
+    report_map = staticmethod(mlip_s2s)
 
     def _coords(self, z0):
         return dcm_transform(z0, self.params.g)[1:]
-
-    def _report_s2s(self, z0, t_ss):
-        return mlip_s2s(z0, t_ss, self.t_ds, self.params.g)
 
 
 @dataclass(frozen=True)
