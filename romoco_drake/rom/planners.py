@@ -20,7 +20,14 @@ import numpy as np
 
 from romoco_drake.errors import RomocoError
 from romoco_drake.registry import Registry
-from romoco_drake.rom import alip, alip_general
+from romoco_drake.rom.alip import alip_step, symmetric_orbit_momentum, target_momentum
+from romoco_drake.rom.alip_general import (
+    desired_momentum_x,
+    desired_momentum_y,
+    lateral_offset,
+    post_impact_com_x,
+    post_impact_com_y,
+)
 from romoco_drake.rom.dcm import dcm_s2s, dcm_transform
 from romoco_drake.rom.hlip import hlip_s2s
 from romoco_drake.rom.lip import omega
@@ -245,7 +252,7 @@ class _AlipConstants(_Constants):
 def _alip_constants(z0: float, t: float, g: float) -> _AlipConstants:
     lam = omega(z0, g)
     return _AlipConstants(lam=lam, k=z0 * lam, cosh_t=math.cosh(lam * t), ks_t=z0 * lam * math.sinh(lam * t),
-                          l_sag=alip.symmetric_orbit_momentum(1.0, t, z0, g),
+                          l_sag=symmetric_orbit_momentum(1.0, t, z0, g),
                           orbit=_orbit_basis(hlip_s2s(z0, t, 0.0, g)))
 
 
@@ -272,9 +279,9 @@ class AlipLaw(FootPlacementLaw):
         l_sag = consts.l_sag * cmd.vx
         alpha, c, ks = self._alpha, consts.cosh_t, consts.ks_t
         (sag_p, sag_l), (lat_p, lat_l) = pre
-        l_x = alip.target_momentum(sag_l, l_sag, l_sag, alpha)
-        l_y = alip.target_momentum(lat_l, orbit_lat[1], l_lat_next, alpha)
-        u_x, u_y = alip.alip_step(sag_p, sag_l, l_x, c, ks), alip.alip_step(lat_p, lat_l, l_y, c, ks)
+        l_x = target_momentum(sag_l, l_sag, l_sag, alpha)
+        l_y = target_momentum(lat_l, orbit_lat[1], l_lat_next, alpha)
+        u_x, u_y = alip_step(sag_p, sag_l, l_x, c, ks), alip_step(lat_p, lat_l, l_y, c, ks)
         return u_x, u_y, ((p1[0] * ux, p1[1] * ux), orbit_lat), (ux, uy)
 
 
@@ -306,9 +313,9 @@ class AlipGeneralLaw(FootPlacementLaw):
         lam = omega(z0, g)
         return _AlipGeneralConstants(
             lam=lam, k=z0 * lam, cosh_t=math.cosh(lam * t_ss), mks_t=m * z0 * lam * math.sinh(lam * t_ss),
-            l_cy_per_vx=alip_general.desired_momentum_y(1.0, t_ss, m, z0, g),
-            l_cx_per_p=alip_general.desired_momentum_x(1.0, 0.0, t_ss, m, z0, g),
-            l_cx_per_vy=alip_general.desired_momentum_x(0.0, 1.0, t_ss, m, z0, g),
+            l_cy_per_vx=desired_momentum_y(1.0, t_ss, m, z0, g),
+            l_cx_per_p=desired_momentum_x(1.0, 0.0, t_ss, m, z0, g),
+            l_cx_per_vy=desired_momentum_x(0.0, 1.0, t_ss, m, z0, g),
         )
 
     def _place(self, pre, stance_side, cmd):
@@ -316,14 +323,14 @@ class AlipGeneralLaw(FootPlacementLaw):
         m, t, vx, vy = self.params.mass, cmd.step_time, cmd.vx, cmd.vy
         (sag_p, sag_l), (lat_p, lat_l) = pre
         l_cy_d = consts.l_cy_per_vx * vx
-        p_star = alip_general.lateral_offset(vy, t, cmd.step_width, stance_side)
+        p_star = lateral_offset(vy, t, cmd.step_width, stance_side)
         l_cx_d = consts.l_cx_per_p * p_star + consts.l_cx_per_vy * vy
         # Eq. 15 and 19 on the contact momenta m L/m: the foot lands p̂⁻ − p⁺ ahead.
         c, mks = consts.cosh_t, consts.mks_t
-        u_x = sag_p - alip_general.post_impact_com_x(l_cy_d, m * sag_l, c, mks)
-        u_y = lat_p - alip_general.post_impact_com_y(l_cx_d, -m * lat_l, c, mks)
+        u_x = sag_p - post_impact_com_x(l_cy_d, m * sag_l, c, mks)
+        u_y = lat_p - post_impact_com_y(l_cx_d, -m * lat_l, c, mks)
         # The current step's orbit: it began at the offset planned in the other stance.
-        p_start = alip_general.lateral_offset(vy, t, cmd.step_width, other_side(stance_side))
+        p_start = lateral_offset(vy, t, cmd.step_width, other_side(stance_side))
         l_cx_orbit = consts.l_cx_per_p * p_start + consts.l_cx_per_vy * vy
         orbit = ((0.5 * vx * t, l_cy_d / m), (p_start + vy * t, -l_cx_orbit / m))
         return u_x, u_y, orbit, (vx * t, p_start + vy * t - p_star)
