@@ -27,6 +27,7 @@ def mlip_domain_flow(t: float, z0: float, g: float = GRAVITY) -> tuple[np.ndarra
     """(Φ, Γ) with x̄(t) = Φ x̄(0) + Γ r for a constant ZMP rate r: eq. 10 in closed form.
 
     With ζ(t) = ζ0 + r t the CoM solves p − ζ = (p0 − ζ0) cosh λt + (L0 / z0 − r) sinh(λt) / λ.
+    :func:`mlip_s2s` uses Φ; Γ is the reference for tests of its B.
     """
     lam = omega(z0, g)
     x = lam * t

@@ -77,7 +77,7 @@ class MpcWeights:
 
 
 def rpy_rotation(theta: np.ndarray) -> np.ndarray:
-    """R = Rz(ψ) Ry(φ) Rx(θ) for Θ = (θ, φ, ψ)."""
+    """R = Rz(ψ) Ry(φ) Rx(θ) for Θ = (θ, φ, ψ); reference for tests of :func:`euler_rate_map_inverse`."""
     cr, cp, cy = np.cos(theta)
     sr, sp, sy = np.sin(theta)
     return np.array([
@@ -88,7 +88,8 @@ def rpy_rotation(theta: np.ndarray) -> np.ndarray:
 
 
 def euler_rate_map(theta: np.ndarray) -> np.ndarray:
-    """T(Θ) with ω = T(Θ) Θ̇ (world-frame ω): columns Rz Ry e_x, Rz e_y, e_z."""
+    """T(Θ) with ω = T(Θ) Θ̇ (world-frame ω): columns Rz Ry e_x, Rz e_y, e_z; reference for tests of
+    :func:`euler_rate_map_inverse`."""
     cp, cy = np.cos(theta[1]), np.cos(theta[2])
     sp, sy = np.sin(theta[1]), np.sin(theta[2])
     return np.array([[cy * cp, -sy, 0.0], [sy * cp, cy, 0.0], [-sp, 0.0, 1.0]])
