@@ -24,7 +24,8 @@ from romoco_drake.metrics import (  # noqa: E402
     SETTLE_S,
 )
 from romoco_drake.rom import alip_general  # noqa: E402
-from romoco_drake.rom.lip import GRAVITY, omega  # noqa: E402
+from romoco_drake.rom.lip import omega  # noqa: E402
+from romoco_drake.spatial import GRAVITY  # noqa: E402
 
 _IDEAL_ORBIT = {"lw": 6.0, "alpha": 0.3, "zorder": 1}  # wide and pale, behind the measured points
 

@@ -8,10 +8,11 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from pydrake.math import RigidTransform, RollPitchYaw
 
-from romoco_drake.embedding import ContactModel, select_contact_points, sole_frame, wrench_map
+from romoco_drake.embedding import ContactModel, select_contact_points, sole_frame
 from romoco_drake.embedding.references import EmbeddingCore
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import load_robot
+from romoco_drake.spatial import wrench_map
 
 MARGINS = {"friction_margin": 0.1, "cop_margin": 0.01, "min_normal_force": 5.0}
 

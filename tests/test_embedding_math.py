@@ -17,10 +17,10 @@ from romoco_drake.embedding import (
     StandingOutputs,
     WalkingOutputs,
     find_leg_joints,
-    wrench_map,
 )
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import load_robot
+from romoco_drake.spatial import wrench_map
 
 H = 1e-5  # finite-difference step (s) along q(t) with constant v
 

@@ -17,7 +17,7 @@ from romoco_drake.rom.gait_schedule import (
     stance_duration,
     touchdown_times,
 )
-from romoco_drake.rom.lip import GRAVITY
+from romoco_drake.spatial import GRAVITY
 
 T_SS, T_DS, DT = 0.3, 0.1, 0.02
 H, W = 0.7, 0.2

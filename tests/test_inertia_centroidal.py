@@ -13,10 +13,6 @@ from romoco_drake.robots.centroidal import (
 from romoco_drake.robots.model import load_robot
 
 
-def _skew(p):
-    return np.array([[0, -p[2], p[1]], [p[2], 0, -p[0]], [-p[1], p[0], 0]])
-
-
 @pytest.fixture(scope="module")
 def draco():
     return load_robot("draco")

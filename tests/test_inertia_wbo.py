@@ -26,10 +26,7 @@ from romoco_drake.inertia.wbo_fit import (
     solve_motion,
 )
 from romoco_drake.robots.model import load_robot
-
-
-def _skew(w):
-    return np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
+from romoco_drake.spatial import skew, so3_exp
 
 
 def test_monomial_jacobian_matches_finite_differences():
@@ -47,7 +44,7 @@ def test_quaternion_rate_relation():
     a, b = np.array([0.3, -0.7, 0.4]), np.array([0.5, 0.2, -0.6])
 
     def R(t):
-        return _expm(a * t + b * t * t)
+        return so3_exp(a * t + b * t * t)
 
     def quat(t):
         return RotationMatrix(R(t)).ToQuaternion().wxyz()
@@ -60,13 +57,7 @@ def test_quaternion_rate_relation():
         Rdot = (R(t + h) - R(t - h)) / (2 * h)
         W = Rdot @ R(t).T
         omega = np.array([W[2, 1], W[0, 2], W[1, 0]])
-        assert np.allclose(eps_dot, 0.5 * (Q[0] * np.eye(3) - _skew(Q[1:])) @ omega, atol=1e-7)
-
-
-def _expm(w):
-    angle = np.linalg.norm(w)
-    K = _skew(w / angle)
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+        assert np.allclose(eps_dot, 0.5 * (Q[0] * np.eye(3) - skew(Q[1:])) @ omega, atol=1e-7)
 
 
 @pytest.fixture(scope="module")

@@ -9,15 +9,13 @@ from scipy.spatial.transform import Rotation
 from romoco_drake.estimation.invariant_ekf import (
     ACCEL_BIAS,
     DIM,
-    GRAVITY,
     GYRO_BIAS,
     PACKED_SIZE,
     InekfState,
     InvariantEkf,
     InvariantEkfParams,
-    hat,
-    so3_exp,
 )
+from romoco_drake.spatial import GRAVITY_W, skew, so3_exp
 
 DT = 0.002
 FEET_B = np.array([[0.02, 0.1, -0.7], [0.0, -0.1, -0.72]])  # foot points in the base frame
@@ -41,11 +39,11 @@ def test_propagation_is_exact_for_imu_readings_held_over_each_step():
     s = _state(R0, [0.3, -0.1, 0.05], [0.0, 0.0, 0.8])
     y = np.concatenate([R0.ravel(), s.v, s.p])
     for _ in range(200):
-        w, f = rng.normal(0, 2.0, 3), rng.normal(0, 3.0, 3) - GRAVITY
+        w, f = rng.normal(0, 2.0, 3), rng.normal(0, 3.0, 3) - GRAVITY_W
 
         def ode(t, y, w=w, f=f):
             R = y[:9].reshape(3, 3)
-            return np.concatenate([(R @ hat(w)).ravel(), R @ f + GRAVITY, y[9:12]])
+            return np.concatenate([(R @ skew(w)).ravel(), R @ f + GRAVITY_W, y[9:12]])
 
         y = solve_ivp(ode, (0, DT), y, rtol=1e-12, atol=1e-13).y[:, -1]
         s = ekf.propagate(s, w, f, DT)
@@ -126,7 +124,7 @@ def test_static_biases_converge():
         s = ekf.touchdown(s, i, FEET_B[i])
     for _ in range(2500):
         gyro = b_g + 1e-3 * rng.standard_normal(3)
-        accel = R.T @ -GRAVITY + b_a + 1e-2 * rng.standard_normal(3)
+        accel = R.T @ -GRAVITY_W + b_a + 1e-2 * rng.standard_normal(3)
         s = ekf.propagate(s, gyro, accel, DT)
         s = ekf.correct(s, FEET_B + 1e-3 * rng.standard_normal((2, 3)), np.zeros((2, 3)))
     np.testing.assert_allclose(s.gyro_bias, b_g, atol=5e-4)
@@ -138,7 +136,7 @@ def test_touchdown_and_liftoff_keep_inactive_slots_uncorrelated():
     ekf = InvariantEkf()
     s = ekf.initial(np.zeros(3), np.eye(3))
     s = ekf.touchdown(s, 0, FEET_B[0])
-    s = ekf.propagate(s, np.zeros(3), -GRAVITY, DT)
+    s = ekf.propagate(s, np.zeros(3), -GRAVITY_W, DT)
     np.testing.assert_array_equal(s.P[12:15, :12], 0.0)
     s = ekf.liftoff(s, 0)
     np.testing.assert_array_equal(s.P[9:12, :9], 0.0)
@@ -170,7 +168,7 @@ def test_system_standing_still_stays_at_the_nominal_pose_and_rejects_bad_inputs(
     system.joint_state_input.FixValue(context, np.concatenate([q0[robot.joint_q_index], np.zeros(nj)]))
     # The IMU's own orientation (NaN: none) is not read; still in the nominal pose, it reads gravity.
     R0 = Rotation.from_quat(q0[robot.base_q_start:robot.base_q_start + 4], scalar_first=True).as_matrix()
-    imu = np.concatenate([np.full(4, np.nan), np.zeros(3), R0.T @ -GRAVITY])
+    imu = np.concatenate([np.full(4, np.nan), np.zeros(3), R0.T @ -GRAVITY_W])
     system.imu_input.FixValue(context, imu)
     system.foot_contact_input.FixValue(context, [1.0, 1.0])
     Simulator(system, context).AdvanceTo(0.5)

@@ -10,7 +10,6 @@ from romoco_drake.estimation.ground_truth import GroundTruthEstimator
 from romoco_drake.estimation.kalman import (
     ACCEL_BIAS,
     FOOT,
-    GRAVITY,
     POSITION,
     VELOCITY,
     ContactAidedKalman,
@@ -18,6 +17,7 @@ from romoco_drake.estimation.kalman import (
 )
 from romoco_drake.estimation.kalman_estimator import KalmanEstimator
 from romoco_drake.robots.model import load_robot
+from romoco_drake.spatial import GRAVITY_W
 
 DT = 0.002
 R_TILTED = RollPitchYaw(0.05, -0.1, 0.7).ToRotationMatrix().matrix()
@@ -36,7 +36,7 @@ def _run(kf, steps, base, feet, contact, R=R_TILTED, accel_noise=0.0, r_noise=0.
     for k in range(1, steps + 1):
         t = k * DT
         p, v, a = base(t)
-        f_B = R.T @ (a - GRAVITY) + np.asarray(bias) + accel_noise * rng.standard_normal(3)
+        f_B = R.T @ (a - GRAVITY_W) + np.asarray(bias) + accel_noise * rng.standard_normal(3)
         contact_time = np.where(contact(t), contact_time + DT, 0.0)
         w = kf.contact_confidence(contact_time)
         x, P = kf.predict(x, P, R, f_B, w, DT)
@@ -161,7 +161,7 @@ def test_predict_integrates_constant_acceleration_exactly():
     x[VELOCITY] = v0
     for k in range(200):  # the base turns; the specific force is measured in its frame
         R = RollPitchYaw(0.1 * np.sin(k), 0.0, 0.01 * k).ToRotationMatrix().matrix()
-        x, P = kf.predict(x, P, R, R.T @ (a - GRAVITY), [True, True], DT)
+        x, P = kf.predict(x, P, R, R.T @ (a - GRAVITY_W), [True, True], DT)
     t = 200 * DT
     np.testing.assert_allclose(x[POSITION], p0 + v0 * t + 0.5 * a * t**2, atol=1e-12)
     np.testing.assert_allclose(x[VELOCITY], v0 + a * t, atol=1e-12)
@@ -180,7 +180,7 @@ def test_covariance_stays_symmetric_positive_definite_through_gait_phases():
     for k in range(5000):
         contact_time = np.where(contact(k * DT), contact_time + DT, 0.0)
         w = kf.contact_confidence(contact_time)
-        x, P = kf.predict(x, P, R_TILTED, R_TILTED.T @ -GRAVITY + 0.05 * rng.standard_normal(3), w, DT)
+        x, P = kf.predict(x, P, R_TILTED, R_TILTED.T @ -GRAVITY_W + 0.05 * rng.standard_normal(3), w, DT)
         x, P = kf.correct(x, P, FEET - x[POSITION] + 0.005 * rng.standard_normal((2, 3)),
                           0.05 * rng.standard_normal((2, 3)), w)
         assert np.array_equal(P, P.T)
@@ -205,7 +205,7 @@ def _nominal_inputs(robot):
     quat = robot.nominal.q[b:b + 4]
     R = RotationMatrix(Quaternion(quat / np.linalg.norm(quat))).matrix()
     joint_state = np.concatenate([robot.nominal.q[robot.joint_q_index], np.zeros(len(robot.joint_names))])
-    return joint_state, np.concatenate([quat, np.zeros(3), R.T @ -GRAVITY])
+    return joint_state, np.concatenate([quat, np.zeros(3), R.T @ -GRAVITY_W])
 
 
 def _g1_system(**kwargs):

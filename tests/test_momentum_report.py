@@ -26,7 +26,7 @@ from romoco_drake.metrics import (
 )
 from romoco_drake.plots import _frontal_orbits, plot_momentum_run
 from romoco_drake.rom import alip_general
-from romoco_drake.rom.lip import GRAVITY
+from romoco_drake.spatial import GRAVITY
 
 DT = 0.1
 WALK = (0.2, 0.0)

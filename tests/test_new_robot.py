@@ -11,7 +11,8 @@ import yaml
 
 from romoco_drake.cli import main
 from romoco_drake.robots.model import RobotModel, load_robot_config, load_robot_config_file
-from romoco_drake.robots.onboard import new_robot, read_mesh_vertices, sole_outline
+from romoco_drake.robots.model_geometry import read_mesh_vertices, sole_outline
+from romoco_drake.robots.onboard import new_robot
 from romoco_drake.robots.source import model_path
 from romoco_drake.rom.polygon import convex_hull_2d
 

@@ -14,13 +14,14 @@ from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
 from romoco_drake.rom import alip, alip_general
-from romoco_drake.rom.dcm import dcm_matrix, dcm_s2s, dcm_transform
+from romoco_drake.rom.dcm import dcm_s2s, dcm_transform
 from romoco_drake.rom.hlip import hlip_s2s
-from romoco_drake.rom.lip import GRAVITY, IMPACT_B, ds_flow, ds_matrix, omega, predict, ss_flow, ss_matrix
+from romoco_drake.rom.lip import IMPACT_B, ds_flow, ds_matrix, omega, ss_flow, ss_matrix
 from romoco_drake.rom.mlip import mlip_domain_flow, mlip_matrices, mlip_s2s
 from romoco_drake.rom.planners import PlannerParams, make_planner
-from romoco_drake.rom.s2s import converging_gain, deadbeat_gain, lqr_gain
+from romoco_drake.rom.s2s import converging_gain, lqr_gain
 from romoco_drake.rom.types import WalkCommand
+from romoco_drake.spatial import GRAVITY
 
 RTOL = 1e-9
 SEEDS = range(6)
@@ -74,7 +75,6 @@ def test_lip_ss_flow_matches_eq1(seed):
     z0, t_ss, _, x, _ = _case(seed)
     numeric = _integrate(_ss(z0), x, t_ss)
     assert _rel_err(ss_flow(t_ss, z0) @ x, numeric) <= RTOL
-    assert _rel_err(predict(x, t_ss, z0), numeric) <= RTOL
 
 
 @pytest.mark.parametrize("seed", SEEDS)
@@ -180,12 +180,10 @@ def test_hlip_without_ds_is_the_lip_map(seed):
 
 @pytest.mark.parametrize("z0", [0.6, 0.8, 1.0])
 def test_dcm_transform_is_a_similarity_of_a_ss(z0):
-    T = dcm_transform(z0)
+    T, lam = dcm_transform(z0), omega(z0)
     transformed = T @ ss_matrix(z0) @ np.linalg.inv(T)
-    np.testing.assert_allclose(transformed, dcm_matrix(z0), atol=1e-12)
-    lam = omega(z0)
-    for M in (ss_matrix(z0), dcm_matrix(z0)):
-        np.testing.assert_allclose(np.sort(np.linalg.eigvals(M).real), [-lam, lam], rtol=1e-12)
+    np.testing.assert_allclose(transformed, [[-lam, lam], [0.0, lam]], atol=1e-12)
+    np.testing.assert_allclose(np.sort(np.linalg.eigvals(ss_matrix(z0)).real), [-lam, lam], rtol=1e-12)
 
 
 def _unstable_mode(s2s, z0: float) -> tuple[float, float, np.ndarray]:
@@ -261,7 +259,7 @@ def test_converging_gain_places_every_eigenvalue_at_alpha(model, z0, t_ss, t_ds,
     assert np.linalg.norm(np.linalg.matrix_power(a_cl - alpha * np.eye(n), n) @ e) <= 1e-10 * scale
     if n == 1:  # the scalar DCM error contracts by exactly α per step
         assert a_cl[0, 0] == pytest.approx(alpha, abs=1e-12)
-    dead = s2s.A + np.outer(s2s.B, deadbeat_gain(s2s))
+    dead = s2s.A + np.outer(s2s.B, converging_gain(s2s, 0.0))
     for _ in range(n):
         e = dead @ e
     assert np.linalg.norm(e) <= 1e-10 * scale
@@ -304,7 +302,8 @@ def test_alip_momentum_prediction(seed):
         assert _rel_err(row, _integrate(_ss(z0), start, t_ss - t_in)) <= RTOL
     p_pre, l_pre = plan.pre_impact[0]
     l_target = rng.uniform(-0.3, 0.3)
-    u = alip.alip_step(p_pre, l_pre, t_ss, z0, l_target)
+    lam = omega(z0)
+    u = alip.alip_step(p_pre, l_pre, l_target, math.cosh(lam * t_ss), z0 * lam * math.sinh(lam * t_ss))
     end = _integrate(_ss(z0), [p_pre - u, l_pre], t_ss)  # the momentum is impact invariant
     assert end[1] == pytest.approx(l_target, rel=RTOL)
 
@@ -317,20 +316,25 @@ def _xo_rhs(mass: float, height: float, sign: float):
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_xo_flows_match_eq9_and_eq10(seed):
-    """Eq. 13 and 16 (the momentum rows of M_x, M_y, eq. 11-12) and eq. 15/19's u as p⁺."""
+    """Eq. 13 and 16 (the momentum rows of M_x, M_y, eq. 11-12: the law's end-of-step prediction)
+    and eq. 15/19's u as p⁺."""
     z0, t_ss, _, _, _ = _case(seed)
     rng = np.random.default_rng(300 + seed)
     m, t_left = rng.uniform(20.0, 150.0), rng.uniform(0.0, t_ss)
     p, l_c = rng.uniform(-0.2, 0.2), m * z0 * rng.uniform(-1.0, 1.0)
-    for sign, predict_l, post_impact in (
-        (1.0, alip_general.predicted_momentum_y, alip_general.post_impact_com_x),
-        (-1.0, alip_general.predicted_momentum_x, alip_general.post_impact_com_y),
+    cmd = WalkCommand(com_height=z0, step_time=t_ss)
+    pre = make_planner("alip_general", PlannerParams(mass=m)).plan(
+        [p, p, z0, l_c, l_c, 0.0], "left", t_ss - t_left, cmd).pre_impact
+    ell = omega(z0)
+    c, mks = math.cosh(ell * t_ss), m * z0 * ell * math.sinh(ell * t_ss)
+    for sign, l_hat, post_impact in (
+        (1.0, m * pre[0, 1], alip_general.post_impact_com_x),
+        (-1.0, -m * pre[1, 1], alip_general.post_impact_com_y),
     ):
         rhs = _xo_rhs(m, z0, sign)
-        l_hat = predict_l(p, l_c, t_left, m, z0)
         assert l_hat == pytest.approx(_integrate(rhs, [p, l_c], t_left)[1], rel=RTOL)
         l_des = m * z0 * rng.uniform(-1.0, 1.0)
-        p_plus = post_impact(l_des, l_hat, t_ss, m, z0)
+        p_plus = post_impact(l_des, l_hat, c, mks)
         assert _integrate(rhs, [p_plus, l_hat], t_ss)[1] == pytest.approx(l_des, rel=RTOL)
 
 

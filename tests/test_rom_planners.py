@@ -286,7 +286,9 @@ def _reference_plan(name: str, params: PlannerParams, state, side: str, t_in: fl
         l_sag = alip.symmetric_orbit_momentum(cmd.vx, t, z0, g)
         l_target = (l_sag + alpha * (pre[0, 1] - l_sag),
                     orbit_next_lat[1] + alpha * (pre[1, 1] - orbit[1, 1]))
-        step = np.array([alip.alip_step(*pre[i], t, z0, l_target[i], g) for i in range(2)])
+        lam = math.sqrt(g / z0)
+        c, ks = math.cosh(lam * t), z0 * lam * math.sinh(lam * t)
+        step = np.array([alip.alip_step(*pre[i], l_target[i], c, ks) for i in range(2)])
         nominal = np.array([ux, uy])
     else:
         p_star = alip_general.lateral_offset(cmd.vy, t, cmd.step_width, side)
@@ -294,8 +296,10 @@ def _reference_plan(name: str, params: PlannerParams, state, side: str, t_in: fl
         l_cy = alip_general.desired_momentum_y(cmd.vx, t, m, z0, g)
         l_cx = alip_general.desired_momentum_x(p_star, cmd.vy, t, m, z0, g)
         l_cx_orbit = alip_general.desired_momentum_x(p_start, cmd.vy, t, m, z0, g)
-        step = np.array([pre[0, 0] - alip_general.post_impact_com_x(l_cy, m * pre[0, 1], t, m, z0, g),
-                         pre[1, 0] - alip_general.post_impact_com_y(l_cx, -m * pre[1, 1], t, m, z0, g)])
+        ell = math.sqrt(g / z0)
+        c, mks = math.cosh(ell * t), m * z0 * ell * math.sinh(ell * t)
+        step = np.array([pre[0, 0] - alip_general.post_impact_com_x(l_cy, m * pre[0, 1], c, mks),
+                         pre[1, 0] - alip_general.post_impact_com_y(l_cx, -m * pre[1, 1], c, mks)])
         orbit = np.array([[0.5 * cmd.vx * t, l_cy / m], [p_start + cmd.vy * t, -l_cx_orbit / m]])
         nominal = np.array([cmd.vx * t, p_start + cmd.vy * t - p_star])
     return {

@@ -12,7 +12,6 @@ import pytest
 
 from romoco_drake.planners.srb_mpc_program import SrbMpcProgram
 from romoco_drake.rom.srb_mpc import (
-    GRAVITY,
     MpcWeights,
     SrbMpc,
     discrete_dynamics,
@@ -22,6 +21,7 @@ from romoco_drake.rom.srb_mpc import (
     yaw_rotation,
 )
 from romoco_drake.rom.wrench_cone import rectangle_wrench_cone
+from romoco_drake.spatial import GRAVITY_W
 
 MASS, KNOTS, DT = 39.2, 10, 0.05
 INERTIA = np.diag([1.6, 1.5, 0.35])
@@ -55,7 +55,7 @@ def eq11(x: np.ndarray, u: np.ndarray, feet: np.ndarray, inertia: np.ndarray, co
         moment += np.cross(feet[i] - p, f) + tau
         force += f
     return np.concatenate([euler_rate_map_inverse(x[0:3]) @ omega, x[9:12], np.linalg.solve(inertia, moment),
-                           force / MASS + GRAVITY])
+                           force / MASS + GRAVITY_W])
 
 
 def integrate(x, u, feet, inertia, contact, duration, steps=50):
@@ -207,7 +207,7 @@ def test_a_horizon_without_contact_is_ballistic():
     x_ref, inertia, feet, yaw, contact = standing()
     solution = make_mpc().solve(x_ref[0], x_ref, inertia, feet, yaw, np.zeros_like(contact))
     assert solution.ok and np.all(solution.u == 0.0)
-    np.testing.assert_allclose(solution.x[-1, 11], KNOTS * DT * GRAVITY[2])
+    np.testing.assert_allclose(solution.x[-1, 11], KNOTS * DT * GRAVITY_W[2])
 
 
 @pytest.mark.parametrize("cls", [SrbMpc, SrbMpcProgram])

@@ -81,7 +81,7 @@ from romoco_drake.config import Range, declare_ranges, positive
 from romoco_drake.control.controller import SolverResult, torque_command
 from romoco_drake.control.hqp import Level, null_space, solve_hierarchy
 from romoco_drake.control.settings import ControllerSettings
-from romoco_drake.control.tasks import DEFAULT_TASK_GAINS, GRAVITY, TaskGain, TaskStack
+from romoco_drake.control.tasks import DEFAULT_TASK_GAINS, TaskGain, TaskStack
 from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.embedding.outputs import leg_chain, sole_frame
 from romoco_drake.embedding.references import TaskReferences
@@ -89,6 +89,7 @@ from romoco_drake.errors import RomocoError
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.wrench_cone import rectangle_wrench_cone
+from romoco_drake.spatial import GRAVITY, skew
 
 
 @dataclass(frozen=True)
@@ -368,7 +369,7 @@ class MomentumHqp:
             rx, ry, rz = (R_WF @ p_FS + p_WF - kin.p_com).tolist()
             X = np.zeros((6, 6))
             X[:3, :3] = X[3:, 3:] = R
-            X[:3, 3:] = np.array([[0.0, -rz, ry], [rz, 0.0, -rx], [-ry, rx, 0.0]]) @ R
+            X[:3, 3:] = skew([rx, ry, rz]) @ R
             blocks.append(X[:, cols])
         X = blocks[0] if len(blocks) == 1 else np.hstack(blocks)
         C, upper, lower, sense = self._domain_cone(feet)
@@ -379,8 +380,7 @@ class MomentumHqp:
                 a = R_WJ @ axis_F  # the joint axis in world; the wrench's moment about the joint
                 rx, ry, rz = (p_WJ - kin.p_com).tolist()  # X gives moments about G: shift to J
                 row = np.zeros(X.shape[1])
-                row[c0:c0 + block.shape[1]] = a @ (block[:3] - np.array(
-                    [[0.0, -rz, ry], [rz, 0.0, -rx], [-ry, rx, 0.0]]) @ block[3:])
+                row[c0:c0 + block.shape[1]] = a @ (block[:3] - skew([rx, ry, rz]) @ block[3:])
                 ankle_rows.append(row)
                 ankle_limits.append(0.9 * limit)  # a margin for the foot's own inertia
             c0 += block.shape[1]

@@ -30,16 +30,12 @@ from romoco_drake.config import Range, declare_ranges
 from romoco_drake.control.tscqp import TscQp, TscqpConfig
 from romoco_drake.embedding.references import TaskReferences
 from romoco_drake.robots.kinematics import RobotKinematics
+from romoco_drake.spatial import wrench_map
 
 
 def foot_wrench_map(points: np.ndarray, center: np.ndarray) -> np.ndarray:
     """W (6 × 3k): the wrench [τ; f] about ``center`` of forces at ``points`` (k×3), all world."""
-    r = points - center
-    W = np.zeros((6, 3 * len(points)))
-    for j, (x, y, z) in enumerate(r):
-        W[:3, 3 * j:3 * j + 3] = [[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]]
-        W[3:, 3 * j:3 * j + 3] = np.eye(3)
-    return W
+    return np.roll(wrench_map((points - center).T), 3, axis=0)
 
 
 @dataclass

@@ -25,6 +25,7 @@ from romoco_drake.embedding.references import EmbeddingCore, TaskReferences
 from romoco_drake.modes import Mode
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
+from romoco_drake.spatial import GRAVITY
 
 
 @dataclass(frozen=True)
@@ -36,8 +37,6 @@ class TaskGain:
     kd: float
     weight: float
 
-
-GRAVITY = 9.81  # m/s²
 
 DEFAULT_TASK_GAINS = (
     TaskGain("com_[xy]", 30.0, 12.0, 10.0),  # standing: gentle, the support polygon is small

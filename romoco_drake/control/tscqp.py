@@ -33,7 +33,6 @@ from romoco_drake.control.controller import SolverResult, torque_command
 from romoco_drake.control.settings import ControllerSettings
 from romoco_drake.control.tasks import (
     DEFAULT_TASK_GAINS,
-    GRAVITY,
     TaskStack,
     load_split_target,
     pivot_moment_map,
@@ -44,6 +43,7 @@ from romoco_drake.errors import RomocoError
 from romoco_drake.modes import Domain
 from romoco_drake.robots.kinematics import RobotKinematics, heading_rotation
 from romoco_drake.robots.model import RobotModel
+from romoco_drake.spatial import GRAVITY
 
 QP_SOLVERS = ("daqp", "clarabel")
 _DOMAIN_CODES = {d: float(i + 1) for i, d in enumerate(Domain)}  # warm start tag; 0: none yet

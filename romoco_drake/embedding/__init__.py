@@ -11,7 +11,6 @@ from romoco_drake.embedding.contact import (
     FootContact,
     select_contact_points,
     support_halfplanes,
-    wrench_map,
 )
 from romoco_drake.embedding.outputs import (
     InAirOutputs,
@@ -40,5 +39,4 @@ __all__ = [
     "select_contact_points",
     "sole_frame",
     "support_halfplanes",
-    "wrench_map",
 ]

@@ -35,6 +35,7 @@ from romoco_drake.errors import RomocoError
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.polygon import convex_hull_2d
+from romoco_drake.spatial import skew, wrench_map
 
 SIDES = ("left", "right")
 # Contact domain -> feet in contact.
@@ -96,30 +97,6 @@ def contact_frame_state(kin: RobotKinematics, origin: np.ndarray, heading: float
     return np.array([c * px + s * py, c * py - s * px, pz, c * Lx + s * Ly, c * Ly - s * Lx, Lz])
 
 
-def _skew(p: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -p[2], p[1]], [p[2], 0.0, -p[0]], [-p[1], p[0], 0.0]])
-
-
-def _skew_stack(p: np.ndarray) -> np.ndarray:
-    """[p_i]× for each row p_i of p (k×3): (k, 3, 3)."""
-    S = np.zeros((len(p), 3, 3))
-    S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -p[:, 2], p[:, 1], -p[:, 0]
-    S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = p[:, 2], -p[:, 1], p[:, 0]
-    return S
-
-
-def wrench_map(points: np.ndarray) -> np.ndarray:
-    """G (6 × 3k) with [f; m] = G [f_1; …; f_k]: f = Σ f_i, m = Σ p_i × f_i.
-
-    ``points`` (3×k) are the force application points relative to the moment reference
-    point, in the frame the forces and the wrench are expressed in. Rank 6 for three
-    non-collinear points; rank 5 for points on a line through the reference point (no
-    moment about the line), the line-foot case.
-    """
-    k = points.shape[1]
-    return np.vstack([np.tile(np.eye(3), k), np.hstack([_skew(p) for p in points.T])])
-
-
 def support_halfplanes(robot: RobotModel, side: str, line: bool | None = None
                        ) -> tuple[np.ndarray, np.ndarray]:
     """Outward normals N (e×2) and offsets d (e,) with the sole region {c : N c ≤ d} in S (x, y).
@@ -162,6 +139,52 @@ class FootContact:
     offsets_F: np.ndarray  # 3×k: the contact points relative to the sole centroid, foot frame
 
 
+def _foot_contact(robot: RobotModel, side: str, line_contact: bool, friction_margin: float, cop_margin: float,
+                  min_normal_force: float) -> FootContact:
+    """One foot's contact points, wrench map, force limits and motion basis (see :class:`ContactModel`)."""
+    mu = robot.config.feet.friction * (1.0 - friction_margin)
+    limits = np.array([
+        [0.0, 0.0, -1.0, 0.0, 0.0, 0.0],
+        [1.0, 0.0, -mu, 0.0, 0.0, 0.0],
+        [-1.0, 0.0, -mu, 0.0, 0.0, 0.0],
+        [0.0, 1.0, -mu, 0.0, 0.0, 0.0],
+        [0.0, -1.0, -mu, 0.0, 0.0, 0.0],
+    ])
+    names, points_F = select_contact_points(robot, side, line_contact)
+    R_FS, p_FS = sole_frame(robot, side)
+    sole_z = R_FS[:, 2] @ (robot.feet[side].points - p_FS[:, None])
+    if np.max(np.abs(sole_z)) > 1e-3:
+        raise RomocoError(f"{robot.yaml_path}: feet.{side}.points: not in one plane normal to "
+                          f"'up' (offsets {np.round(sole_z, 4).tolist()} m)")
+    G = wrench_map(R_FS.T @ (points_F - p_FS[:, None]))
+    N, d = support_halfplanes(robot, side, line_contact)
+    # N·(−m_y, m_x) ≤ (d − margin) f_z, valid for f_z ≥ 0.
+    cop = np.zeros((len(d), 6))
+    cop[:, 2] = -(d - cop_margin)
+    cop[:, 3] = N[:, 1]
+    cop[:, 4] = -N[:, 0]
+    # Torsion: |m_z| ≤ μ ρ f_z with ρ the sole points' mean distance from the centroid, the
+    # most friction can resist about z when the load is spread evenly over those points.
+    # A line foot resists z moments only by the lateral friction at its two ends, which
+    # also carries its lateral force, so it gets half of that.
+    xy = (R_FS.T @ (robot.feet[side].points - p_FS[:, None]))[:2]
+    rho = float(np.mean(np.linalg.norm(xy, axis=0))) * (0.5 if line_contact else 1.0)
+    torsion = np.array([[0.0, 0.0, -mu * rho, 0.0, 0.0, 1.0], [0.0, 0.0, -mu * rho, 0.0, 0.0, -1.0]])
+    A_w = limits if robot.is_point_foot else np.vstack([limits, cop, torsion])
+    b = np.zeros(len(A_w))
+    b[0] = -min_normal_force
+    # Point velocities of a rigid foot are Gᵀ [v; ω] (Gᵀ maps a twist to the points as G
+    # maps point forces to a wrench): its range is the foot's rows' column space, rank 6
+    # of 3k for a plane foot, 5 for a line (no spin about the line moves its points).
+    U, sv, _ = np.linalg.svd(G.T, full_matrices=False)
+    motion = U[:, sv > 1e-9 * sv[0]]
+    offsets = points_F - p_FS[:, None]
+    arrays = (np.asfortranarray(points_F), R_FS, p_FS, G, A_w @ G, b, motion, offsets)
+    for a in arrays:
+        a.setflags(write=False)
+    return FootContact(side, robot.foot_frames[side], names, *arrays)
+
+
 class ContactModel:
     """Holonomic constraints per contact domain and each foot's force limits, for one robot.
 
@@ -183,49 +206,9 @@ class ContactModel:
         self.line_contact = not robot.is_point_foot and (robot.is_line_foot or line_contact)
         self.point_contact = robot.is_point_foot
         plant = robot.plant
-        mu = robot.config.feet.friction * (1.0 - friction_margin)
-        limits = np.array([
-            [0.0, 0.0, -1.0, 0.0, 0.0, 0.0],
-            [1.0, 0.0, -mu, 0.0, 0.0, 0.0],
-            [-1.0, 0.0, -mu, 0.0, 0.0, 0.0],
-            [0.0, 1.0, -mu, 0.0, 0.0, 0.0],
-            [0.0, -1.0, -mu, 0.0, 0.0, 0.0],
-        ])
-        self.feet: dict[str, FootContact] = {}
-        for side in SIDES:
-            names, points_F = select_contact_points(robot, side, self.line_contact)
-            R_FS, p_FS = sole_frame(robot, side)
-            sole_z = R_FS[:, 2] @ (robot.feet[side].points - p_FS[:, None])
-            if np.max(np.abs(sole_z)) > 1e-3:
-                raise RomocoError(f"{robot.yaml_path}: feet.{side}.points: not in one plane normal to "
-                                  f"'up' (offsets {np.round(sole_z, 4).tolist()} m)")
-            G = wrench_map(R_FS.T @ (points_F - p_FS[:, None]))
-            N, d = support_halfplanes(robot, side, self.line_contact)
-            # N·(−m_y, m_x) ≤ (d − margin) f_z, valid for f_z ≥ 0.
-            cop = np.zeros((len(d), 6))
-            cop[:, 2] = -(d - cop_margin)
-            cop[:, 3] = N[:, 1]
-            cop[:, 4] = -N[:, 0]
-            # Torsion: |m_z| ≤ μ ρ f_z with ρ the sole points' mean distance from the centroid, the
-            # most friction can resist about z when the load is spread evenly over those points.
-            # A line foot resists z moments only by the lateral friction at its two ends, which
-            # also carries its lateral force, so it gets half of that.
-            xy = (R_FS.T @ (robot.feet[side].points - p_FS[:, None]))[:2]
-            rho = float(np.mean(np.linalg.norm(xy, axis=0))) * (0.5 if self.line_contact else 1.0)
-            torsion = np.array([[0.0, 0.0, -mu * rho, 0.0, 0.0, 1.0], [0.0, 0.0, -mu * rho, 0.0, 0.0, -1.0]])
-            A_w = limits if self.point_contact else np.vstack([limits, cop, torsion])
-            b = np.zeros(len(A_w))
-            b[0] = -min_normal_force
-            # Point velocities of a rigid foot are Gᵀ [v; ω] (Gᵀ maps a twist to the points as G
-            # maps point forces to a wrench): its range is the foot's rows' column space, rank 6
-            # of 3k for a plane foot, 5 for a line (no spin about the line moves its points).
-            U, sv, _ = np.linalg.svd(G.T, full_matrices=False)
-            motion = U[:, sv > 1e-9 * sv[0]]
-            offsets = points_F - p_FS[:, None]
-            arrays = (np.asfortranarray(points_F), R_FS, p_FS, G, A_w @ G, b, motion, offsets)
-            for a in arrays:
-                a.setflags(write=False)
-            self.feet[side] = FootContact(side, robot.foot_frames[side], names, *arrays)
+        self.feet: dict[str, FootContact] = {
+            side: _foot_contact(robot, side, self.line_contact, friction_margin, cop_margin, min_normal_force)
+            for side in SIDES}
         self._names = {
             domain: tuple(f"{s}_{p}_{a}" for s in sides for p in self.feet[s].point_names for a in "xyz")
             + tuple(f"internal_{i}" for i in range(robot.num_internal_constraints()))
@@ -261,10 +244,10 @@ class ContactModel:
             h.append((r + (R @ foot.p_FS + p)[:, None]).ravel(order="F"))
             Jw, Jv = J6[:3], J6[3:]
             # −[r]× J_ω for all points at once: (k, 3, 3) @ (3, nv).
-            J.append((_skew_stack(-r.T) @ Jw + Jv).reshape(-1, self.robot.nv))
-            W = _skew(Jw @ kin.v)
+            J.append((skew(-r.T) @ Jw + Jv).reshape(-1, self.robot.nv))
+            W = skew(Jw @ kin.v)
             # a_c + α × r + ω × (ω × r), one row a point.
-            Jdv.append((bias[3:] + r.T @ (_skew(bias[:3]) + W @ W).T).ravel())
+            Jdv.append((bias[3:] + r.T @ (skew(bias[:3]) + W @ W).T).ravel())
         if self.robot.num_internal_constraints():
             internal = self.robot.internal_constraints(kin.context)
             h.append(internal.h)

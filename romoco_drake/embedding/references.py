@@ -39,8 +39,8 @@ from romoco_drake.embedding.outputs import InAirOutputs, Output, StandingOutputs
 from romoco_drake.modes import Domain, Mode
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
-from romoco_drake.rom.lip import GRAVITY
 from romoco_drake.rom.types import MpcReference, PlannerOutput
+from romoco_drake.spatial import GRAVITY
 from romoco_drake.values import SharedValue
 
 STAND_SETTLE_S = 1.0

@@ -42,7 +42,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-GRAVITY = np.array([0.0, 0.0, -9.81])  # g_W (m/s²)
+from romoco_drake.spatial import GRAVITY_W, skew, so3_exp
+
 FEET = 2  # left, right: the order of the foot_contact port
 DIM = 9 + 3 * FEET + 6
 ROT, VEL, POS = slice(0, 3), slice(3, 6), slice(6, 9)
@@ -112,26 +113,16 @@ PACKED_SIZE = 29 + DIM * DIM
 
 
 # ------------------------------------------------------------------------------- Lie algebra
-def hat(w: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-
-
-def so3_exp(phi: np.ndarray) -> np.ndarray:
-    """Exp: rotation by |φ| about φ."""
-    return gamma(phi, 0)
-
-
 def gamma(phi: np.ndarray, m: int) -> np.ndarray:
-    """Γ_m(φ) = Σ_{n≥0} (φ^)ⁿ / (n + m)!: Γ_0 = Exp, Γ_1 the left Jacobian, Γ_2 its integral
-    (position over a step). Closed forms (Rodrigues), the series near φ = 0."""
+    """Γ_m(φ) = Σ_{n≥0} (φ^)ⁿ / (n + m)!: Γ_1 the left Jacobian, Γ_2 its integral (position over
+    a step); Γ_0 = Exp is :func:`~romoco_drake.spatial.so3_exp`. Closed forms (Rodrigues), the
+    series near φ = 0."""
     theta = float(np.linalg.norm(phi))
-    W = hat(phi)
+    W = skew(phi)
     W2 = W @ W
     if theta < 1e-4:  # the series' next term is below θ³/6 < 2e-13
         return _I3 / math.factorial(m) + W / math.factorial(m + 1) + W2 / math.factorial(m + 2)
     s, c = math.sin(theta), math.cos(theta)
-    if m == 0:
-        return _I3 + s / theta * W + (1 - c) / theta**2 * W2
     if m == 1:
         return _I3 + (1 - c) / theta**2 * W + (theta - s) / theta**3 * W2
     if m == 2:
@@ -169,14 +160,14 @@ class InvariantEkf:
         A = np.zeros((DIM, DIM))
         R = s.R
         A[ROT, GYRO_BIAS] = -R
-        A[VEL, ROT] = hat(GRAVITY)
-        A[VEL, GYRO_BIAS] = -hat(s.v) @ R
+        A[VEL, ROT] = skew(GRAVITY_W)
+        A[VEL, GYRO_BIAS] = -skew(s.v) @ R
         A[VEL, ACCEL_BIAS] = -R
         A[POS, VEL] = _I3
-        A[POS, GYRO_BIAS] = -hat(s.p) @ R
+        A[POS, GYRO_BIAS] = -skew(s.p) @ R
         for i in range(FEET):
             if s.active[i]:
-                A[FOOT[i], GYRO_BIAS] = -hat(s.d[i]) @ R
+                A[FOOT[i], GYRO_BIAS] = -skew(s.d[i]) @ R
         return A
 
     def noise_map(self, s: InekfState) -> np.ndarray:
@@ -184,7 +175,7 @@ class InvariantEkf:
         G = np.eye(DIM)
         R = s.R
         for rows, x in ((VEL, s.v), (POS, s.p), *((FOOT[i], s.d[i]) for i in range(FEET))):
-            G[rows, ROT] = hat(x) @ R
+            G[rows, ROT] = skew(x) @ R
         G[ROT, ROT] = R
         G[VEL, VEL] = R
         # Position has no noise of its own; the feet's is isotropic, so rotating it changes nothing.
@@ -215,8 +206,8 @@ class InvariantEkf:
         w, a = gyro - s.gyro_bias, accel - s.accel_bias
         phi = w * dt
         R = s.R
-        out = InekfState(R @ so3_exp(phi), s.v + R @ gamma(phi, 1) @ a * dt + GRAVITY * dt,
-                         s.p + s.v * dt + R @ gamma(phi, 2) @ a * dt**2 + 0.5 * GRAVITY * dt**2,
+        out = InekfState(R @ so3_exp(phi), s.v + R @ gamma(phi, 1) @ a * dt + GRAVITY_W * dt,
+                         s.p + s.v * dt + R @ gamma(phi, 2) @ a * dt**2 + 0.5 * GRAVITY_W * dt**2,
                          s.d.copy(), s.gyro_bias.copy(), s.accel_bias.copy(), s.active.copy(),
                          _symmetric(Phi @ s.P @ Phi.T + Q))
         _clear_inactive(out)

@@ -5,19 +5,16 @@ from __future__ import annotations
 import numpy as np
 from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RotationMatrix
-from pydrake.multibody.tree import JacobianWrtVariable
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
+from romoco_drake.estimation.contact_estimator import ContactEstimator
 from romoco_drake.estimation.ground_truth import plant_state
 from romoco_drake.estimation.invariant_ekf import InekfState, InvariantEkf, InvariantEkfParams
-from romoco_drake.robots.kinematics import RobotKinematics, declare_kinematics_cache
+from romoco_drake.robots.kinematics import declare_kinematics_cache
 from romoco_drake.robots.model import RobotModel
 
-SIDES = ("left", "right")
-IMU_SIZE = 10
 
-
-class InvariantEkfEstimator(LeafSystem):
+class InvariantEkfEstimator(ContactEstimator):
     """Floating-base state from the contact-aided invariant EKF (:mod:`.invariant_ekf`); swaps in
     for :class:`~romoco_drake.estimation.ground_truth.GroundTruthEstimator`.
 
@@ -47,29 +44,17 @@ class InvariantEkfEstimator(LeafSystem):
 
     def __init__(self, robot: RobotModel, period: float = 0.002, params: InvariantEkfParams | None = None,
                  initial_base_position: np.ndarray | None = None, offset: float = 0.0):
-        super().__init__()
-        self._robot = robot
-        self._period = period
+        super().__init__(robot, period)
         self._filter = InvariantEkf(params or InvariantEkfParams())
         b = robot.base_q_start
         self._p0 = (robot.nominal.q[b + 4:b + 7].copy() if initial_base_position is None
                     else np.array(initial_base_position, dtype=float))
-        nj = len(robot.joint_names)
-        self.joint_state_input = self.DeclareVectorInputPort("joint_state", 2 * nj)
-        self.imu_input = self.DeclareVectorInputPort("imu", IMU_SIZE)
-        self.foot_contact_input = self.DeclareVectorInputPort("foot_contact", 2)
         self._legs = declare_kinematics_cache(
             self, robot, lambda c: self.leg_state(self.joint_state_input.Eval(c)),
             {self.joint_state_input.ticket()})
         q0 = robot.nominal.q[b:b + 4]
         self._R0 = RotationMatrix(Quaternion(q0 / np.linalg.norm(q0))).matrix()
-        start = self._filter.initial(self._p0, self._R0)
-        self._filter_index = self.DeclareDiscreteState(start.pack())
-        self._started_index = self.DeclareDiscreteState(1)
-        self._contact_time_index = self.DeclareDiscreteState(2)
-        self._rejected_index = self.DeclareDiscreteState(1)
-        self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
-        self.state_output = self.DeclareVectorOutputPort("state", robot.nq + robot.nv, self._calc_state)
+        self._filter_index = self._declare_state(self._filter.initial(self._p0, self._R0).pack(), offset)
 
     # ------------------------------------------------------------------ kinematics
     def leg_state(self, joint_state: np.ndarray) -> np.ndarray:
@@ -83,19 +68,6 @@ class InvariantEkfEstimator(LeafSystem):
         v[r.joint_v_index] = joint_state[nj:]
         return np.concatenate([q, v])
 
-    def foot_kinematics(self, kin: RobotKinematics) -> tuple[np.ndarray, np.ndarray]:
-        """Contact points relative to the base, h_B (2×3), and their velocity from the joints
-        alone, J_B q̇_j (2×3), in base axes."""
-        plant, world = self._robot.plant, self._robot.plant.world_frame()
-        h, v = np.zeros((2, 3)), np.zeros((2, 3))
-        for i, side in enumerate(SIDES):
-            frame, point = self._robot.foot_frames[side], self._robot.feet[side].points.mean(axis=1)
-            h[i] = plant.CalcPointsPositions(kin.context, frame, point, world).ravel()
-            J = plant.CalcJacobianTranslationalVelocity(kin.context, JacobianWrtVariable.kV, frame, point,
-                                                        world, world)
-            v[i] = J @ kin.v
-        return h, v
-
     # ---------------------------------------------------------------------- events
     def _valid_inputs(self, context):
         js = self.joint_state_input.Eval(context)
@@ -108,12 +80,13 @@ class InvariantEkfEstimator(LeafSystem):
     def _update(self, context, discrete_state) -> None:
         inputs = self._valid_inputs(context)
         if inputs is None:
-            count = context.get_discrete_state(self._rejected_index).value()[0]
-            discrete_state.get_mutable_vector(self._rejected_index).SetFromVector([count + 1.0])
+            self._reject(context, discrete_state)
             return
         gyro, accel, contact = inputs
         ekf = self._filter
-        h_B, v_joint_B = self.foot_kinematics(self._legs.Eval(context))
+        # The leg state has the base at the origin: the contact points relative to the base, h_B,
+        # and their velocities from the joints alone, J_B q̇_j, both in base axes.
+        h_B, v_joint_B = self._foot_points(self._legs.Eval(context))
         previous = context.get_discrete_state(self._contact_time_index).value()
         if not context.get_discrete_state(self._started_index).value()[0]:
             s = ekf.initial(self._p0, self._R0)
@@ -135,10 +108,6 @@ class InvariantEkfEstimator(LeafSystem):
     # --------------------------------------------------------------------- outputs
     def filter_state(self, context) -> InekfState:
         return InekfState.unpack(context.get_discrete_state(self._filter_index).value())
-
-    def rejected_updates(self, context) -> int:
-        """How many updates were skipped for malformed inputs."""
-        return int(context.get_discrete_state(self._rejected_index).value()[0])
 
     def _calc_state(self, context, output: BasicVector) -> None:
         s = self.filter_state(context)

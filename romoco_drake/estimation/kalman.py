@@ -33,7 +33,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-GRAVITY = np.array([0.0, 0.0, -9.81])  # g_W (m/s²)
+from romoco_drake.spatial import GRAVITY_W
+
 STATE_SIZE = 15
 POSITION = slice(0, 3)
 VELOCITY = slice(3, 6)
@@ -98,7 +99,7 @@ class ContactAidedKalman:
         """Propagates over ``dt`` (s) with specific force ``f_B`` (m/s², base frame) held constant;
         ``contact`` (2,) is each foot's contact confidence w (or a flag)."""
         p = self.params
-        a = R_WB @ (f_B - x[ACCEL_BIAS]) + GRAVITY
+        a = R_WB @ (f_B - x[ACCEL_BIAS]) + GRAVITY_W
         x = x.copy()
         x[POSITION] += x[VELOCITY] * dt + 0.5 * a * dt**2
         x[VELOCITY] += a * dt

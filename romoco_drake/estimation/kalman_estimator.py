@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RotationMatrix
-from pydrake.multibody.tree import JacobianWrtVariable
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
+from romoco_drake.estimation.contact_estimator import SIDES, ContactEstimator
 from romoco_drake.estimation.ground_truth import plant_state
 from romoco_drake.estimation.kalman import (
     POSITION,
@@ -20,13 +20,11 @@ from romoco_drake.estimation.kalman import (
 from romoco_drake.robots.kinematics import RobotKinematics, declare_kinematics_cache
 from romoco_drake.robots.model import RobotModel
 
-SIDES = ("left", "right")
-IMU_SIZE = 10
 # An IMU quaternion further than this from unit norm is malformed (e.g. an all-zero message).
 QUATERNION_NORM_TOLERANCE = 0.1
 
 
-class KalmanEstimator(LeafSystem):
+class KalmanEstimator(ContactEstimator):
     """Floating-base state from a contact-aided Kalman filter (:mod:`.kalman`); swaps in for
     :class:`GroundTruthEstimator`.
 
@@ -62,48 +60,26 @@ class KalmanEstimator(LeafSystem):
 
     def __init__(self, robot: RobotModel, period: float = 0.002, params: KalmanParams | None = None,
                  initial_base_position: np.ndarray | None = None, offset: float = 0.0):
-        super().__init__()
-        self._robot = robot
-        self._period = period
+        super().__init__(robot, period)
         self._filter = ContactAidedKalman(params or KalmanParams())
         self._initial_base_position = (
             None if initial_base_position is None else np.array(initial_base_position, dtype=float))
         nj = len(robot.joint_names)
-        self.joint_state_input = self.DeclareVectorInputPort("joint_state", 2 * nj)
-        self.imu_input = self.DeclareVectorInputPort("imu", IMU_SIZE)
         # The legs' kinematics at the measured joints and orientation, cached on those inputs.
         self._legs = declare_kinematics_cache(
             self, robot, lambda c: self.leg_state(self.joint_state_input.Eval(c), self.imu_input.Eval(c)),
             {self.joint_state_input.ticket(), self.imu_input.ticket()})
-        self.foot_contact_input = self.DeclareVectorInputPort("foot_contact", 2)
         q0 = robot.nominal.q
         nominal_js = np.concatenate([q0[robot.joint_q_index], np.zeros(nj)])
         nominal_imu = np.concatenate([q0[robot.base_q_start:robot.base_q_start + 4], np.zeros(6)])
-        self._kf_index = self.DeclareDiscreteState(pack(*self._start(nominal_js, nominal_imu)))
-        self._started_index = self.DeclareDiscreteState(1)
-        self._contact_time_index = self.DeclareDiscreteState(2)
-        self._rejected_index = self.DeclareDiscreteState(1)
-        self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
-        self.state_output = self.DeclareVectorOutputPort("state", robot.nq + robot.nv, self._calc_state)
+        self._kf_index = self._declare_state(pack(*self._start(nominal_js, nominal_imu)), offset)
 
     # ------------------------------------------------------------------ kinematics
     def foot_kinematics(self, joint_state: np.ndarray, imu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Foot reference points relative to the base and their velocities relative to the base,
         both in world axes (2×3 each, left then right): r = R_WB r_B(q_j) and
         v_rel = R_WB (ω_B × r_B + J_B(q_j) q̇_j)."""
-        return self._foot_kinematics(RobotKinematics(self._robot, self.leg_state(joint_state, imu)))
-
-    def _foot_kinematics(self, kin: RobotKinematics) -> tuple[np.ndarray, np.ndarray]:
-        ctx, v = kin.context, kin.v
-        plant, world = self._robot.plant, self._robot.plant.world_frame()
-        r, v_rel = np.zeros((2, 3)), np.zeros((2, 3))
-        for i, side in enumerate(SIDES):
-            frame, point = self._robot.foot_frames[side], self._robot.feet[side].points.mean(axis=1)
-            r[i] = plant.CalcPointsPositions(ctx, frame, point, world).ravel()
-            J = plant.CalcJacobianTranslationalVelocity(
-                ctx, JacobianWrtVariable.kV, frame, point, world, world)
-            v_rel[i] = J @ v
-        return r, v_rel
+        return self._foot_points(RobotKinematics(self._robot, self.leg_state(joint_state, imu)))
 
     def leg_state(self, joint_state: np.ndarray, imu: np.ndarray) -> np.ndarray:
         """The plant state [q; v] of the measured legs with the base at the world origin, at rest
@@ -120,7 +96,7 @@ class KalmanEstimator(LeafSystem):
 
     def _start(self, joint_state: np.ndarray, imu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         kin = RobotKinematics(self._robot, self.leg_state(joint_state, imu))
-        r_world, _ = self._foot_kinematics(kin)
+        r_world, _ = self._foot_points(kin)
         p_WB = self._initial_base_position
         if p_WB is None:
             lowest = min(self._robot.sole_points_in_world(kin.context, s)[2].min() for s in SIDES)
@@ -141,8 +117,7 @@ class KalmanEstimator(LeafSystem):
     def _update(self, context, discrete_state) -> None:
         inputs = self._valid_inputs(context)
         if inputs is None:
-            count = context.get_discrete_state(self._rejected_index).value()[0]
-            discrete_state.get_mutable_vector(self._rejected_index).SetFromVector([count + 1.0])
+            self._reject(context, discrete_state)
             return
         js, imu, contact, R_WB = inputs
         if not context.get_discrete_state(self._started_index).value()[0]:
@@ -154,7 +129,7 @@ class KalmanEstimator(LeafSystem):
         w = self._filter.contact_confidence(contact_time)
         x, P = unpack(context.get_discrete_state(self._kf_index).value())
         x, P = self._filter.predict(x, P, R_WB, imu[7:10], w, self._period)
-        r_world, v_rel = self._foot_kinematics(self._legs.Eval(context))
+        r_world, v_rel = self._foot_points(self._legs.Eval(context))
         x, P = self._filter.correct(x, P, r_world, v_rel, w)
         discrete_state.get_mutable_vector(self._kf_index).SetFromVector(pack(x, P))
         discrete_state.get_mutable_vector(self._contact_time_index).SetFromVector(contact_time)
@@ -163,10 +138,6 @@ class KalmanEstimator(LeafSystem):
     def filter_state(self, context) -> tuple[np.ndarray, np.ndarray]:
         """The filter's (x, P) (see :mod:`.kalman` for the layout of x)."""
         return unpack(context.get_discrete_state(self._kf_index).value())
-
-    def rejected_updates(self, context) -> int:
-        """How many updates were skipped for malformed inputs."""
-        return int(context.get_discrete_state(self._rejected_index).value()[0])
 
     def _calc_state(self, context, output: BasicVector) -> None:
         imu = self.imu_input.Eval(context)

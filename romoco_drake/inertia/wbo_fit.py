@@ -15,6 +15,7 @@ from romoco_drake.inertia.data import LegIk, Motion, base_fixed_positions
 from romoco_drake.inertia.wbo import WBO_JOINTS, Wbo, monomial_jacobian, monomials
 from romoco_drake.robots.centroidal import wbo_angular_velocity
 from romoco_drake.robots.model import RobotModel
+from romoco_drake.spatial import so3_exp
 
 
 def relative_wbo_velocities(robot: RobotModel, q: np.ndarray, v_joints: np.ndarray,
@@ -81,15 +82,6 @@ def _log(R: np.ndarray) -> np.ndarray:
     return aa.angle() * aa.axis()
 
 
-def _exp(w: np.ndarray) -> np.ndarray:
-    angle = np.linalg.norm(w)
-    if angle < 1e-12:
-        return np.eye(3)
-    k = w / angle
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
-
-
 def _angle(R: np.ndarray) -> float:
     return float(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
 
@@ -110,14 +102,14 @@ def integrate_wbo(robot: RobotModel, motion: Motion, q: np.ndarray, R_start: np.
     for k in range(len(q) - 1):
         w_B = _log(R_WB[k + 1] @ R_WB[k].T)
         q_mid = 0.5 * (q[k] + q[k + 1])
-        q_mid[b:b + 4] = RotationMatrix(_exp(0.5 * w_B) @ R_WB[k]).ToQuaternion().wxyz()
+        q_mid[b:b + 4] = RotationMatrix(so3_exp(0.5 * w_B) @ R_WB[k]).ToQuaternion().wxyz()
         q_mid[b + 4:b + 7] = 0.5 * (p_WB[k] + p_WB[k + 1])
         v = np.zeros(robot.nv)
         v[robot.base_v_start:robot.base_v_start + 3] = w_B
         v[robot.joint_v_index] = (q[k + 1] - q[k])[robot.joint_q_index]
         plant.SetPositions(context, q_mid)
         plant.SetVelocities(context, v)
-        out.append(_exp(wbo_angular_velocity(plant, context)) @ out[-1])
+        out.append(so3_exp(wbo_angular_velocity(plant, context)) @ out[-1])
     return np.array(out)
 
 

@@ -78,6 +78,7 @@ from romoco_drake.interfaces.lcm_codec import (
 from romoco_drake.interfaces.predictor import ContactPredictor, PredictedState
 from romoco_drake.modes import Mode
 from romoco_drake.robots.model import RobotModel
+from romoco_drake.spatial import GRAVITY, quaternion_exp
 
 LINK_COUNTERS = ("stale_events", "ride_through_events", "stand_events", "damping_events", "rejected_messages",
                  "clamped_commands", "estop")
@@ -145,7 +146,7 @@ def _turned(wxyz: np.ndarray, theta: np.ndarray, body: bool) -> np.ndarray:
     angle = float(np.linalg.norm(theta))
     if angle == 0.0 or not np.isfinite(angle):
         return wxyz.copy()
-    dq = Quaternion(wxyz=np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * theta / angle]))
+    dq = Quaternion(wxyz=quaternion_exp(theta))
     q = Quaternion(wxyz=wxyz / np.linalg.norm(wxyz))
     return (q.multiply(dq) if body else dq.multiply(q)).wxyz()
 
@@ -157,7 +158,7 @@ def nominal_measurements(robot: RobotModel) -> dict[str, np.ndarray]:
     qb = robot.base_q_start
     return {
         "joint_state": np.concatenate([q[robot.joint_q_index], np.zeros(nj)]),
-        "imu": np.concatenate([q[qb:qb + 4], np.zeros(3), [0.0, 0.0, 9.81]]),
+        "imu": np.concatenate([q[qb:qb + 4], np.zeros(3), [0.0, 0.0, GRAVITY]]),
         "foot_contact": np.ones(2),
         "base_pose": q[qb:qb + 7].copy(),
         "base_velocity": np.zeros(6),

@@ -28,6 +28,7 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from romoco_drake.config import Range, declare_ranges
 from romoco_drake.errors import RomocoError
 from romoco_drake.robots.model import RobotModel
+from romoco_drake.spatial import quaternion_exp
 
 
 @dataclass
@@ -100,11 +101,9 @@ def specific_force(R_WB: np.ndarray, a_WBo_W: np.ndarray, g_W: np.ndarray) -> np
 
 def perturb_quaternion(q_WB: np.ndarray, theta_B: np.ndarray) -> np.ndarray:
     """q_WB ⊗ exp(θ_B/2): ``q_WB`` (w x y z) rotated by the small rotation vector θ_B in B."""
-    angle = np.linalg.norm(theta_B)
-    if angle == 0.0:
+    if np.linalg.norm(theta_B) == 0.0:
         return q_WB.copy()
-    dq = np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * theta_B / angle])
-    return Quaternion(wxyz=q_WB).multiply(Quaternion(wxyz=dq)).wxyz()
+    return Quaternion(wxyz=q_WB).multiply(Quaternion(wxyz=quaternion_exp(theta_B))).wxyz()
 
 
 def _unit(q: np.ndarray) -> np.ndarray | None:
@@ -208,7 +207,10 @@ class SimulatedSensors(LeafSystem):
         # [b_g (3), b_a (3), yaw error (1), switches (2), debounce timers (2)]
         self._state_index = self.DeclareDiscreteState(
             np.concatenate([self.gyro_bias, self.accel_bias, np.zeros(5)]))
+        self.DeclarePeriodicDiscreteUpdateEvent(dt, 0.0, self._sample)
+        self._declare_ports(plant, nj)
 
+    def _declare_ports(self, plant: MultibodyPlant, nj: int) -> None:
         self.plant_state_input = self.DeclareVectorInputPort("plant_state", plant.num_multibody_states())
         self.accelerations_input = self.DeclareAbstractInputPort(
             "body_spatial_accelerations", plant.get_body_spatial_accelerations_output_port().Allocate())
@@ -223,7 +225,6 @@ class SimulatedSensors(LeafSystem):
         self.foot_contact_output = self.DeclareVectorOutputPort(
             "foot_contact", 2, lambda c, out: out.SetFromVector(self._sensor_state(c)[7:9]),
             prerequisites_of_calc={self.xd_ticket()})
-        self.DeclarePeriodicDiscreteUpdateEvent(dt, 0.0, self._sample)
         self.base_pose_output = self.DeclareVectorOutputPort(
             "base_pose", 7, self._base_pose, prerequisites_of_calc={state})
         self.base_velocity_output = self.DeclareVectorOutputPort(

@@ -9,7 +9,6 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from romoco_drake.rom.lip import GRAVITY
 from romoco_drake.rom.planners import DsModel
 from romoco_drake.rom.types import (
     COMMAND_SIZE,
@@ -20,6 +19,7 @@ from romoco_drake.rom.types import (
     WalkCommand,
     other_side,
 )
+from romoco_drake.spatial import GRAVITY
 from romoco_drake.values import SharedValue
 
 # Switching times are compared with this slack so that T_SS on the tick grid switches on time.

@@ -39,15 +39,10 @@ def foot_forward_axis(robot: RobotModel, side: str) -> np.ndarray:
     return np.array([1.0, 0.0, 0.0])
 
 
-def solve_nominal_pose(robot: RobotModel) -> NominalPose:
+def _add_stance_constraints(robot: RobotModel, ik: InverseKinematics) -> None:
+    """Soles flat at z = 0 and apart about the origin, base level, internal loops closed."""
     plant, cfg = robot.plant, robot.config.nominal
-    context = plant.CreateDefaultContext()
-    ik = InverseKinematics(plant, with_joint_limits=True)
-    q = ik.q()
-    prog = ik.get_mutable_prog()
-    world = plant.world_frame()
-    inf = np.inf
-
+    q, prog, world, inf = ik.q(), ik.get_mutable_prog(), plant.world_frame(), np.inf
     for side, sign in (("left", 1.0), ("right", -1.0)):
         frame = robot.foot_frames[side]
         pts = robot.feet[side].points
@@ -75,6 +70,14 @@ def solve_nominal_pose(robot: RobotModel) -> NominalPose:
         i_l = plant.GetJointByName(c.leader).position_start()
         prog.AddLinearEqualityConstraint(q[i_f] - c.ratio * q[i_l] == 0.0)
 
+
+def solve_nominal_pose(robot: RobotModel) -> NominalPose:
+    """The standing pose of the module docstring, or a RomocoError naming what to change."""
+    plant, cfg = robot.plant, robot.config.nominal
+    context = plant.CreateDefaultContext()
+    ik = InverseKinematics(plant, with_joint_limits=True)
+    q, prog, world = ik.q(), ik.get_mutable_prog(), plant.world_frame()
+    _add_stance_constraints(robot, ik)
     com = prog.NewContinuousVariables(3, "com")
     prog.AddConstraint(ComPositionConstraint(plant, None, world, context), np.concatenate([q, com]))
     prog.AddBoundingBoxConstraint([0.0, 0.0, cfg.com_height], [0.0, 0.0, cfg.com_height], com)

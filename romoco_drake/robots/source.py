@@ -144,6 +144,22 @@ def _prepare_cached(source_key: tuple) -> PreparedModel:
     if file_type == "urdf":
         _zero_massless_inertia(root)
 
+    joints = _remove_and_weld(root, parents, path, remove_bodies, weld_joints)
+    if file_type == "urdf":
+        _drop_uncoupled_mimics(joints)
+        if base_frame_rpy is not None:
+            _add_base_frame(root, path, base_frame_rpy)
+    elif base_frame_rpy is not None:
+        raise RomocoError(f"{path}: base_frame_rpy is for URDF models only")
+
+    efforts, velocities = _joint_limits(joints, file_type)
+    return PreparedModel(ET.tostring(root, encoding="unicode"), file_type, path, efforts, velocities)
+
+
+def _remove_and_weld(root: ET.Element, parents: dict, path: Path, remove_bodies, weld_joints
+                     ) -> dict[str, ET.Element]:
+    """Removes the ``remove_bodies`` links with their joints, makes ``weld_joints`` fixed; returns
+    the joints left, by name."""
     links = {el.get("name"): el for el in root.iter("link")}
     joints = {el.get("name"): el for el in root.iter("joint")}
     for name in remove_bodies:
@@ -163,13 +179,12 @@ def _prepare_cached(source_key: tuple) -> PreparedModel:
         for tag in ("axis", "limit", "dynamics"):
             for el in list(joint.findall(tag)):
                 joint.remove(el)
-    if file_type == "urdf":
-        _drop_uncoupled_mimics(joints)
-        if base_frame_rpy is not None:
-            _add_base_frame(root, path, base_frame_rpy)
-    elif base_frame_rpy is not None:
-        raise RomocoError(f"{path}: base_frame_rpy is for URDF models only")
+    return joints
 
+
+def _joint_limits(joints: dict[str, ET.Element], file_type: str) -> tuple[dict[str, float], dict[str, float]]:
+    """(effort, velocity) limits by joint name, the positive ones; an SDFormat joint's effort is set
+    to 0 in the XML (Drake's parser would make an actuator; RobotModel adds them itself)."""
     efforts, velocities = {}, {}
     for name, joint in joints.items():
         if file_type == "sdf" and joint.find("axis") is not None and joint.find("axis/limit") is None:
@@ -191,7 +206,7 @@ def _prepare_cached(source_key: tuple) -> PreparedModel:
             efforts[name] = e
         if (v := _float_or_none(velocity)) is not None and v > 0:
             velocities[name] = v
-    return PreparedModel(ET.tostring(root, encoding="unicode"), file_type, path, efforts, velocities)
+    return efforts, velocities
 
 
 def _zero_massless_inertia(root: ET.Element) -> None:

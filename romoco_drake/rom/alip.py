@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import math
 
-from romoco_drake.rom.lip import GRAVITY, omega
+from romoco_drake.rom.lip import omega
+from romoco_drake.spatial import GRAVITY
 
 
 def symmetric_orbit_momentum(v: float, t_step: float, z0: float, g: float = GRAVITY) -> float:
@@ -28,12 +29,10 @@ def target_momentum(l_pre: float, l_orbit_now: float, l_orbit_next: float, alpha
     return l_orbit_next + alpha * (l_pre - l_orbit_now)
 
 
-def alip_step(p_pre: float, l_pre: float, t_next: float, z0: float, l_target: float,
-              g: float = GRAVITY) -> float:
-    """Step u (new pivot relative to the current one) that makes L⁻_{k+1} = l_target.
+def alip_step(p_pre: float, l_pre: float, l_target: float, cosh_t: float, ks_t: float) -> float:
+    """Step u (new pivot relative to the current one, m) that makes L⁻_{k+1} = l_target.
 
-    From L⁻_{k+1} = z0 λ sinh(λT) (p̂⁻ − u) + cosh(λT) L̂⁻ (the momentum is impact invariant).
+    From L⁻_{k+1} = z0 λ sinh(λT) (p̂⁻ − u) + cosh(λT) L̂⁻ (the momentum is impact invariant);
+    ``cosh_t`` = cosh λT and ``ks_t`` = z0 λ sinh λT for the next step's time T.
     """
-    lam = omega(z0, g)
-    s, c = math.sinh(lam * t_next), math.cosh(lam * t_next)
-    return (c * l_pre + z0 * lam * s * p_pre - l_target) / (z0 * lam * s)
+    return (cosh_t * l_pre + ks_t * p_pre - l_target) / ks_t

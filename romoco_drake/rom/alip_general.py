@@ -10,21 +10,8 @@ from __future__ import annotations
 import math
 
 from romoco_drake.rom.alip import symmetric_orbit_momentum
-from romoco_drake.rom.lip import GRAVITY, omega
-
-
-def predicted_momentum_y(p_x: float, l_cy: float, t_left: float, mass: float, height: float,
-                         g: float = GRAVITY) -> float:
-    """L̂_cy at the end of the step, ``t_left`` seconds ahead (eq. 13)."""
-    ell = omega(height, g)
-    return mass * height * ell * math.sinh(ell * t_left) * p_x + math.cosh(ell * t_left) * l_cy
-
-
-def predicted_momentum_x(p_y: float, l_cx: float, t_left: float, mass: float, height: float,
-                         g: float = GRAVITY) -> float:
-    """L̂_cx at the end of the step (eq. 16)."""
-    ell = omega(height, g)
-    return -mass * height * ell * math.sinh(ell * t_left) * p_y + math.cosh(ell * t_left) * l_cx
+from romoco_drake.rom.lip import omega
+from romoco_drake.spatial import GRAVITY
 
 
 def desired_momentum_y(v_x: float, t_step: float, mass: float, height: float, g: float = GRAVITY
@@ -54,22 +41,16 @@ def desired_momentum_x(p_star: float, v_y: float, t_step: float, mass: float, he
             - mass * height * ell * v_y * t_step / math.tanh(x))
 
 
-def post_impact_com_x(l_cy_desired: float, l_cy_pre: float, t_step: float, mass: float, height: float,
-                      g: float = GRAVITY) -> float:
-    """u_x of eq. 15.
+def post_impact_com_x(l_cy_desired: float, l_cy_pre: float, cosh_t: float, mks_t: float) -> float:
+    """u_x of eq. 15 (m); ``cosh_t`` = cosh ℓT, ``mks_t`` = mHℓ sinh ℓT for the step time T.
 
     It is the post-impact CoM position relative to the new contact, p_x⁺ (solve
     L_cy(T) = mHℓ sinh(ℓT) p_x⁺ + cosh(ℓT) L̂_cy = L^d), so the foot lands p̂_x⁻ − u_x ahead of the
-    current contact, not u_x.
+    current contact, not u_x. The pre-impact L̂_cy (eq. 13) is the law's end-of-step prediction.
     """
-    ell = omega(height, g)
-    x = ell * t_step
-    return (l_cy_desired - math.cosh(x) * l_cy_pre) / (mass * height * ell * math.sinh(x))
+    return (l_cy_desired - cosh_t * l_cy_pre) / mks_t
 
 
-def post_impact_com_y(l_cx_desired: float, l_cx_pre: float, t_step: float, mass: float, height: float,
-                      g: float = GRAVITY) -> float:
-    """u_y of eq. 19, likewise the post-impact p_y⁺ relative to the new contact."""
-    ell = omega(height, g)
-    x = ell * t_step
-    return -(l_cx_desired - math.cosh(x) * l_cx_pre) / (mass * height * ell * math.sinh(x))
+def post_impact_com_y(l_cx_desired: float, l_cx_pre: float, cosh_t: float, mks_t: float) -> float:
+    """u_y of eq. 19, likewise the post-impact p_y⁺ relative to the new contact (eq. 16 predicts L̂_cx)."""
+    return -(l_cx_desired - cosh_t * l_cx_pre) / mks_t

@@ -6,19 +6,14 @@ import math
 
 import numpy as np
 
-from romoco_drake.rom.lip import GRAVITY, omega
+from romoco_drake.rom.lip import omega
 from romoco_drake.rom.s2s import StepToStep
+from romoco_drake.spatial import GRAVITY
 
 
 def dcm_transform(z0: float, g: float = GRAVITY) -> np.ndarray:
-    """T with (p, ξ) = T (p, L)."""
+    """T with (p, ξ) = T (p, L/m); in (p, ξ) the SS dynamics are T A_SS T⁻¹ = [[−λ, λ], [0, λ]]."""
     return np.array([[1.0, 0.0], [1.0, 1.0 / (omega(z0, g) * z0)]])
-
-
-def dcm_matrix(z0: float, g: float = GRAVITY) -> np.ndarray:
-    """The SS dynamics in (p, ξ): T A_SS T⁻¹ = [[−λ, λ], [0, λ]]."""
-    lam = omega(z0, g)
-    return np.array([[-lam, lam], [0.0, lam]])
 
 
 def dcm_s2s(z0: float, t_ss: float, t_ds: float, g: float = GRAVITY) -> StepToStep:

@@ -49,8 +49,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from romoco_drake.rom.lip import GRAVITY
 from romoco_drake.rom.types import SIDES
+from romoco_drake.spatial import GRAVITY
 
 # MPC state x = [roll, pitch, yaw, p_c (3), ω (3), ṗ_c (3)] (rad, m, rad/s, m/s), world frame.
 STATE_SIZE = 12

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from romoco_drake.rom.lip import GRAVITY, IMPACT_B, ds_flow, ss_flow
+from romoco_drake.rom.lip import IMPACT_B, ds_flow, ss_flow
 from romoco_drake.rom.s2s import StepToStep
+from romoco_drake.spatial import GRAVITY
 
 
 def hlip_s2s(z0: float, t_ss: float, t_ds: float, g: float = GRAVITY) -> StepToStep:

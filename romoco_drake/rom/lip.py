@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-GRAVITY = 9.81
+from romoco_drake.spatial import GRAVITY
 
 # The support switch moves the pivot by the step u: x⁺ = x⁻ + IMPACT_B u (eq. 3).
 IMPACT_B = np.array([-1.0, 0.0])
@@ -24,12 +24,13 @@ def omega(z0: float, g: float = GRAVITY) -> float:
 
 
 def ss_matrix(z0: float, g: float = GRAVITY) -> np.ndarray:
-    """A_SS of eq. 1."""
+    """A_SS of eq. 1; reference for tests of ss_flow and the S2S maps."""
     return np.array([[0.0, 1.0 / z0], [g, 0.0]])
 
 
 def ds_matrix(z0: float) -> np.ndarray:
-    """A_DS of eq. 4: H-LIP double support holds L (and so the CoM velocity) constant."""
+    """A_DS of eq. 4: H-LIP double support holds L (and so the CoM velocity) constant; reference for
+    tests of ds_flow and hlip_s2s."""
     return np.array([[0.0, 1.0 / z0], [0.0, 0.0]])
 
 
@@ -44,7 +45,3 @@ def ds_flow(t: float, z0: float) -> np.ndarray:
     """exp(A_DS t): constant-velocity double support."""
     return np.array([[1.0, t / z0], [0.0, 1.0]])
 
-
-def predict(x: np.ndarray, t: float, z0: float, g: float = GRAVITY) -> np.ndarray:
-    """The SS state ``t`` seconds ahead of ``x``."""
-    return ss_flow(t, z0, g) @ np.asarray(x, dtype=float)

@@ -12,12 +12,13 @@ import math
 
 import numpy as np
 
-from romoco_drake.rom.lip import GRAVITY, omega
+from romoco_drake.rom.lip import omega
 from romoco_drake.rom.s2s import StepToStep
+from romoco_drake.spatial import GRAVITY
 
 
 def mlip_matrices(z0: float, g: float = GRAVITY) -> tuple[np.ndarray, np.ndarray]:
-    """A_ct and B_ct of eq. 9."""
+    """A_ct and B_ct of eq. 9; reference for tests of mlip_domain_flow and mlip_s2s."""
     A = np.array([[0.0, 1.0 / z0, 0.0], [g, 0.0, -g], [0.0, 0.0, 0.0]])
     return A, np.array([0.0, 0.0, 1.0])
 
@@ -26,6 +27,7 @@ def mlip_domain_flow(t: float, z0: float, g: float = GRAVITY) -> tuple[np.ndarra
     """(Φ, Γ) with x̄(t) = Φ x̄(0) + Γ r for a constant ZMP rate r: eq. 10 in closed form.
 
     With ζ(t) = ζ0 + r t the CoM solves p − ζ = (p0 − ζ0) cosh λt + (L0 / z0 − r) sinh(λt) / λ.
+    :func:`mlip_s2s` uses Φ; Γ is the reference for tests of its B.
     """
     lam = omega(z0, g)
     x = lam * t

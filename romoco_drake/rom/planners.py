@@ -12,7 +12,7 @@ from __future__ import annotations
 import functools
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -20,13 +20,21 @@ import numpy as np
 
 from romoco_drake.errors import RomocoError
 from romoco_drake.registry import Registry
-from romoco_drake.rom import alip, alip_general
-from romoco_drake.rom.dcm import dcm_s2s
+from romoco_drake.rom.alip import alip_step, symmetric_orbit_momentum, target_momentum
+from romoco_drake.rom.alip_general import (
+    desired_momentum_x,
+    desired_momentum_y,
+    lateral_offset,
+    post_impact_com_x,
+    post_impact_com_y,
+)
+from romoco_drake.rom.dcm import dcm_s2s, dcm_transform
 from romoco_drake.rom.hlip import hlip_s2s
-from romoco_drake.rom.lip import GRAVITY, omega
+from romoco_drake.rom.lip import omega
 from romoco_drake.rom.mlip import mlip_s2s
 from romoco_drake.rom.s2s import StepToStep, converging_gain, lqr_gain
 from romoco_drake.rom.types import PlannerOutput, WalkCommand, other_side
+from romoco_drake.spatial import GRAVITY
 
 DsModel = Literal["none", "hold_velocity", "zmp_ramp"]
 
@@ -160,22 +168,24 @@ def _orbit_basis(s2s: StepToStep) -> tuple[Plane, Plane, Plane]:
 
 
 class S2SLaw(FootPlacementLaw):
-    """u = u* + K (C x̂⁻ − x*) on a linear S2S map (eq. 7); C maps (p, L/m) to the law's state."""
+    """u = u* + K (C x̂⁻ − x*) on a linear S2S map (eq. 7); C maps (p, L/m) to the law's state.
 
-    @abstractmethod
-    def _s2s(self, z0: float, t_ss: float) -> StepToStep:
-        """The law's S2S map."""
+    ``s2s_map(z0, t_ss, t_ds, g)`` is the law's map, ``report_map`` the (p, L/m) map whose orbit
+    is reported (``s2s_map`` when None). Double support rolls the ZMP unless a law says otherwise.
+    """
+
+    ds_model = "zmp_ramp"
+    supported_gains = ("deadbeat", "converging", "lqr")
+    s2s_map: Callable[[float, float, float, float], StepToStep]
+    report_map: Callable[[float, float, float, float], StepToStep] | None = None
 
     def _coords(self, z0: float) -> np.ndarray:
         return np.eye(2)
 
-    def _report_s2s(self, z0: float, t_ss: float) -> StepToStep:
-        """The (p, L/m) S2S map whose orbit is reported."""
-        return self._s2s(z0, t_ss)
-
     def _build_constants(self, z0: float, t_ss: float) -> _S2SMaps:
-        s2s = self._s2s(z0, t_ss)
         p = self.params
+        s2s = self.s2s_map(z0, t_ss, self.t_ds, p.g)
+        report = s2s if self.report_map is None else self.report_map(z0, t_ss, self.t_ds, p.g)
         if p.gain == "lqr":
             gain = lqr_gain(s2s, np.diag(p.lqr_q), p.lqr_r)
         else:
@@ -185,7 +195,7 @@ class S2SLaw(FootPlacementLaw):
             lam=lam, k=z0 * lam,
             gain=tuple(map(float, gain @ self._coords(z0))),
             orbit_gain=tuple(float(gain @ row) for row in _orbit_basis(s2s)),
-            report=_orbit_basis(self._report_s2s(z0, t_ss)),
+            report=_orbit_basis(report),
         )
 
     def _place(self, pre, stance_side, cmd):
@@ -206,37 +216,27 @@ class HlipLaw(S2SLaw):
 
     name = "hlip"
     ds_model = "hold_velocity"
-    supported_gains = ("deadbeat", "converging", "lqr")
-
-    def _s2s(self, z0, t_ss):
-        return hlip_s2s(z0, t_ss, self.t_ds, self.params.g)
+    s2s_map = staticmethod(hlip_s2s)
 
 
 class MlipLaw(S2SLaw):
     """MLIP: double support rolls the ZMP from the stance pivot to the new foot."""
 
     name = "mlip"
-    ds_model = "zmp_ramp"
-    supported_gains = ("deadbeat", "converging", "lqr")
-
-    def _s2s(self, z0, t_ss):
-        return mlip_s2s(z0, t_ss, self.t_ds, self.params.g)
+    s2s_map = staticmethod(mlip_s2s)
 
 
 class DcmLaw(S2SLaw):
-    """DCM: regulate only the unstable mode ξ = p + L/(λ z0); the CoM follows it (stable mode)."""
+    """DCM: regulate only the unstable mode ξ = p + L/(λ z0) of MLIP's map; the CoM follows it
+    (stable mode), and the orbit reported is MLIP's."""
 
     name = "dcm"
-    ds_model = "zmp_ramp"
-
-    def _s2s(self, z0, t_ss):
-        return dcm_s2s(z0, t_ss, self.t_ds, self.params.g)
+    supported_gains = ("deadbeat", "converging")
+    s2s_map = staticmethod(dcm_s2s)
+    report_map = staticmethod(mlip_s2s)
 
     def _coords(self, z0):
-        return np.array([[1.0, 1.0 / (omega(z0, self.params.g) * z0)]])
-
-    def _report_s2s(self, z0, t_ss):
-        return mlip_s2s(z0, t_ss, self.t_ds, self.params.g)
+        return dcm_transform(z0, self.params.g)[1:]
 
 
 @dataclass(frozen=True)
@@ -252,7 +252,7 @@ class _AlipConstants(_Constants):
 def _alip_constants(z0: float, t: float, g: float) -> _AlipConstants:
     lam = omega(z0, g)
     return _AlipConstants(lam=lam, k=z0 * lam, cosh_t=math.cosh(lam * t), ks_t=z0 * lam * math.sinh(lam * t),
-                          l_sag=alip.symmetric_orbit_momentum(1.0, t, z0, g),
+                          l_sag=symmetric_orbit_momentum(1.0, t, z0, g),
                           orbit=_orbit_basis(hlip_s2s(z0, t, 0.0, g)))
 
 
@@ -277,13 +277,11 @@ class AlipLaw(FootPlacementLaw):
         orbit_lat = (own[0] * uy + nxt[0] * uy_next, own[1] * uy + nxt[1] * uy_next)
         l_lat_next = own[1] * uy_next + nxt[1] * uy  # the orbit's L/m at the end of the next step
         l_sag = consts.l_sag * cmd.vx
-        # alip.target_momentum and alip.alip_step with the step-time constants hoisted.
         alpha, c, ks = self._alpha, consts.cosh_t, consts.ks_t
         (sag_p, sag_l), (lat_p, lat_l) = pre
-        l_x = l_sag + alpha * (sag_l - l_sag)
-        l_y = l_lat_next + alpha * (lat_l - orbit_lat[1])
-        u_x = (c * sag_l + ks * sag_p - l_x) / ks
-        u_y = (c * lat_l + ks * lat_p - l_y) / ks
+        l_x = target_momentum(sag_l, l_sag, l_sag, alpha)
+        l_y = target_momentum(lat_l, orbit_lat[1], l_lat_next, alpha)
+        u_x, u_y = alip_step(sag_p, sag_l, l_x, c, ks), alip_step(lat_p, lat_l, l_y, c, ks)
         return u_x, u_y, ((p1[0] * ux, p1[1] * ux), orbit_lat), (ux, uy)
 
 
@@ -315,9 +313,9 @@ class AlipGeneralLaw(FootPlacementLaw):
         lam = omega(z0, g)
         return _AlipGeneralConstants(
             lam=lam, k=z0 * lam, cosh_t=math.cosh(lam * t_ss), mks_t=m * z0 * lam * math.sinh(lam * t_ss),
-            l_cy_per_vx=alip_general.desired_momentum_y(1.0, t_ss, m, z0, g),
-            l_cx_per_p=alip_general.desired_momentum_x(1.0, 0.0, t_ss, m, z0, g),
-            l_cx_per_vy=alip_general.desired_momentum_x(0.0, 1.0, t_ss, m, z0, g),
+            l_cy_per_vx=desired_momentum_y(1.0, t_ss, m, z0, g),
+            l_cx_per_p=desired_momentum_x(1.0, 0.0, t_ss, m, z0, g),
+            l_cx_per_vy=desired_momentum_x(0.0, 1.0, t_ss, m, z0, g),
         )
 
     def _place(self, pre, stance_side, cmd):
@@ -325,14 +323,14 @@ class AlipGeneralLaw(FootPlacementLaw):
         m, t, vx, vy = self.params.mass, cmd.step_time, cmd.vx, cmd.vy
         (sag_p, sag_l), (lat_p, lat_l) = pre
         l_cy_d = consts.l_cy_per_vx * vx
-        p_star = alip_general.lateral_offset(vy, t, cmd.step_width, stance_side)
+        p_star = lateral_offset(vy, t, cmd.step_width, stance_side)
         l_cx_d = consts.l_cx_per_p * p_star + consts.l_cx_per_vy * vy
-        # eq. 15 and 19 (alip_general.post_impact_com_x/y) on the contact momenta m L/m.
+        # Eq. 15 and 19 on the contact momenta m L/m: the foot lands p̂⁻ − p⁺ ahead.
         c, mks = consts.cosh_t, consts.mks_t
-        u_x = sag_p - (l_cy_d - c * (m * sag_l)) / mks
-        u_y = lat_p + (l_cx_d - c * (-m * lat_l)) / mks
+        u_x = sag_p - post_impact_com_x(l_cy_d, m * sag_l, c, mks)
+        u_y = lat_p - post_impact_com_y(l_cx_d, -m * lat_l, c, mks)
         # The current step's orbit: it began at the offset planned in the other stance.
-        p_start = alip_general.lateral_offset(vy, t, cmd.step_width, other_side(stance_side))
+        p_start = lateral_offset(vy, t, cmd.step_width, other_side(stance_side))
         l_cx_orbit = consts.l_cx_per_p * p_start + consts.l_cx_per_vy * vy
         orbit = ((0.5 * vx * t, l_cy_d / m), (p_start + vy * t, -l_cx_orbit / m))
         return u_x, u_y, orbit, (vx * t, p_start + vy * t - p_star)

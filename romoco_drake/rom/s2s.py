@@ -55,11 +55,6 @@ def converging_gain(s2s: StepToStep, alpha: float) -> np.ndarray:
     return -last @ np.linalg.solve(ctrb, np.linalg.matrix_power(shifted, n))
 
 
-def deadbeat_gain(s2s: StepToStep) -> np.ndarray:
-    """K with (A + B K) nilpotent: the error reaches zero in n steps."""
-    return converging_gain(s2s, 0.0)
-
-
 def lqr_gain(s2s: StepToStep, Q: np.ndarray, R: float, iterations: int = 10000, tol: float = 1e-12
              ) -> np.ndarray:
     """Discrete LQR gain K (u = K x) from the Riccati recursion iterated to convergence."""

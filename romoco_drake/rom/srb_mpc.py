@@ -37,10 +37,10 @@ import daqp
 import numpy as np
 
 from romoco_drake.rom.wrench_cone import rectangle_wrench_cone
+from romoco_drake.spatial import GRAVITY_W, skew
 
 STATE_SIZE = 12
 INPUT_SIZE = 12
-GRAVITY = np.array([0.0, 0.0, -9.81])
 
 _DAQP_INF = 1e30  # DAQP ignores bounds at or beyond this magnitude
 _DAQP_FLAGS = {
@@ -77,7 +77,7 @@ class MpcWeights:
 
 
 def rpy_rotation(theta: np.ndarray) -> np.ndarray:
-    """R = Rz(ψ) Ry(φ) Rx(θ) for Θ = (θ, φ, ψ)."""
+    """R = Rz(ψ) Ry(φ) Rx(θ) for Θ = (θ, φ, ψ); reference for tests of :func:`euler_rate_map_inverse`."""
     cr, cp, cy = np.cos(theta)
     sr, sp, sy = np.sin(theta)
     return np.array([
@@ -88,7 +88,8 @@ def rpy_rotation(theta: np.ndarray) -> np.ndarray:
 
 
 def euler_rate_map(theta: np.ndarray) -> np.ndarray:
-    """T(Θ) with ω = T(Θ) Θ̇ (world-frame ω): columns Rz Ry e_x, Rz e_y, e_z."""
+    """T(Θ) with ω = T(Θ) Θ̇ (world-frame ω): columns Rz Ry e_x, Rz e_y, e_z; reference for tests of
+    :func:`euler_rate_map_inverse`."""
     cp, cy = np.cos(theta[1]), np.cos(theta[2])
     sp, sy = np.sin(theta[1]), np.sin(theta[2])
     return np.array([[cy * cp, -sy, 0.0], [sy * cp, cy, 0.0], [-sp, 0.0, 1.0]])
@@ -103,16 +104,6 @@ def euler_rate_map_inverse(theta: np.ndarray) -> np.ndarray:
     out[..., 0, 0], out[..., 0, 1] = cy / cp, sy / cp
     out[..., 1, 0], out[..., 1, 1] = -sy, cy
     out[..., 2, 0], out[..., 2, 1], out[..., 2, 2] = cy * tp, sy * tp, 1.0
-    return out
-
-
-def skew(v: np.ndarray) -> np.ndarray:
-    """[v]× for one (3,) or a batch (..., 3) of vectors."""
-    v = np.asarray(v, dtype=float)
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
-    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
-    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
     return out
 
 
@@ -145,7 +136,7 @@ def discrete_dynamics(mass: float, dt: float, x_ref: np.ndarray, inertia: np.nda
             B[6:9, c + 3:c + 6] = dt * inertia_inv @ skew(feet[i] - x_ref[3:6])
             B[9:12, c + 3:c + 6] = dt / mass * np.eye(3)
     d = np.zeros(STATE_SIZE)
-    d[9:12] = dt * GRAVITY
+    d[9:12] = dt * GRAVITY_W
     return A, B, d
 
 
@@ -258,7 +249,17 @@ class SrbMpc:
         H.reshape(na, 6, na, 6)[np.arange(na), :, np.arange(na), :] += r_blocks
         H *= 2.0
         g = 2.0 * np.einsum("kri,kr->i", qS, free - x_ref[1:])
+        y, flag, iterations = self._solve_qp(H, g, na)
+        if y is None:
+            return self._failure(free, x0, f"daqp: {_DAQP_FLAGS.get(flag, f'exit flag {flag}')}", iterations)
+        u = np.zeros((N * 2, 6))
+        u[active] = np.einsum("aij,aj->ai", to_world, y.reshape(na, 6))
+        x = free + np.einsum("kri,i->kr", S, y)
+        return MpcSolution(u.reshape(N, INPUT_SIZE), np.vstack([x0, x]), True, "solved", iterations)
 
+    def _solve_qp(self, H: np.ndarray, g: np.ndarray, na: int) -> tuple[np.ndarray | None, int, int]:
+        """min ½ yᵀ H y + gᵀ y on the DAQP workspace kept for ``na`` (knot, foot) pairs:
+        (y, or None when it failed, the exit flag, the iterations)."""
         workspace = self._workspaces.get(na)
         if workspace is None:
             C = np.kron(np.eye(na), self._rows)
@@ -276,14 +277,8 @@ class SrbMpc:
         if flag < 0:
             # A failed solve leaves a working set that would poison the next warm start.
             del self._workspaces[na]
-            return self._failure(free, x0, f"daqp: {_DAQP_FLAGS.get(flag, f'exit flag {flag}')}",
-                                 int(info["iterations"]))
-        y = np.asarray(y)
-        u = np.zeros((N * 2, 6))
-        u[active] = np.einsum("aij,aj->ai", to_world, y.reshape(na, 6))
-        x = free + np.einsum("kri,i->kr", S, y)
-        return MpcSolution(u.reshape(N, INPUT_SIZE), np.vstack([x0, x]), True, "solved",
-                           int(info["iterations"]))
+            return None, flag, int(info["iterations"])
+        return np.asarray(y), flag, int(info["iterations"])
 
     def _free_response(self, x0: np.ndarray, integral: np.ndarray) -> np.ndarray:
         """x_1..x_N (N, 12) with u = 0: ω constant, Θ integrates T⁻¹ω, the CoM falls."""
@@ -291,9 +286,9 @@ class SrbMpc:
         k = self._steps
         free = np.empty((N, STATE_SIZE))
         free[:, 0:3] = x0[0:3] + integral[1:] @ x0[6:9]
-        free[:, 3:6] = x0[3:6] + k * dt * x0[9:12] + (dt * dt * k * (k - 1) / 2.0) * GRAVITY
+        free[:, 3:6] = x0[3:6] + k * dt * x0[9:12] + (dt * dt * k * (k - 1) / 2.0) * GRAVITY_W
         free[:, 6:9] = x0[6:9]
-        free[:, 9:12] = x0[9:12] + k * dt * GRAVITY
+        free[:, 9:12] = x0[9:12] + k * dt * GRAVITY_W
         return free
 
     def _t_integral(self, x_ref: np.ndarray) -> np.ndarray:

@@ -38,8 +38,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from romoco_drake.errors import RomocoError
-from romoco_drake.rom.lip import GRAVITY
 from romoco_drake.rom.types import SWING_COMMIT_FRACTION, PlannerOutput
+from romoco_drake.spatial import GRAVITY
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from romoco_drake.spatial import wrench_map
+
 
 def rectangle_wrench_cone(half_length: float, half_width: float, mu: float) -> np.ndarray:
     """A (16×6) with A [τ; f] ≤ 0 exactly for the wrenches the rectangle's corners can exert.
@@ -42,7 +44,8 @@ def rectangle_wrench_cone(half_length: float, half_width: float, mu: float) -> n
 
 
 def corner_wrench(corner_forces: np.ndarray, half_length: float, half_width: float) -> np.ndarray:
-    """[τ; f] about the sole centre of forces (4×3) at the corners (±X, ±Y, 0)."""
+    """[τ; f] about the sole centre of forces (4×3, N) at the corners (±X, ±Y, 0) (m), sole frame;
+    reference for tests of :func:`rectangle_wrench_cone`."""
     X, Y = half_length, half_width
     corners = np.array([[X, Y, 0.0], [X, -Y, 0.0], [-X, Y, 0.0], [-X, -Y, 0.0]])
-    return np.concatenate([np.cross(corners, corner_forces).sum(axis=0), corner_forces.sum(axis=0)])
+    return np.roll(wrench_map(corners.T) @ np.ravel(corner_forces), 3)
