@@ -247,3 +247,19 @@ def test_mpc_com_rows_are_the_horizontal_com_acceleration_error():
     expected = 3.0 * (p_ddot[:2] - a_c)
     got = _residual(MpcComTracking(config).rows(ctx), x)
     np.testing.assert_allclose(got, expected, atol=1e-5 * np.abs(expected).max())
+
+
+def test_joint_limit_margin_stops_each_joint_that_far_inside_its_limits():
+    """With a margin m the bounds reach q_lo + m and q_hi − m (m capped at a quarter of the range)."""
+    robot, _, kin, refs, ctx = _tick("standing")
+    h, m = 0.05, 0.1
+    _, lower, upper = JointLimits(robot, JointLimitConfig(horizon=h, margin=m)).bounds(ctx)
+    legs = ~robot.locked_actuator_mask
+    q_idx, v_idx = robot.actuated_q_index[legs], robot.actuated_v_index[legs]
+    q, v = kin.q[q_idx], kin.v[v_idx]
+    lo, hi = robot.plant.GetPositionLowerLimits()[q_idx], robot.plant.GetPositionUpperLimits()[q_idx]
+    margin = np.minimum(m, 0.25 * (hi - lo))
+    inside = (q + v * h > lo + margin) & (q + v * h < hi - margin)
+    assert inside.sum() >= len(q) - 3 and np.any(margin == m)
+    np.testing.assert_allclose((q + v * h + 0.5 * lower * h**2)[inside], (lo + margin)[inside], atol=1e-12)
+    np.testing.assert_allclose((q + v * h + 0.5 * upper * h**2)[inside], (hi - margin)[inside], atol=1e-12)
