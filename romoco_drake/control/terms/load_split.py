@@ -103,11 +103,13 @@ class LoadSplit(CostTerm):
     def __init__(self, total_mass: float, config: LoadSplitConfig):
         self.total_mass, self.config = total_mass, config
         self._root = math.sqrt(config.weight)
+        self._rows: dict[tuple[int, int], np.ndarray] = {}  # constant: made once per QP size
 
     def rows(self, ctx: TermContext) -> Rows | None:
         refs = ctx.refs
         if not (refs.domain == Domain.DOUBLE and self.config.weight > 0.0):
             return None
-        n_f = refs.num_contact_forces
-        target = load_split_target(self.total_mass, ctx.kin, refs, ctx.a_cmd)
-        return ctx.force_rows(self._root * np.eye(n_f)), self._root * target
+        key = (refs.num_contact_forces, ctx.n)
+        if key not in self._rows:
+            self._rows[key] = ctx.force_rows(self._root * np.eye(key[0]))
+        return self._rows[key], self._root * load_split_target(self.total_mass, ctx.kin, refs, ctx.a_cmd)
