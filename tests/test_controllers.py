@@ -18,8 +18,8 @@ from romoco_drake.control.inverse_kinematics import (
     gravity_compensation,
     integrate_configuration,
 )
-from romoco_drake.control.tasks import load_split_forces
-from romoco_drake.control.tscqp import TscQp
+from romoco_drake.control.terms.load_split import LoadSplitConfig, load_split_forces
+from romoco_drake.control.tscqp import TscQp, TscqpConfig
 from romoco_drake.embedding.references import EmbeddingCore
 from romoco_drake.modes import Mode
 from romoco_drake.robots.kinematics import RobotKinematics
@@ -179,7 +179,8 @@ def test_inverse_dynamics_agrees_with_tscqp_when_no_inequality_is_active(name, m
         refs = dataclasses.replace(refs, y_des=refs.y.copy(), ydot_des=refs.J @ v,
                                    yddot_des=np.zeros_like(refs.y))
     ours = InverseDynamics(robot, core.contact, load_split_weight=0.0).compute(context, refs)
-    theirs, _ = TscQp(robot, core.contact, load_split_weight=0.0).compute(context, refs)
+    exact = TscqpConfig(load_split=LoadSplitConfig(0.0))
+    theirs, _ = TscQp(robot, core.contact, exact).compute(context, refs)
     assert ours.success and theirs.success
     n_f = refs.num_contact_forces
     assert np.all(refs.A_f @ ours.forces[:n_f] < refs.b_f)  # the friction and CoP limits are inactive
@@ -380,7 +381,7 @@ def test_mode_port_rejects_what_is_not_a_mode():
 @pytest.mark.parametrize("k", [2, 3, 5])
 def test_cop_weights_are_the_least_norm_solution(k):
     """The closed form matches least squares for line (k = 2, rank-deficient) and plane feet."""
-    from romoco_drake.control.tasks import _cop_weights
+    from romoco_drake.control.terms.load_split import _cop_weights
 
     rng = np.random.default_rng(k)
     points = rng.standard_normal((k, 2))

@@ -6,7 +6,11 @@ import functools
 import numpy as np
 import pytest
 
-from romoco_drake.control.mpc_wbc import MpcWbc, foot_wrench_map
+from romoco_drake.control.mpc_wbc import MpcWbc, WbcConfig
+from romoco_drake.control.terms.angular_momentum import AngularMomentumConfig
+from romoco_drake.control.terms.joint_limits import JointLimitConfig
+from romoco_drake.control.terms.load_split import LoadSplitConfig
+from romoco_drake.control.terms.mpc_tracking import MpcTrackingConfig, foot_wrench_map
 from romoco_drake.control.tscqp import TscQp
 from romoco_drake.embedding.references import EmbeddingCore
 from romoco_drake.robots.kinematics import RobotKinematics
@@ -55,7 +59,8 @@ def test_wbc_tracks_a_feasible_wrench_exactly():
     assert base.success and shifted.success
     target = _foot_wrenches(core, kin, refs, shifted.forces)
     assert np.abs(target - _foot_wrenches(core, kin, refs, base.forces)).max() > 5.0
-    wbc = MpcWbc(robot, core.contact, wrench_weight=1.0, com_weight=0.0)
+    wrench_only = MpcTrackingConfig(wrench_weight=1.0, com_weight=0.0)
+    wbc = MpcWbc(robot, core.contact, WbcConfig(mpc_tracking=wrench_only))
     solution, _ = wbc.compute(kin, dataclasses.replace(refs, mpc=_reference(robot, kin, target)))
     assert solution.success
     got = _foot_wrenches(core, kin, refs, solution.forces)
@@ -70,3 +75,22 @@ def test_wbc_without_a_usable_reference_is_the_tscqp(ok):
     wbc, _ = MpcWbc(robot, core.contact).compute(kin, dataclasses.replace(refs, mpc=mpc))
     plain, _ = TscQp(robot, core.contact).compute(kin, refs)
     np.testing.assert_allclose(wbc.tau, plain.tau, atol=1e-9)
+
+
+def test_wbc_keeps_every_tscqp_term_while_tracking_the_mpc():
+    """With a fresh MPC reference the TSC-QP's terms stay: the angular-momentum rows add
+    2 w A_kᵀ A_k to H's v̇ block, the load split 2 w I to its force block, and the joint limits
+    their rows (the WBC used to replace them all by the MPC's rows)."""
+    robot, core, kin, refs = _draco()
+    refs = dataclasses.replace(refs, mpc=_reference(robot, kin, np.full((2, 6), 50.0)))
+    nv, n_f, w_k, w_f = robot.nv, refs.num_contact_forces, 30.0, 1e-2
+    base = MpcWbc(robot, core.contact, WbcConfig(load_split=LoadSplitConfig(0.0))).formulate(kin, refs)
+    config = WbcConfig(angular_momentum=AngularMomentumConfig(weight=w_k), load_split=LoadSplitConfig(w_f),
+                       joint_limits=JointLimitConfig(horizon=0.05))
+    kept = MpcWbc(robot, core.contact, config).formulate(kin, refs)
+    A_k = kin.centroidal_momentum_matrix()[0][:3]
+    added = kept.H - base.H
+    scale = np.abs(base.H).max()
+    np.testing.assert_allclose(added[:nv, :nv], 2.0 * w_k * A_k.T @ A_k, atol=1e-9 * scale)
+    np.testing.assert_allclose(added[nv:nv + n_f, nv:nv + n_f], 2.0 * w_f * np.eye(n_f), atol=1e-9 * scale)
+    assert base.n_lim == 0 and kept.n_lim > 0 and len(kept.A) == len(base.A) + kept.n_lim

@@ -13,7 +13,9 @@ import pytest
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.control.controller import SolverResult
-from romoco_drake.control.tscqp import TscQp
+from romoco_drake.control.terms.angular_momentum import AngularMomentumConfig
+from romoco_drake.control.terms.joint_limits import JointLimitConfig
+from romoco_drake.control.tscqp import TscQp, TscqpConfig
 from romoco_drake.modes import Domain
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.scenario import build_diagram, initial_positions, load_scenario, with_overrides
@@ -62,8 +64,8 @@ def test_daqp_gives_the_reference_solution_in_every_domain(scenario_name):
     interior-point method stops short of that minimum in those directions.
     """
     robot, contact, ticks = _recorded(scenario_name)
-    fast = TscQp(robot, contact, solver="daqp")
-    reference = TscQp(robot, contact, solver="clarabel", clarabel_tolerance=1e-10)
+    fast = TscQp(robot, contact, TscqpConfig(solver="daqp"))
+    reference = TscQp(robot, contact, TscqpConfig(solver="clarabel"), clarabel_tolerance=1e-10)
     for domain in Domain:
         assert len(ticks[domain]) >= 3, f"no {domain} ticks recorded"
         for x, refs in ticks[domain]:
@@ -98,7 +100,7 @@ def test_infeasible_qp_is_a_failure_not_an_exception():
                                      b_f=np.concatenate([refs.b_f - 1.0, -refs.b_f - 1.0]))
     kin = RobotKinematics(robot, x)
     for solver in ("daqp", "clarabel"):
-        solution, warm = TscQp(robot, contact, solver=solver).compute(kin, impossible)
+        solution, warm = TscQp(robot, contact, TscqpConfig(solver=solver)).compute(kin, impossible)
         assert not solution.success and warm is None
 
 
@@ -110,7 +112,7 @@ def test_torque_limits_no_force_can_meet_are_relaxed():
     demanding = dataclasses.replace(refs, b_f=refs.b_f - 1e3)
     kin = RobotKinematics(robot, x)
     for solver in ("daqp", "clarabel"):
-        solution, warm = TscQp(robot, contact, solver=solver).compute(kin, demanding)
+        solution, warm = TscQp(robot, contact, TscqpConfig(solver=solver)).compute(kin, demanding)
         assert solution.success and solution.relaxed and warm is None
         assert np.abs(solution.tau).max() > robot.effort_limits.max()
 
@@ -129,7 +131,8 @@ def test_a_joint_moving_into_its_limit_is_stopped_within_the_horizon():
     free, _ = TscQp(robot, contact).compute(kin, refs)
     assert free.vdot[joint.velocity_start()] < 2.0 / 0.01 - 1.0
     for solver in ("daqp", "clarabel"):
-        solution, _ = TscQp(robot, contact, solver=solver, joint_limit_horizon=0.01).compute(kin, refs)
+        qp = TscQp(robot, contact, TscqpConfig(solver=solver, joint_limits=JointLimitConfig(0.01)))
+        solution, _ = qp.compute(kin, refs)
         assert solution.success and not solution.relaxed
         assert solution.vdot[joint.velocity_start()] >= 2.0 / 0.01 - 1e-4
 
@@ -152,7 +155,8 @@ def test_angular_momentum_axes_weigh_the_heading_frame():
     base = TscQp(robot, contact).formulate(kin, refs).H[:nv, :nv]
 
     def added(axes):
-        qp = TscQp(robot, contact, angular_momentum_weight=w, angular_momentum_axes=axes).formulate(kin, refs)
+        config = TscqpConfig(angular_momentum=AngularMomentumConfig(weight=w, axes=list(axes)))
+        qp = TscQp(robot, contact, config).formulate(kin, refs)
         return qp.H[:nv, :nv] - base
 
     scale = np.abs(base).max()

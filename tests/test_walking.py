@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from romoco_drake.control.tscqp import TscQp
+from romoco_drake.control.terms.load_split import LoadSplitConfig
+from romoco_drake.control.tscqp import TscQp, TscqpConfig
 from romoco_drake.embedding.references import EmbeddingCore
 from romoco_drake.modes import Mode
 from romoco_drake.planners.state_machine import GaitStateMachine
@@ -21,7 +22,8 @@ from romoco_drake.scenario import CommandPoint, build_diagram, load_scenario
 def g1():
     robot = load_robot("g1")
     core = EmbeddingCore(robot)
-    return robot, core, TscQp(robot, core.contact, load_split_weight=0.0)  # exact task tracking
+    exact = TscqpConfig(load_split=LoadSplitConfig(0.0))  # exact task tracking
+    return robot, core, TscQp(robot, core.contact, exact)
 
 
 def _standing_refs(robot, core, v):

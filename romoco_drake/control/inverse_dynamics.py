@@ -31,7 +31,7 @@ about its sole centroid (TSC-QP's pivot weight). The regularisation is not cosme
 the pendulum by the ROM) would be held still by ankle torque and large internal forces.
 
 In double support the cost also pulls the point forces toward a load split between the feet
-(:func:`~romoco_drake.control.tasks.load_split_target`: the commanded CoM acceleration's force,
+(:func:`~romoco_drake.control.terms.load_split.load_split_target`: the commanded CoM acceleration's force,
 shared by where its LIP zero-moment point lies), with a small weight. Without it, the tasks at
 Cassie's first double support asked for a net wrench only a pulling trailing foot gives (−870
 N, then a fall), and G1 twisted in place after stopping. Targeting only the internal forces
@@ -58,15 +58,16 @@ from romoco_drake.control.tasks import (
     DEFAULT_TASK_GAINS,
     TaskGain,
     TaskStack,
-    load_split_target,
-    pivot_moment_map,
     subspace_basis,
     weighted_least_squares,
 )
+from romoco_drake.control.terms.load_split import LoadSplit, LoadSplitConfig
+from romoco_drake.control.terms.pivot_moment import PivotMoment, PivotMomentConfig
+from romoco_drake.control.terms.tasks import TaskTracking
+from romoco_drake.control.terms.term import TermContext
 from romoco_drake.control.tscqp import QpSolution
 from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.embedding.references import TaskReferences
-from romoco_drake.modes import Domain
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
 
@@ -104,8 +105,11 @@ class InverseDynamics:
                  load_split_weight: float = 1e-3):
         self.robot, self.contact = robot, contact
         self.tasks = TaskStack(robot, gains)
-        self.eps, self.k_h, self.w_pivot = regularization, constraint_damping, pivot_moment_weight
-        self.w_split = load_split_weight
+        self.eps, self.k_h = regularization, constraint_damping
+        # The TSC-QP's cost terms on x = [v̇; λ], composed with x = x_p + X z below.
+        self.terms = [TaskTracking(), PivotMoment(contact, PivotMomentConfig(pivot_moment_weight)),
+                      LoadSplit(robot.total_mass, LoadSplitConfig(load_split_weight))]
+        self._rows_a = np.argmax(robot.B, axis=0)
         self._eye = np.eye(robot.nv)
 
     warm_start_size = 0
@@ -128,7 +132,7 @@ class InverseDynamics:
         r = self.robot
         q, v = kin.q, kin.v
         t = self.tasks.evaluate(refs, q)
-        a_cmd = t.yddot_des - t.kp * t.error - t.kd * (t.J @ v - t.ydot_des)
+        ctx = TermContext.evaluate(kin, refs, t, self._rows_a)
         M, C = kin.M, kin.C
         Jh = refs.holonomic.J
         h = subspace_basis(Jh)
@@ -151,21 +155,15 @@ class InverseDynamics:
         lam_p = Lam @ (f_p - r.B @ tau_p)
         L = Lam @ (M @ N_z - r.B @ T)
         eps_v, eps_tau, eps_lam = self.eps
-        rows = [t.J @ N_z, N_z, T, L]
-        targets = [a_cmd - t.Jdot_v - t.J @ vdot_p, -vdot_p, -tau_p, -lam_p]
-        weights = [t.weight, np.full(r.nv, eps_v), np.full(r.nu, eps_tau), np.full(len(lam_p), eps_lam)]
-        if refs.domain.single_support and self.w_pivot > 0.0:
-            G = pivot_moment_map(self.contact, kin, refs)
-            n_f = refs.num_contact_forces
-            rows.append(G @ L[:n_f])
-            targets.append(-G @ lam_p[:n_f])
-            weights.append(np.full(2, self.w_pivot))
-        if refs.domain == Domain.DOUBLE and self.w_split > 0.0:
-            n_f = refs.num_contact_forces
-            f_split = load_split_target(self.robot, kin, refs, a_cmd)
-            rows.append(L[:n_f])
-            targets.append(f_split - lam_p[:n_f])
-            weights.append(np.full(n_f, self.w_split))
+        rows = [N_z, T, L]
+        targets = [-vdot_p, -tau_p, -lam_p]
+        weights = [np.full(r.nv, eps_v), np.full(r.nu, eps_tau), np.full(len(lam_p), eps_lam)]
+        # Each term's ‖S x − s‖² (weight folded in) on x = [v̇; λ] = x_p + X z.
+        X, x_p = np.vstack([N_z, L]), np.concatenate([vdot_p, lam_p])
+        for S_x, s_x in filter(None, (term.rows(ctx) for term in self.terms)):
+            rows.append(S_x @ X)
+            targets.append(s_x - S_x @ x_p)
+            weights.append(np.ones(len(s_x)))
         z = weighted_least_squares(np.vstack(rows), np.concatenate(targets), np.concatenate(weights), 0.0)
         vdot, tau, forces = vdot_p + N_z @ z, tau_p + T @ z, lam_p + L @ z
         ok = bool(np.all(np.isfinite(tau)) and np.all(np.isfinite(vdot)))

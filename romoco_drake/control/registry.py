@@ -57,12 +57,6 @@ def _momentum(robot, config: MomentumConfig):
                        limit_margin=config.limit_margin)
 
 
-def _wbc(robot, config: WbcConfig):
-    track = config.mpc_tracking
-    return MpcWbc.from_config(robot, contact_model(robot), config, wrench_weight=track.wrench_weight,
-                              com_weight=track.com_weight, com_kp=track.com_kp, com_kd=track.com_kd)
-
-
 CONTROLLERS = Registry("controller")
 CONTROLLERS.add("standing", lambda robot, config: StandingController(robot, 1.0 / config.rate_hz,
                                                                       LINK_TICK_OFFSET),
@@ -82,5 +76,6 @@ CONTROLLERS.add("posik", _ik, "position IK by Newton-Raphson, joint PD (RoMoCo �
 CONTROLLERS.add("momentum", _momentum,
                 "hierarchical centroidal-momentum QPs in the contact null space (XO paper §III)",
                 config=MomentumConfig, traits=ControllerTraits(momentum_log=True))
-CONTROLLERS.add("wbc", _wbc, "TSC-QP tracking a wrench MPC's contact wrenches and CoM (VI-MPC paper §III.E)",
+CONTROLLERS.add("wbc", lambda robot, config: MpcWbc.from_config(robot, contact_model(robot), config),
+                "TSC-QP tracking a wrench MPC's contact wrenches and CoM (VI-MPC paper §III.E)",
                 config=WbcConfig)

@@ -8,7 +8,6 @@
   (rank 6 of 9 for a plane foot), so J_h is never inverted as it stands; V_n V_nᵀ = I − J_h⁺ J_h
   is the constraint null-space projector.
 - :func:`weighted_least_squares`: the damped weighted task solve in a null-space coordinate.
-- :func:`pivot_moment_map`: the stance contact forces' moment about the sole centroid.
 - :class:`TaskGain` and the default gains and weights of every output, shared by all four
   controllers, and :func:`placeholder_references`.
 """
@@ -20,12 +19,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.embedding.references import EmbeddingCore, TaskReferences
 from romoco_drake.modes import Mode
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
-from romoco_drake.spatial import GRAVITY
 
 
 @dataclass(frozen=True)
@@ -79,6 +76,10 @@ class Tasks:
     kp: np.ndarray
     kd: np.ndarray
     weight: np.ndarray
+
+    def commanded(self, v: np.ndarray) -> np.ndarray:
+        """ÿ_cmd = ÿ_d − K_p (y − y_d) − K_d (ẏ − ẏ_d) at the generalized velocity ``v``."""
+        return self.yddot_des - self.kp * self.error - self.kd * (self.J @ v - self.ydot_des)
 
 
 class TaskStack:
@@ -163,85 +164,6 @@ def weighted_least_squares(A: np.ndarray, b: np.ndarray, w: np.ndarray, damping:
     if prior is not None:
         g += damping * prior
     return np.linalg.solve(H, g)
-
-
-def pivot_moment_map(contact: ContactModel, kin: RobotKinematics, refs: TaskReferences) -> np.ndarray:
-    """G (2 × n_f): horizontal moment of the single-support contact forces about the sole centroid.
-
-    The ROM planners assume the stance foot is a pivot (no ankle torque about the sole
-    centroid, LIP eq. 1); penalising G λ, as TSC-QP does, keeps the centre of pressure near
-    that point in single support so the robot's momentum evolves as the planner predicts.
-    """
-    pivot = contact.sole_center(kin, refs.domain)
-    r = refs.holonomic.y[:refs.num_contact_forces].reshape(-1, 3) - pivot
-    G = np.zeros((2, refs.num_contact_forces))
-    # (r × f)_x = r_y f_z − r_z f_y ; (r × f)_y = r_z f_x − r_x f_z
-    G[0, 1::3], G[0, 2::3] = -r[:, 2], r[:, 1]
-    G[1, 0::3], G[1, 2::3] = r[:, 2], -r[:, 0]
-    return G
-
-
-def load_split_forces(contact_points: np.ndarray, p_zmp: np.ndarray, force: np.ndarray) -> np.ndarray:
-    """Double-support point forces (3k,) carrying the total ``force`` with its ZMP at ``p_zmp``.
-
-    ``contact_points`` (k×3, world) are the left foot's points then the right foot's, as in
-    the double-support rows of J_h. The right foot's share is where the ZMP projects on the
-    segment between the two foot centroids (clipped to [0, 1]). The ZMP's offset from that
-    segment shifts both feet's centres of pressure: each foot spreads its share over its
-    points with the (clipped, non-negative) barycentric weights of its shifted CoP.
-    """
-    half = len(contact_points) // 2
-    feet = contact_points[:half], contact_points[half:]
-    c_l, c_r = (p.mean(axis=0)[:2] for p in feet)
-    d = c_r - c_l
-    share_r = float(np.clip((p_zmp[:2] - c_l) @ d / max(d @ d, 1e-12), 0.0, 1.0))
-    offset = p_zmp[:2] - (c_l + share_r * d)
-    f = np.empty_like(contact_points)
-    for rows, points, share in ((slice(0, half), feet[0], 1.0 - share_r),
-                                (slice(half, None), feet[1], share_r)):
-        w = np.clip(_cop_weights(points[:, :2] - points[:, :2].mean(axis=0), offset), 0.0, None)
-        f[rows] = np.outer(w / w.sum(), force * share)
-    return f.ravel()
-
-
-def _cop_weights(rel: np.ndarray, offset: np.ndarray) -> np.ndarray:
-    """Least-norm point weights w with Σw = 1 and Σ w_i rel_i = offset (``rel``: k×2, centred).
-
-    Centred points are orthogonal to the ones vector, so w = 1/k + rel G⁺ offset with the 2×2
-    G = relᵀ rel; G is rank 1 for a line foot, where G⁺ = G / trace(G)². Closed form because
-    ``np.linalg.lstsq`` cost 0.15 ms a foot, in every standing tick.
-    """
-    G = rel.T @ rel
-    trace = G[0, 0] + G[1, 1]
-    det = G[0, 0] * G[1, 1] - G[0, 1] ** 2
-    if det > 1e-9 * trace**2:
-        G_pinv = np.array([[G[1, 1], -G[0, 1]], [-G[0, 1], G[0, 0]]]) / det
-    else:
-        G_pinv = G / max(trace, 1e-12) ** 2
-    return 1.0 / len(rel) + rel @ (G_pinv @ offset)
-
-
-def load_split_target(robot: RobotModel, kin: RobotKinematics, refs: TaskReferences, a_cmd: np.ndarray
-                      ) -> np.ndarray:
-    """The double-support point-force target: the commanded CoM acceleration, LIP-style.
-
-    ``a_cmd`` holds the commanded accelerations of the active outputs (then the locked joints).
-    The CoM acceleration commanded by the active ``com_*`` tasks (zero where there is none:
-    walking's double support regulates only the height) sets the total force m (a − g) and,
-    through the LIP relation p_zmp = p_com − z_c a_xy / (g + a_z), where the normal load sits
-    between and under the feet (:func:`load_split_forces`). So the target agrees with the tasks
-    whenever their demand is feasible and pulls it back into the support when it is not.
-    """
-    n_f = refs.num_contact_forces
-    points = refs.holonomic.y[:n_f].reshape(-1, 3)
-    active = [n for n, on in zip(refs.names, refs.active, strict=True) if on]
-    a_com = np.array([a_cmd[active.index(n)] if n in active else 0.0 for n in ("com_x", "com_y", "com_z")])
-    p_com = kin.p_com
-    g_plus_az = max(GRAVITY + a_com[2], 0.1 * GRAVITY)
-    z_c = p_com[2] - points[:, 2].mean()
-    p_zmp = p_com[:2] - z_c * a_com[:2] / g_plus_az
-    force = robot.total_mass * np.array([a_com[0], a_com[1], g_plus_az])
-    return load_split_forces(points, p_zmp, force)
 
 
 def placeholder_references(robot: RobotModel) -> TaskReferences:
