@@ -19,7 +19,6 @@ EXCEPTIONS: dict[str, str] = {
     "cli.py::make_parser": _SPLITTING,
     "control/momentum.py": _SPLITTING,
     "control/momentum.py::MomentumHqp.compute": _SPLITTING,
-    "control/tscqp.py::TscQp.formulate": _SPLITTING,
     "interfaces/hardware.py": _SPLITTING,
     "runner.py::run_scenario": _SPLITTING,
     "scenario.py": _SPLITTING,
