@@ -106,9 +106,10 @@ def _follow_sliders(sliders, plant, diagram, context, period: float = 0.05) -> N
 
 def _cmd_run(args) -> int:
     from romoco_drake.control.registry import CONTROLLERS
-    from romoco_drake.interfaces.hardware import LINK_COUNTERS
-    from romoco_drake.runner import run_scenario, stderr_progress
+    from romoco_drake.modes import LinkCounters
+    from romoco_drake.runner import run_scenario
     from romoco_drake.scenario import load_scenario, with_overrides
+    from romoco_drake.simulation import stderr_progress
 
     scenario = with_overrides(load_scenario(args.scenario), args.planner, args.controller, args.command,
                               args.estimator, args.solver, args.push, args.dropout)
@@ -147,7 +148,7 @@ def _cmd_run(args) -> int:
                   f"rad/min, position drift {summary['position_drift_per_m']} per m walked, "
                   f"{summary['estimator_rejected_updates']} rejected updates")
         if link != "sim":
-            print("  link: " + ", ".join(f"{k} {summary[k]}" for k in LINK_COUNTERS))
+            print("  link: " + ", ".join(f"{k} {summary[k]}" for k in LinkCounters().summary()))
         if "robot_link" in summary:
             print("  robot side: " + ", ".join(f"{k} {v}" for k, v in summary["robot_link"].items()))
         if "lcm_log" in summary:
@@ -206,8 +207,9 @@ def _cmd_new_robot(args) -> int:
 
 
 def _cmd_robot_sim(args) -> int:
-    from romoco_drake.runner import run_robot_sim, stderr_progress
+    from romoco_drake.runner import run_robot_sim
     from romoco_drake.scenario import load_scenario
+    from romoco_drake.simulation import stderr_progress
 
     meshcat = _live_meshcat(args.meshcat)
     summary = run_robot_sim(load_scenario(args.scenario), args.duration, args.lcm_url, meshcat,
@@ -270,7 +272,7 @@ def _cmd_bench_matrix(args) -> int:
     from romoco_drake.bench.walking import WALKING_ROBOTS, bench_matrix, walking_robots
     from romoco_drake.control.registry import CONTROLLERS
     from romoco_drake.rom.planners import PLANNERS
-    from romoco_drake.runner import stderr_progress
+    from romoco_drake.simulation import stderr_progress
 
     walking_controllers = [name for name, entry in CONTROLLERS.items() if entry.facts["walking"]]
     robots = _names(args.robots, WALKING_ROBOTS, "robot", walking_robots())
@@ -335,7 +337,7 @@ def _names(text: str | None, default, what: str, known) -> list[str]:
 def _cmd_bench_agility(args) -> int:
     from romoco_drake.bench.agility import MOTIONS, PAPER, bench_agility
     from romoco_drake.planners.vimpc import INERTIA_MODES
-    from romoco_drake.runner import stderr_progress
+    from romoco_drake.simulation import stderr_progress
 
     modes = _names(args.modes, INERTIA_MODES, "inertia mode", INERTIA_MODES)
     motions = _names(args.motions, tuple(MOTIONS), "motion", tuple(MOTIONS))
@@ -353,7 +355,7 @@ def _cmd_bench_agility(args) -> int:
 def _cmd_bench_dropout(args) -> int:
     from romoco_drake.bench.dropout import bench_dropout
     from romoco_drake.interfaces.dropout import STREAM_CHANNELS
-    from romoco_drake.runner import stderr_progress
+    from romoco_drake.simulation import stderr_progress
 
     if args.stream not in STREAM_CHANNELS:
         raise RomocoError(f"--stream must be one of: {', '.join(STREAM_CHANNELS)}")
@@ -379,7 +381,7 @@ def _cmd_bench_dropout(args) -> int:
 def _cmd_bench_push(args) -> int:
     from romoco_drake.bench.push import ANGULAR_MOMENTUM_WEIGHT, DIRECTIONS, bench_push
     from romoco_drake.robots.model import robot_names
-    from romoco_drake.runner import stderr_progress
+    from romoco_drake.simulation import stderr_progress
 
     if args.robot not in robot_names():
         raise RomocoError(f"unknown robot '{args.robot}' (known: {', '.join(robot_names())})")
@@ -445,7 +447,7 @@ def _cmd_reproduce(args) -> int:
 
     from romoco_drake.bench.report import claim_table_md, write_report
     from romoco_drake.bench.reproduce import PAPERS, QUICK_SHORTENS, reproduce
-    from romoco_drake.runner import stderr_progress
+    from romoco_drake.simulation import stderr_progress
 
     papers = list(PAPERS) if args.paper == "all" else [args.paper]
     if papers[0] not in PAPERS:

@@ -1,23 +1,27 @@
-"""Run a scenario: simulate, optionally show or record it in Meshcat, summarise."""
+"""Run a scenario: simulate, optionally show or record it in Meshcat, summarise.
+
+The run summary is collected from the systems that measured it: the fall monitor, the
+estimator, the LCM link's two sides, and for walking the gait state machine, the command
+limiter, the whole-body controller, a VI-MPC planner and the momentum log (each one's
+``summary``), with velocity tracking from the state log (:mod:`~romoco_drake.metrics`).
+"""
 
 from __future__ import annotations
 
 import contextlib
-import gc
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
 from pydrake.geometry import Meshcat
-from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 
+from romoco_drake.control.momentum_log import momentum_summary
 from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces.hardware import link_summary
 from romoco_drake.interfaces.lcm_log import LcmLogRecorder
 from romoco_drake.interfaces.robot_sim import make_robot_sim, robot_summary
-from romoco_drake.metrics import finite_or_none, momentum_summary, velocity_tracking
+from romoco_drake.metrics import finite_or_none, tracking_summary, velocity_tracking
+from romoco_drake.modes import MpcStats
 from romoco_drake.planners.command import CommandSource, segments_from_log
 from romoco_drake.planners.heading import base_yaw
 from romoco_drake.planners.vimpc import VimpcPlanner
@@ -30,30 +34,9 @@ from romoco_drake.scenario import (
     initial_positions,
     uses_motor_command,
 )
+from romoco_drake.simulation import RunEnd, make_lcm, simulate
 
-PROGRESS_WALL_S = 2.0  # print progress lines at most this often
-# Drake's report that the plant's discrete contact solver gave up on a step (v1.51,
-# multibody/plant/sap_driver.cc; the plants here use SAP).
-# Drake's SAP contact solver reports a diverged state with one of these.
-SAP_DIVERGED = ("The SAP solver failed to converge", "The Hessian of the momentum cost")
-# No robot's |q| or |v| (m, rad, m/s, rad/s) gets here; a blown-up simulation does within a
-# few steps, often without a solver noticing (then a controller trips on it).
-BLOWN_UP = 1e6
 MIN_WALKED_M = 0.1  # m: a shorter path gives no position drift per metre
-
-
-@contextlib.contextmanager
-def frozen_heap():
-    """Within: every Python object alive on entry (the diagram, its systems, the models) is out
-    of the garbage collector's view (``gc.freeze``), so the collections a run triggers scan only
-    what its ticks allocate (full collections over the diagram stretched G1's tick by about
-    20 %). On exit they are collectable again, so runs in one process do not pile up."""
-    gc.collect()
-    gc.freeze()
-    try:
-        yield
-    finally:
-        gc.unfreeze()
 
 
 def run_scenario(
@@ -105,57 +88,64 @@ def run_scenario(
     recorder = LcmLogRecorder(lcm, Path(lcm_log), clock=context.get_time) if lcm_log is not None else None
     if record is not None:
         meshcat.StartRecording(frames_per_second=30.0)
-    wall0 = time.perf_counter()
     simulator.Initialize()
-    last_print, last_t = wall0, 0.0
-    chunk = min(0.1, duration)
-    t, diverged, stopped = 0.0, None, None
     # The log is closed however the run ends (Ctrl-C on --hardware included).
-    with contextlib.ExitStack() as stack, frozen_heap():
+    with contextlib.ExitStack() as stack:
         if recorder is not None:
             stack.callback(recorder.close)
-        while t < duration - 1e-9:
-            t = min(duration, t + chunk)
-            try:
-                simulator.AdvanceTo(t)
-            except KeyboardInterrupt:
-                if not teleop:
-                    raise
-                duration = t = context.get_time()  # Ctrl-C ends a teleop run; summarise it
-                break
-            except Exception as e:
-                # A diverged simulation ends the run as a fall (the monitor may not have sampled
-                # it yet), without a traceback; anything else is a bug and goes up as it is.
-                if (reason := divergence(e, _plant_state(built, context))) is None:
-                    raise
-                diverged = (context.get_time(), reason)
-                break
-            if stop_after_fall is not None:
-                fall = built.monitor.summary(built.monitor.GetMyContextFromRoot(context))["fall_time_s"]
-                if fall is not None and t >= fall + stop_after_fall:
-                    stopped = t
-                    break
-            now = time.perf_counter()
-            if progress is not None and now - last_print > PROGRESS_WALL_S:
-                if teleop:
-                    rate = (t - last_t) / (now - last_print)
-                    progress(f"[{scenario.name} teleop] t = {t:.1f} s, {rate:.2f}x real time "
-                             "(Ctrl-C ends the run)")
-                else:
-                    progress(f"[{scenario.name}] t = {t:.1f}/{duration:.1f} s ({100 * t / duration:.0f}%)")
-                last_print, last_t = now, t
-    wall = time.perf_counter() - wall0
+        end = simulate(simulator, duration, lambda: _plant_state(built, context),
+                       _reporter(progress, scenario.name, duration, teleop),
+                       _fall_stop(built, context, stop_after_fall), ctrl_c_ends=teleop)
     if record is not None:
-        meshcat.StopRecording()
-        meshcat.PublishRecording()
-        record = Path(record)
-        try:
-            record.write_text(meshcat.StaticHtml())
-        except OSError as e:
-            raise RomocoError(f"{record}: cannot write the replay ({e.strerror})") from None
+        record = _write_replay(meshcat, Path(record))
     if inspect is not None:
         inspect(built, context)
-    monitor_context = built.monitor.GetMyContextFromRoot(context)
+    summary = _run_summary(built, context, scenario, link, end, end.time if end.interrupted else duration,
+                           plot_dir)
+    if recorder is not None:
+        summary["lcm_log"] = {"path": str(recorder.path), "events": recorder.count}
+    if teleop:
+        summary["teleop_estop"] = built.command.estop_pressed(built.command.GetMyContextFromRoot(context))
+    if record is not None:
+        summary["record"] = str(record)
+    return summary
+
+
+def _reporter(progress, name: str, duration: float, teleop: bool):
+    """The run's progress line for :func:`~romoco_drake.simulation.simulate` (None: silent)."""
+    if progress is None:
+        return None
+    if teleop:
+        return lambda t, rate: progress(f"[{name} teleop] t = {t:.1f} s, {rate:.2f}x real time "
+                                        "(Ctrl-C ends the run)")
+    return lambda t, _: progress(f"[{name}] t = {t:.1f}/{duration:.1f} s ({100 * t / duration:.0f}%)")
+
+
+def _fall_stop(built, context, after: float | None):
+    """The stop condition: ``after`` s past the fall monitor's fall (None: never)."""
+    if after is None:
+        return None
+
+    def stop(t: float) -> bool:
+        fall = built.monitor.summary(built.monitor.GetMyContextFromRoot(context))["fall_time_s"]
+        return fall is not None and t >= fall + after
+
+    return stop
+
+
+def _write_replay(meshcat: Meshcat, record: Path) -> Path:
+    meshcat.StopRecording()
+    meshcat.PublishRecording()
+    try:
+        record.write_text(meshcat.StaticHtml())
+    except OSError as e:
+        raise RomocoError(f"{record}: cannot write the replay ({e.strerror})") from None
+    return record
+
+
+def _run_summary(built, context, scenario: Scenario, link: str, end: RunEnd, duration: float,
+                 plot_dir: Path | None) -> dict:
+    """The run's facts and what each system measured (module docstring)."""
     summary = {
         "link": link,
         "scenario": scenario.name,
@@ -163,32 +153,20 @@ def run_scenario(
         "controller": scenario.controller.name,
         "estimator": scenario.estimator.name,
         "duration_s": duration,
-        "wall_s": round(wall, 3),
-        "realtime_factor": round(duration / wall, 3) if wall > 0 else None,
+        "wall_s": round(end.wall_s, 3),
+        "realtime_factor": round(duration / end.wall_s, 3) if end.wall_s > 0 else None,
     }
-    summary.update(built.monitor.summary(monitor_context))
-    if stopped is not None:
-        summary["stopped_s"] = stopped
-    if diverged is not None:
-        summary["simulation_error"] = diverged[1]
-        if not summary["fell"]:
-            summary.update(fell=True, fall_time_s=diverged[0], fall_reason="simulation_diverged")
+    summary |= end.outcome(built.monitor.summary(built.monitor.GetMyContextFromRoot(context)))
     # What a run measured is scored up to a fall: after it the state (diverged, in the worst
     # case) says nothing about tracking.
     until = summary["fall_time_s"]
-    summary.update(_estimator_summary(built, context, until))
+    summary |= _estimator_summary(built, context, until)
     if link != "sim":
-        summary.update(link_summary(built.station, context))
+        summary |= link_summary(built.station, context)
     if built.robot_sim is not None:
         summary["robot_link"] = robot_summary(built.robot_sim, context)
-    if recorder is not None:
-        summary["lcm_log"] = {"path": str(recorder.path), "events": recorder.count}
     if built.walking is not None:
-        summary.update(_walking_summary(built, context, scenario, plot_dir, until))
-    if teleop:
-        summary["teleop_estop"] = built.command.estop_pressed(built.command.GetMyContextFromRoot(context))
-    if record is not None:
-        summary["record"] = str(record)
+        summary |= _walking_summary(built, context, scenario, plot_dir, until)
     return summary
 
 
@@ -203,9 +181,8 @@ def run_robot_sim(scenario: Scenario, duration: float | None = None, lcm_url: st
     check_duration(duration)
     lcm = make_lcm(lcm_url)
     robot = load_robot(scenario.robot)
-    motor_pd = uses_motor_command(scenario)
     robot_sim = make_robot_sim(robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link,
-                               wait_for_commands_s=wait_s, motor_pd=motor_pd,
+                               wait_for_commands_s=wait_s, motor_pd=uses_motor_command(scenario),
                                disturbances=scenario.disturbances)
     simulator = Simulator(robot_sim)
     context = simulator.get_mutable_context()
@@ -220,42 +197,14 @@ def run_robot_sim(scenario: Scenario, duration: float | None = None, lcm_url: st
     except RuntimeError as e:
         raise RomocoError(f"robot-sim: no motor command within {wait_s:g} s "
                           f"({str(e).splitlines()[0][:120]})") from None
-    last_print, diverged = time.perf_counter(), None
-    with frozen_heap():
-        while context.get_time() < duration - 1e-9:
-            try:
-                simulator.AdvanceTo(min(duration, context.get_time() + 0.1))
-            except Exception as e:  # a diverged simulation ends the run as a fall, as in run_scenario
-                state = plant.GetPositionsAndVelocities(plant.GetMyContextFromRoot(context))
-                if (reason := divergence(e, state)) is None:
-                    raise
-                diverged = (context.get_time(), reason)
-                break
-            if progress is not None and time.perf_counter() - last_print > PROGRESS_WALL_S:
-                progress(f"[robot-sim {robot.name}] t = {context.get_time():.1f}/{duration:.1f} s")
-                last_print = time.perf_counter()
+    report = None if progress is None else (
+        lambda t, _: progress(f"[robot-sim {robot.name}] t = {t:.1f}/{duration:.1f} s"))
+    end = simulate(simulator, duration,
+                   lambda: plant.GetPositionsAndVelocities(plant.GetMyContextFromRoot(context)), report)
     monitor = station.GetSubsystemByName("monitor")
-    summary = ({"robot": robot.name, "lcm_url": lcm.get_lcm_url(), "duration_s": duration}
-               | monitor.summary(monitor.GetMyContextFromRoot(context)) | robot_summary(robot_sim, context))
-    if diverged is not None:
-        summary["simulation_error"] = diverged[1]
-        if not summary["fell"]:
-            summary.update(fell=True, fall_time_s=diverged[0], fall_reason="simulation_diverged")
-    return summary
-
-
-def divergence(error: Exception, plant_state: np.ndarray | None) -> str | None:
-    """What to report if ``error``, raised while advancing the simulation, means it diverged; else None.
-
-    Diverged: Drake's SAP solver said so, or the plant state ``[q; v]`` (None without a plant)
-    is non-finite or blown up past ``BLOWN_UP``, whatever then raised (e.g. a controller's
-    "QuaternionToRotationMatrix(): All the elements in a quaternion are zero").
-    """
-    text = str(error).strip()
-    blown_up = plant_state is not None and not np.all(np.abs(plant_state) < BLOWN_UP)  # NaN included
-    if not blown_up and not any(marker in text for marker in SAP_DIVERGED):
-        return None
-    return text.splitlines()[0].split(". ")[0].rstrip(".") if text else type(error).__name__
+    return ({"robot": robot.name, "lcm_url": lcm.get_lcm_url(), "duration_s": duration}
+            | end.outcome(monitor.summary(monitor.GetMyContextFromRoot(context)))
+            | robot_summary(robot_sim, context))
 
 
 def _plant_state(built, context) -> np.ndarray | None:
@@ -266,15 +215,6 @@ def _plant_state(built, context) -> np.ndarray | None:
     return plant.GetPositionsAndVelocities(plant.GetMyContextFromRoot(context))
 
 
-def make_lcm(url: str | None) -> DrakeLcm:
-    """A DrakeLcm on ``url`` (None: Drake's default UDP multicast), or one line saying why not."""
-    try:
-        return DrakeLcm(url) if url is not None else DrakeLcm()
-    except RuntimeError as e:
-        reason = str(e).splitlines()[0]
-        raise RomocoError(f"cannot open LCM on {url or 'the default URL'}: {reason}") from None
-
-
 def log_samples(log, until: float | None) -> tuple[np.ndarray, np.ndarray]:
     """A log's (times, data columns), up to time ``until`` if given."""
     times, data = log.sample_times(), log.data()
@@ -282,8 +222,6 @@ def log_samples(log, until: float | None) -> tuple[np.ndarray, np.ndarray]:
         return times, data
     n = int(np.searchsorted(times, until, side="right"))
     return times[:n], data[:, :n]
-
-
 def _estimator_summary(built, context, until: float | None) -> dict:
     """A filtering estimator's health and, when the true state is known, its errors against it:
     base velocity (rms of the error's norm, m/s), yaw drift (rad per minute, from the first to the
@@ -320,68 +258,34 @@ def estimate_errors(robot, times: np.ndarray, truth: np.ndarray, estimate: np.nd
     }
 
 
-def stderr_progress(message: str) -> None:
-    print(message, file=sys.stderr, flush=True)
-
-
 def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, until: float | None) -> dict:
+    """The walking loop's contributions: tracking, gait, command limits, controller, MPC, momentum;
+    with ``plot_dir``, the walking (and momentum) figures."""
+    loop = built.walking
+
+    def own(system):
+        return system.GetMyContextFromRoot(context)
+
     times, states = log_samples(built.state_log.FindLog(context), until)
     command = built.command
     if built.command_log is not None:  # teleop: score against the commands the page gave
         command = CommandSource(segments_from_log(*log_samples(built.command_log.FindLog(context), until)))
     tracking = velocity_tracking(built.robot, command, times, states)
-    ticks = built.walking.tick_log.FindLog(context).data()[0, 1:]  # the first sample precedes any tick
-    loop = built.walking
-    schedule = loop.state_machine.schedule(loop.state_machine.GetMyContextFromRoot(context))
-    controller_context = loop.controller.GetMyContextFromRoot(context)
-    failures, safe_ticks, _, relaxed = loop.controller.stats_port.Eval(controller_context)
-    mpc = {}
-    if isinstance(loop.planner, VimpcPlanner):
-        planner_context = loop.planner.GetMyContextFromRoot(context)
-        solves, failed, fallback = loop.planner.mpc_stats_port.Eval(planner_context)
-        mpc = {"mpc_solves": int(solves), "mpc_failures": int(failed), "mpc_fallback_updates": int(fallback),
-               "vimpc_inertia": scenario.vimpc.inertia}
-    return {
-        "planner": scenario.planner.name if mpc else loop.planner.law.name,
-        "velocity_rms_error": finite_or_none(tracking["velocity_rms_error"]),
-        "mean_velocity": finite_or_none(tracking["mean_velocity"]),
-        "steps": schedule.steps,
-        "command_clipped_segments": sum(loop.limiter.clipped(seg.command) for seg in command.segments),
-        "qp_failures": int(failures),
-        "relaxed_ticks": int(relaxed),
-        "safe_mode_entries": schedule.safe_mode_entries,
-        "safe_mode_ticks": int(safe_ticks),
-        "controller_tick_ms": _tick_stats(ticks),
-    } | mpc | _momentum(built, context, scenario, plot_dir, times, tracking, until)
-
-
-def _tick_stats(ticks: np.ndarray) -> dict:
-    """Median and 99th percentile of the controller tick times (ms); None when the tick log holds
-    no tick (a run that diverged or ended within one controller period)."""
-    if len(ticks) == 0:
-        return {"median": None, "p99": None}
-    return {"median": round(float(np.median(ticks)), 3), "p99": round(float(np.percentile(ticks, 99)), 3)}
-
-
-def _momentum(built, context, scenario: Scenario, plot_dir: Path | None, times, tracking, until) -> dict:
-    """The XO paper's summary keys and, with a plot directory, its figures (momentum runs), and the
-    walking plots."""
-    out, paths = {}, []
-    log = built.walking.momentum_log
-    if log is not None:
-        log_times, data = log_samples(log.FindLog(context), until)
-        out = momentum_summary(log_times, data)
-        if plot_dir is not None:
-            from romoco_drake.plots import plot_momentum_run
-
-            w = built.robot.config.walking
-            paths += plot_momentum_run(Path(plot_dir), scenario.name, log_times, data, built.robot.total_mass,
-                                       w.z0, w.t_ss, times, tracking["measured"], tracking["wanted"],
-                                       step_width=w.step_width)
+    ticks = loop.tick_log.FindLog(context).data()[0, 1:]  # the first sample precedes any tick
+    mpc = isinstance(loop.planner, VimpcPlanner)
+    out = ({"planner": scenario.planner.name if mpc else loop.planner.law.name} | tracking_summary(tracking)
+           | loop.state_machine.summary(own(loop.state_machine)) | loop.limiter.summary(command.segments)
+           | loop.controller.summary(own(loop.controller), ticks))
+    if mpc:
+        out |= MpcStats.from_vector(loop.planner.mpc_stats_port.Eval(own(loop.planner))).summary()
+        out["vimpc_inertia"] = scenario.vimpc.inertia
+    momentum = None if loop.momentum_log is None else log_samples(loop.momentum_log.FindLog(context), until)
+    if momentum is not None:
+        out |= momentum_summary(*momentum)
     if plot_dir is not None:
-        from romoco_drake.plots import plot_walking_run
+        from romoco_drake.plots import plot_run
 
-        error_times, errors = log_samples(built.walking.error_log.FindLog(context), until)
-        paths = plot_walking_run(Path(plot_dir), scenario.name, times, tracking, error_times, errors) + paths
-        out["plots"] = [str(p) for p in paths]
+        errors = log_samples(loop.error_log.FindLog(context), until)
+        out["plots"] = [str(p) for p in plot_run(Path(plot_dir), scenario.name, built.robot, times, tracking,
+                                                 errors, momentum)]
     return out

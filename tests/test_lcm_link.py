@@ -12,16 +12,12 @@ from pydrake.systems.framework import PortDataType
 
 from romoco_drake.cli import main
 from romoco_drake.interfaces import lcm_codec as codec
-from romoco_drake.interfaces.hardware import (
-    CommandSender,
-    LinkConfig,
-    LinkStage,
-    link_summary,
-    make_hardware_station,
-    nominal_measurements,
-)
+from romoco_drake.interfaces.hardware import CommandSender, link_summary, make_hardware_station
+from romoco_drake.interfaces.link import LinkConfig
+from romoco_drake.interfaces.receiver import nominal_measurements
 from romoco_drake.interfaces.robot_sim import make_robot_sim, robot_summary
 from romoco_drake.interfaces.station import make_station
+from romoco_drake.modes import LinkStage
 from romoco_drake.robots.model import load_robot
 from romoco_drake.runner import log_samples, run_scenario
 from romoco_drake.scenario import build_diagram, initial_positions, load_scenario, with_overrides
@@ -431,8 +427,8 @@ class SenderBench:
         return sent
 
     def stats(self) -> dict:
-        rejected, clamped, estop = self.sender.stats_port.Eval(self.context)
-        return {"rejected": rejected, "clamped": clamped, "estop": estop}
+        c = self.sender.stats_port.Eval(self.context)
+        return {"rejected": c.rejected_messages, "clamped": c.clamped_commands, "estop": c.estop}
 
 
 @pytest.mark.parametrize("motor_pd", [False, True])

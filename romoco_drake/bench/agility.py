@@ -24,7 +24,8 @@ from collections.abc import Callable
 import numpy as np
 
 from romoco_drake.bench.sweep import IN_PROCESS, SweepOptions, Variant, run_sweep
-from romoco_drake.metrics import AVERAGE_WINDOW_S, heading_velocity, moving_average
+from romoco_drake.metrics import AVERAGE_WINDOW_S, moving_average
+from romoco_drake.planners.heading import heading_velocity
 from romoco_drake.planners.vimpc import INERTIA_MODES
 from romoco_drake.runner import log_samples, run_scenario
 from romoco_drake.scenario import CommandPoint, Scenario, load_scenario

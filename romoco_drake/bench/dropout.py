@@ -16,7 +16,7 @@ import numpy as np
 
 from romoco_drake.bench.sweep import IN_PROCESS, SweepOptions, Variant, run_sweep
 from romoco_drake.interfaces.dropout import Dropout
-from romoco_drake.metrics import heading_velocity
+from romoco_drake.planners.heading import heading_velocity
 from romoco_drake.robots.model import load_robot
 from romoco_drake.runner import log_samples, run_scenario
 from romoco_drake.scenario import CommandPoint, Scenario, load_scenario

@@ -15,7 +15,7 @@ from romoco_drake.interfaces.station import make_station
 from romoco_drake.planners.vimpc import VimpcPlanner
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.rom.types import WalkCommand, side_from_sign
-from romoco_drake.runner import frozen_heap, run_scenario
+from romoco_drake.runner import run_scenario
 from romoco_drake.scenario import (
     Scenario,
     build_diagram,
@@ -24,6 +24,7 @@ from romoco_drake.scenario import (
     scenario_names,
     with_overrides,
 )
+from romoco_drake.simulation import frozen_heap
 
 # The matrix's default robots (the RoMoCo paper's); any robot with a walking scenario can be asked for.
 WALKING_ROBOTS = ("g1", "cassie", "h1")

@@ -28,10 +28,10 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.embedding.contact import contact_frame
-from romoco_drake.interfaces.hardware import EstopLatch
 from romoco_drake.interfaces.lcm_codec import Estop, encode_estop
-from romoco_drake.metrics import heading_velocity
+from romoco_drake.interfaces.link import EstopLatch
 from romoco_drake.modes import Mode
+from romoco_drake.planners.heading import heading_velocity
 from romoco_drake.robots.kinematics import kinematics_model_value
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.types import COMMAND_SIZE, PlannerOutput
