@@ -1,4 +1,5 @@
-"""Velocity tracking from a run's logs: how closely the robot walked its command."""
+"""Numbers from a run's logs: how closely the robot walked its command, and a filtering
+estimator's errors against the true state."""
 
 from __future__ import annotations
 
@@ -7,11 +8,13 @@ import math
 import numpy as np
 
 from romoco_drake.planners.command import CommandSource, reach_times
-from romoco_drake.planners.heading import heading_velocity
+from romoco_drake.planners.heading import base_yaw, heading_velocity
 from romoco_drake.robots.model import RobotModel
 
 AVERAGE_WINDOW_S = 1.0
 SETTLE_S = 1.0  # a command segment is scored from a second after the limited command reached it
+MIN_WALKED_M = 0.1  # m: a shorter path gives no position drift per metre
+
 
 def moving_average(times: np.ndarray, values: np.ndarray, window: float) -> np.ndarray:
     """Trailing average over ``window`` seconds (shorter at the start)."""
@@ -60,3 +63,46 @@ def tracking_summary(tracking: dict) -> dict:
     """The run summary's tracking keys from :func:`velocity_tracking`'s result."""
     return {"velocity_rms_error": finite_or_none(tracking["velocity_rms_error"]),
             "mean_velocity": finite_or_none(tracking["mean_velocity"])}
+
+
+def log_samples(log, until: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """A log's (times, data columns), up to time ``until`` if given."""
+    times, data = log.sample_times(), log.data()
+    if until is None:
+        return times, data
+    n = int(np.searchsorted(times, until, side="right"))
+    return times[:n], data[:, :n]
+def estimator_summary(built, context, until: float | None) -> dict:
+    """A filtering estimator's health and, when the true state is known, its errors against it:
+    base velocity (rms of the error's norm, m/s), yaw drift (rad per minute, from the first to the
+    last sample) and horizontal position drift per metre walked (the error's change over the run
+    over the true path length; None when the robot walked under 0.1 m)."""
+    if not hasattr(built.estimator, "rejected_updates"):
+        return {}
+    out = {"estimator_rejected_updates": built.estimator.rejected_updates(
+        built.estimator.GetMyContextFromRoot(context))}
+    if built.plant_station is not None:
+        times, truth = log_samples(built.state_log.FindLog(context), until)
+        estimate = log_samples(built.estimate_log.FindLog(context), until)[1]
+        n = min(truth.shape[1], estimate.shape[1])
+        out.update(estimate_errors(built.robot, times[:n], truth[:, :n], estimate[:, :n]))
+    return out
+
+
+def estimate_errors(robot, times: np.ndarray, truth: np.ndarray, estimate: np.ndarray) -> dict:
+    """Estimator errors against the truth, state samples one per column (see estimator_summary)."""
+    if len(times) < 2:
+        return dict.fromkeys(("velocity_estimate_rms_error", "yaw_drift_rad_per_min", "position_drift_per_m"))
+    j = robot.nq + robot.base_v_start + 3
+    error = np.linalg.norm(estimate[j:j + 3] - truth[j:j + 3], axis=0)
+    yaw_error = np.unwrap(base_yaw(robot, estimate) - base_yaw(robot, truth))
+    minutes = (times[-1] - times[0]) / 60.0
+    b = robot.base_q_start + 4
+    p_error = estimate[b:b + 2] - truth[b:b + 2]
+    walked = float(np.sum(np.linalg.norm(np.diff(truth[b:b + 2], axis=1), axis=0)))
+    drift = np.linalg.norm(p_error[:, -1] - p_error[:, 0]) / walked if walked > MIN_WALKED_M else np.nan
+    return {
+        "velocity_estimate_rms_error": finite_or_none([round(float(np.sqrt(np.mean(error**2))), 4)])[0],
+        "yaw_drift_rad_per_min": finite_or_none([round(float(yaw_error[-1] - yaw_error[0]) / minutes, 5)])[0],
+        "position_drift_per_m": finite_or_none([round(float(drift), 4)])[0],
+    }

@@ -9,21 +9,24 @@ limiter, the whole-body controller, a VI-MPC planner and the momentum log (each 
 from __future__ import annotations
 
 import contextlib
+import json
+import sys
 from pathlib import Path
 
 import numpy as np
 from pydrake.geometry import Meshcat
 from pydrake.systems.analysis import Simulator
 
+from romoco_drake.commands import fall_text, live_meshcat
 from romoco_drake.control.momentum_log import momentum_summary
+from romoco_drake.control.registry import CONTROLLERS
 from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces.hardware import link_summary
 from romoco_drake.interfaces.lcm_log import LcmLogRecorder
 from romoco_drake.interfaces.robot_sim import make_robot_sim, robot_summary
-from romoco_drake.metrics import finite_or_none, tracking_summary, velocity_tracking
-from romoco_drake.modes import MpcStats
+from romoco_drake.metrics import estimator_summary, log_samples, tracking_summary, velocity_tracking
+from romoco_drake.modes import LinkCounters, MpcStats
 from romoco_drake.planners.command import CommandSource, segments_from_log
-from romoco_drake.planners.heading import base_yaw
 from romoco_drake.planners.vimpc import VimpcPlanner
 from romoco_drake.robots.model import load_robot
 from romoco_drake.scenario import (
@@ -32,11 +35,11 @@ from romoco_drake.scenario import (
     build_diagram,
     check_duration,
     initial_positions,
+    load_scenario,
     uses_motor_command,
+    with_overrides,
 )
-from romoco_drake.simulation import RunEnd, make_lcm, simulate
-
-MIN_WALKED_M = 0.1  # m: a shorter path gives no position drift per metre
+from romoco_drake.simulation import RunEnd, make_lcm, simulate, stderr_progress
 
 
 def run_scenario(
@@ -77,14 +80,8 @@ def run_scenario(
         meshcat = Meshcat()
     lcm = make_lcm(lcm_url or ("memq://" if link == "via_lcm" else None)) if link != "sim" else None
     built = build_diagram(scenario, meshcat, law, link, lcm, teleop)
-    simulator = Simulator(built.diagram)
+    simulator = _simulator(built, scenario, realtime=link == "hardware" or teleop)
     context = simulator.get_mutable_context()
-    if built.plant_station is not None:
-        plant = built.plant_station.GetSubsystemByName("plant")
-        q0 = initial_positions(built.robot, scenario)
-        plant.SetPositions(plant.GetMyMutableContextFromRoot(context), q0)
-    if link == "hardware" or teleop:
-        simulator.set_target_realtime_rate(1.0)
     recorder = LcmLogRecorder(lcm, Path(lcm_log), clock=context.get_time) if lcm_log is not None else None
     if record is not None:
         meshcat.StartRecording(frames_per_second=30.0)
@@ -101,14 +98,20 @@ def run_scenario(
     if inspect is not None:
         inspect(built, context)
     summary = _run_summary(built, context, scenario, link, end, end.time if end.interrupted else duration,
-                           plot_dir)
-    if recorder is not None:
-        summary["lcm_log"] = {"path": str(recorder.path), "events": recorder.count}
-    if teleop:
-        summary["teleop_estop"] = built.command.estop_pressed(built.command.GetMyContextFromRoot(context))
-    if record is not None:
-        summary["record"] = str(record)
-    return summary
+                           plot_dir, recorder, teleop)
+    return summary | ({"record": str(record)} if record is not None else {})
+
+
+def _simulator(built, scenario: Scenario, realtime: bool) -> Simulator:
+    """A simulator of the built diagram, the simulated robot (if any) at its initial pose."""
+    simulator = Simulator(built.diagram)
+    if built.plant_station is not None:
+        plant = built.plant_station.GetSubsystemByName("plant")
+        q0 = initial_positions(built.robot, scenario)
+        plant.SetPositions(plant.GetMyMutableContextFromRoot(simulator.get_mutable_context()), q0)
+    if realtime:
+        simulator.set_target_realtime_rate(1.0)
+    return simulator
 
 
 def _reporter(progress, name: str, duration: float, teleop: bool):
@@ -144,7 +147,7 @@ def _write_replay(meshcat: Meshcat, record: Path) -> Path:
 
 
 def _run_summary(built, context, scenario: Scenario, link: str, end: RunEnd, duration: float,
-                 plot_dir: Path | None) -> dict:
+                 plot_dir: Path | None, recorder: LcmLogRecorder | None, teleop: bool) -> dict:
     """The run's facts and what each system measured (module docstring)."""
     summary = {
         "link": link,
@@ -160,13 +163,17 @@ def _run_summary(built, context, scenario: Scenario, link: str, end: RunEnd, dur
     # What a run measured is scored up to a fall: after it the state (diverged, in the worst
     # case) says nothing about tracking.
     until = summary["fall_time_s"]
-    summary |= _estimator_summary(built, context, until)
+    summary |= estimator_summary(built, context, until)
     if link != "sim":
         summary |= link_summary(built.station, context)
     if built.robot_sim is not None:
         summary["robot_link"] = robot_summary(built.robot_sim, context)
+    if recorder is not None:
+        summary["lcm_log"] = {"path": str(recorder.path), "events": recorder.count}
     if built.walking is not None:
         summary |= _walking_summary(built, context, scenario, plot_dir, until)
+    if teleop:
+        summary["teleop_estop"] = built.command.estop_pressed(built.command.GetMyContextFromRoot(context))
     return summary
 
 
@@ -215,49 +222,6 @@ def _plant_state(built, context) -> np.ndarray | None:
     return plant.GetPositionsAndVelocities(plant.GetMyContextFromRoot(context))
 
 
-def log_samples(log, until: float | None) -> tuple[np.ndarray, np.ndarray]:
-    """A log's (times, data columns), up to time ``until`` if given."""
-    times, data = log.sample_times(), log.data()
-    if until is None:
-        return times, data
-    n = int(np.searchsorted(times, until, side="right"))
-    return times[:n], data[:, :n]
-def _estimator_summary(built, context, until: float | None) -> dict:
-    """A filtering estimator's health and, when the true state is known, its errors against it:
-    base velocity (rms of the error's norm, m/s), yaw drift (rad per minute, from the first to the
-    last sample) and horizontal position drift per metre walked (the error's change over the run
-    over the true path length; None when the robot walked under 0.1 m)."""
-    if not hasattr(built.estimator, "rejected_updates"):
-        return {}
-    out = {"estimator_rejected_updates": built.estimator.rejected_updates(
-        built.estimator.GetMyContextFromRoot(context))}
-    if built.plant_station is not None:
-        times, truth = log_samples(built.state_log.FindLog(context), until)
-        estimate = log_samples(built.estimate_log.FindLog(context), until)[1]
-        n = min(truth.shape[1], estimate.shape[1])
-        out.update(estimate_errors(built.robot, times[:n], truth[:, :n], estimate[:, :n]))
-    return out
-
-
-def estimate_errors(robot, times: np.ndarray, truth: np.ndarray, estimate: np.ndarray) -> dict:
-    """Estimator errors against the truth, state samples one per column (see _estimator_summary)."""
-    if len(times) < 2:
-        return dict.fromkeys(("velocity_estimate_rms_error", "yaw_drift_rad_per_min", "position_drift_per_m"))
-    j = robot.nq + robot.base_v_start + 3
-    error = np.linalg.norm(estimate[j:j + 3] - truth[j:j + 3], axis=0)
-    yaw_error = np.unwrap(base_yaw(robot, estimate) - base_yaw(robot, truth))
-    minutes = (times[-1] - times[0]) / 60.0
-    b = robot.base_q_start + 4
-    p_error = estimate[b:b + 2] - truth[b:b + 2]
-    walked = float(np.sum(np.linalg.norm(np.diff(truth[b:b + 2], axis=1), axis=0)))
-    drift = np.linalg.norm(p_error[:, -1] - p_error[:, 0]) / walked if walked > MIN_WALKED_M else np.nan
-    return {
-        "velocity_estimate_rms_error": finite_or_none([round(float(np.sqrt(np.mean(error**2))), 4)])[0],
-        "yaw_drift_rad_per_min": finite_or_none([round(float(yaw_error[-1] - yaw_error[0]) / minutes, 5)])[0],
-        "position_drift_per_m": finite_or_none([round(float(drift), 4)])[0],
-    }
-
-
 def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, until: float | None) -> dict:
     """The walking loop's contributions: tracking, gait, command limits, controller, MPC, momentum;
     with ``plot_dir``, the walking (and momentum) figures."""
@@ -289,3 +253,154 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, 
         out["plots"] = [str(p) for p in plot_run(Path(plot_dir), scenario.name, built.robot, times, tracking,
                                                  errors, momentum)]
     return out
+
+
+def register_run(sub) -> None:
+    """``romoco run``."""
+    p = sub.add_parser("run", help="simulate a scenario")
+    add_run_args(p)
+    p.set_defaults(func=_cmd_run)
+
+
+def add_run_args(p) -> None:
+    """The flags of ``romoco run``: the scenario, how it is shown, what overrides it, the link."""
+    p.add_argument("scenario", help="scenario name (diagrams/NAME.yaml) or a YAML path")
+    p.add_argument("--duration", type=float, default=None, help="simulated seconds")
+    p.add_argument("--meshcat", action="store_true", help="serve a live Meshcat view")
+    p.add_argument("--record", type=Path, metavar="FILE.html", help="write an offline Meshcat replay")
+    p.add_argument("--json", action="store_true", help="print the run summary as JSON (last line)")
+    p.add_argument("--no-wait", action="store_true", help="with --meshcat, exit when the run ends")
+    p.add_argument("--teleop", action="store_true",
+                   help="with --meshcat: drive the robot from the page (sliders, buttons, gamepad) at real "
+                        "time until Ctrl-C or --duration")
+    p.add_argument("--planner", help="override the scenario's planner (see romoco list)")
+    p.add_argument("--controller", help="override the scenario's controller (see romoco list)")
+    p.add_argument("--command", metavar="T:VX,VY,WZ;...",
+                   help="override the velocity command: piecewise constant from each time T (s)")
+    p.add_argument("--push", action="append", metavar="T:FX,FY,FZ[:DURATION]",
+                   help="push the base from time T (s) with force (N) in the heading frame, for DURATION "
+                        "(s, default 0.1); repeatable")
+    p.add_argument("--dropout", action="append", metavar="T:DURATION[:STREAM]",
+                   help="with --via-lcm: lose the link's STREAM (proprioception, commands or all; default "
+                        "proprioception) from time T (s) for DURATION (s); repeatable")
+    p.add_argument("--plot", type=Path, metavar="DIR", help="write velocity and tracking-error PNGs")
+    p.add_argument("--estimator",
+                   help="override the scenario's estimator: ground_truth, kalman or invariant_ekf")
+    p.add_argument("--solver", help="override the TSC-QP's QP solver: daqp or clarabel (the reference)")
+    p.add_argument("--via-lcm", action="store_true",
+                   help="run the robot and the controller over LCM in this process (memq:// by default)")
+    p.add_argument("--hardware", action="store_true",
+                   help="run only the controller, at real time, against a robot on LCM (see robot-sim)")
+    p.add_argument("--lcm-url", help="LCM URL for --via-lcm or --hardware")
+    p.add_argument("--lcm-log", type=Path, metavar="FILE", help="record the LCM traffic (LCM log format)")
+
+
+def scenario_from_args(args) -> Scenario:
+    """The scenario ``add_run_args``'s flags name, with their overrides."""
+    return with_overrides(load_scenario(args.scenario), args.planner, args.controller, args.command,
+                          args.estimator, args.solver, args.push, args.dropout)
+
+
+def _cmd_run(args) -> int:
+    scenario = scenario_from_args(args)
+    if args.via_lcm and args.hardware:
+        raise RomocoError("--via-lcm and --hardware exclude each other")
+    link = "via_lcm" if args.via_lcm else "hardware" if args.hardware else "sim"
+    if args.lcm_url is not None and link == "sim":
+        raise RomocoError("--lcm-url needs --via-lcm or --hardware")
+    if args.teleop and not args.meshcat:
+        raise RomocoError("--teleop needs --meshcat (the page is the command source)")
+    if args.teleop and args.command is not None:
+        raise RomocoError("--teleop and --command exclude each other (the page gives the command)")
+    if args.teleop and not CONTROLLERS[scenario.controller.name].facts["walking"]:
+        raise RomocoError(f"--teleop needs a walking controller, not '{scenario.controller.name}'")
+    summary = run_scenario(scenario, duration=args.duration, meshcat=live_meshcat(args.meshcat),
+                           record=args.record, progress=stderr_progress, plot_dir=args.plot, link=link,
+                           lcm_url=args.lcm_url, lcm_log=args.lcm_log, teleop=args.teleop)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        _print_run(summary, args.record)
+    if args.meshcat and not args.no_wait and sys.stdin.isatty():
+        try:
+            input("Press Enter to quit (the Meshcat page replays the run). ")
+        except (EOFError, KeyboardInterrupt):
+            pass
+    return 0
+
+
+def _print_run(summary: dict, record: Path | None) -> None:
+    """The run summary as text lines."""
+    print(f"{summary['scenario']} ({summary['robot']}): {summary['duration_s']} s simulated in "
+          f"{summary['wall_s']} s ({summary['realtime_factor']}x real time); {fall_text(summary)}; "
+          f"base height drift {summary['base_height_drift_m'] * 1000:.1f} mm")
+    if "velocity_rms_error" in summary:
+        print(f"  {summary['planner']} + {summary['controller']}: {summary['steps']} steps, "
+              f"velocity rms error (vx, vy, wz) {summary['velocity_rms_error']}, "
+              f"mean velocity {summary['mean_velocity']}, "
+              f"QP failures {summary['qp_failures']}, safe-mode entries {summary['safe_mode_entries']}, "
+              f"controller tick {summary['controller_tick_ms']['median']} ms median")
+    if "velocity_estimate_rms_error" in summary:
+        print(f"  {summary['estimator']}: base velocity estimate rms error "
+              f"{summary['velocity_estimate_rms_error']} m/s, "
+              f"yaw drift {summary['yaw_drift_rad_per_min']} "
+              f"rad/min, position drift {summary['position_drift_per_m']} per m walked, "
+              f"{summary['estimator_rejected_updates']} rejected updates")
+    if summary["link"] != "sim":
+        print("  link: " + ", ".join(f"{k} {summary[k]}" for k in LinkCounters().summary()))
+    if "robot_link" in summary:
+        print("  robot side: " + ", ".join(f"{k} {v}" for k, v in summary["robot_link"].items()))
+    if "lcm_log" in summary:
+        print(f"  LCM log {summary['lcm_log']['path']}: {summary['lcm_log']['events']} messages")
+    for path in summary.get("plots", []):
+        print(f"  wrote {path}")
+    if record:
+        print(f"replay written to {record}")
+
+
+def register_robot_sim(sub) -> None:
+    """``romoco robot-sim``."""
+    p = sub.add_parser("robot-sim", help="a simulated robot behind LCM, for `romoco run --hardware`")
+    p.add_argument("scenario", help="scenario name or YAML path (robot, plant step, sensors, link)")
+    p.add_argument("--lcm-url", help="LCM URL (default: Drake's UDP multicast)")
+    p.add_argument("--duration", type=float, default=None, help="seconds to run (default: the scenario's)")
+    p.add_argument("--meshcat", action="store_true", help="serve a live Meshcat view")
+    p.add_argument("--wait", type=float, default=60.0, metavar="S",
+                   help="seconds to wait for the controller's first command before starting")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON (last line)")
+    p.set_defaults(func=_cmd_robot_sim)
+
+
+def _cmd_robot_sim(args) -> int:
+    summary = run_robot_sim(load_scenario(args.scenario), args.duration, args.lcm_url,
+                            live_meshcat(args.meshcat), progress=stderr_progress, wait_s=args.wait)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(f"robot-sim {summary['robot']} on {summary['lcm_url']}: {summary['duration_s']} s; "
+              f"{fall_text(summary)}; "
+              + ", ".join(f"{k} {summary[k]}" for k in ("stale_events", "rejected_messages", "estop")))
+    return 0
+
+
+def register_plot(sub) -> None:
+    """``romoco plot``: a run's figures and tracking numbers from its LCM log (``romoco run --lcm-log``)."""
+    p = sub.add_parser("plot", help="plot a run from its LCM log (romoco run --lcm-log)")
+    p.add_argument("log", type=Path)
+    p.add_argument("--out", type=Path, default=Path("plots"), metavar="DIR", help="where to write PNGs")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON (last line)")
+    p.set_defaults(func=_cmd_plot)
+
+
+def _cmd_plot(args) -> int:
+    from romoco_drake.interfaces.lcm_log import plot_status_log
+
+    s = plot_status_log(args.log, args.out)
+    if args.json:
+        print(json.dumps(s))
+    else:
+        print(f"{s['log']} ({s['robot']}, {s['duration_s']} s): velocity rms error (vx, vy, wz) "
+              f"{s['velocity_rms_error']}, mean velocity {s['mean_velocity']}")
+        for path in s["plots"]:
+            print(f"  wrote {path}")
+    return 0
