@@ -296,9 +296,10 @@ def add_run_args(p) -> None:
 
 
 def scenario_from_args(args) -> Scenario:
-    """The scenario ``add_run_args``'s flags name, with their overrides."""
-    return with_overrides(load_scenario(args.scenario), args.planner, args.controller, args.command,
-                          args.estimator, args.solver, args.push, args.dropout)
+    """The scenario ``args.scenario`` names, with whichever of ``add_run_args``'s overrides the
+    subcommand has (run, robot-sim and bench tick build their scenario here)."""
+    flags = ("planner", "controller", "command", "estimator", "solver", "push", "dropout")
+    return with_overrides(load_scenario(args.scenario), *(getattr(args, flag, None) for flag in flags))
 
 
 def _cmd_run(args) -> int:
@@ -372,7 +373,7 @@ def register_robot_sim(sub) -> None:
 
 
 def _cmd_robot_sim(args) -> int:
-    summary = run_robot_sim(load_scenario(args.scenario), args.duration, args.lcm_url,
+    summary = run_robot_sim(scenario_from_args(args), args.duration, args.lcm_url,
                             live_meshcat(args.meshcat), progress=stderr_progress, wait_s=args.wait)
     if args.json:
         print(json.dumps(summary))

@@ -26,7 +26,7 @@ from romoco_drake.planners.vimpc import VimpcPlanner
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.rom.planners import PLANNERS
 from romoco_drake.rom.types import WalkCommand, side_from_sign
-from romoco_drake.runner import run_scenario
+from romoco_drake.runner import run_scenario, scenario_from_args
 from romoco_drake.scenario import (
     Scenario,
     build_diagram,
@@ -263,8 +263,7 @@ def _estimate_columns(r: dict) -> str:
 
 
 def _cmd_bench_tick(args) -> int:
-    scenario = with_overrides(load_scenario(args.scenario), args.planner, args.controller, solver=args.solver)
-    s = bench_tick(scenario, ticks=args.ticks)
+    s = bench_tick(scenario_from_args(args), ticks=args.ticks)
     if args.json:
         print(json.dumps(s))
     else:

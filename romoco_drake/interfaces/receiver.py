@@ -5,7 +5,7 @@ predicted while they are missing (:mod:`~romoco_drake.interfaces.hardware` descr
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from pydrake.common.eigen_geometry import Quaternion
@@ -77,7 +77,7 @@ class BlindPredictor:
     """A receiver's prediction of the robot while proprioception is missing (the receiver's docstring).
 
     Like :class:`~romoco_drake.interfaces.link.Inbox` it declares its state on its owner: the
-    current :class:`BlindPrediction` (None while none runs) and the :class:`MissedUpdate` s kept
+    current :class:`BlindPrediction` (None while none runs) and the :class:`MissedUpdate` values kept
     while the stream is still fresh, both abstract state; :meth:`advance` runs inside the
     owner's unrestricted update.
     """
@@ -269,9 +269,8 @@ class MeasurementReceiver(LeafSystem):
             age = max(age, self.base_state.age(context, state))
         stage = link_stage(age, self.config)
         was = LinkStage.decode(context.get_discrete_state(self._link).GetAtIndex(0))
-        stale = was == LinkStage.FRESH and stage != LinkStage.FRESH
-        counts = replace(counts, rejected_messages=counts.rejected_messages + rejected,
-                         stale_events=counts.stale_events + stale)
+        counts += LinkCounters(stale_events=was == LinkStage.FRESH and stage != LinkStage.FRESH,
+                               rejected_messages=rejected)
         if np.isfinite(age) and stage > was:  # each stage entered counts (not before the first message,
             counts = counts.entered(stage)  # nothing was lost yet); skipped ones (ride_through_s 0) do not
         self.predictor.advance(context, state, self.command_port.Eval(context), stage)
