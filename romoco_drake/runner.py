@@ -255,6 +255,10 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, 
     return out
 
 
+# add_run_args's flags that override the scenario, in with_overrides' order.
+OVERRIDES = ("planner", "controller", "command", "estimator", "solver", "push", "dropout")
+
+
 def register_run(sub) -> None:
     """``romoco run``."""
     p = sub.add_parser("run", help="simulate a scenario")
@@ -295,11 +299,11 @@ def add_run_args(p) -> None:
     p.add_argument("--lcm-log", type=Path, metavar="FILE", help="record the LCM traffic (LCM log format)")
 
 
-def scenario_from_args(args) -> Scenario:
-    """The scenario ``args.scenario`` names, with whichever of ``add_run_args``'s overrides the
-    subcommand has (run, robot-sim and bench tick build their scenario here)."""
-    flags = ("planner", "controller", "command", "estimator", "solver", "push", "dropout")
-    return with_overrides(load_scenario(args.scenario), *(getattr(args, flag, None) for flag in flags))
+def scenario_from_args(args, flags: tuple[str, ...] = OVERRIDES) -> Scenario:
+    """The scenario ``args.scenario`` names with the override ``flags`` (those of ``OVERRIDES``
+    the subcommand has) applied; run, robot-sim and bench tick build their scenario here."""
+    return with_overrides(load_scenario(args.scenario),
+                          *(getattr(args, flag) if flag in flags else None for flag in OVERRIDES))
 
 
 def _cmd_run(args) -> int:
@@ -373,7 +377,7 @@ def register_robot_sim(sub) -> None:
 
 
 def _cmd_robot_sim(args) -> int:
-    summary = run_robot_sim(scenario_from_args(args), args.duration, args.lcm_url,
+    summary = run_robot_sim(scenario_from_args(args, ()), args.duration, args.lcm_url,
                             live_meshcat(args.meshcat), progress=stderr_progress, wait_s=args.wait)
     if args.json:
         print(json.dumps(summary))

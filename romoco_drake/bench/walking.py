@@ -263,7 +263,7 @@ def _estimate_columns(r: dict) -> str:
 
 
 def _cmd_bench_tick(args) -> int:
-    s = bench_tick(scenario_from_args(args), ticks=args.ticks)
+    s = bench_tick(scenario_from_args(args, ("planner", "controller", "solver")), ticks=args.ticks)
     if args.json:
         print(json.dumps(s))
     else:
