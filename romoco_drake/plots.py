@@ -10,19 +10,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from romoco_drake.metrics import (  # noqa: E402
-    ROW_STANCE,
-    ROWS_COM,
-    ROWS_COM_DESIRED,
-    ROWS_COM_IN_CONTACT,
-    ROWS_COMMAND,
-    ROWS_L_COM,
-    ROWS_L_CONTACT,
-    ROWS_L_CONTACT_PREDICTED,
-    ROWS_MOMENTUM,
-    ROWS_MOMENTUM_DESIRED,
-    SETTLE_S,
-)
+from romoco_drake.control.momentum_log import MomentumRecord  # noqa: E402
+from romoco_drake.metrics import SETTLE_S  # noqa: E402
 from romoco_drake.rom import alip_general  # noqa: E402
 from romoco_drake.rom.lip import omega  # noqa: E402
 from romoco_drake.spatial import GRAVITY  # noqa: E402
@@ -101,11 +90,23 @@ def plot_walking_run(out_dir: Path, name: str, times: np.ndarray, tracking: dict
     return [velocity, tracking_png]
 
 
+def plot_run(out_dir: Path, name: str, robot, times: np.ndarray, tracking: dict, errors: tuple,
+             momentum: tuple | None = None) -> list[Path]:
+    """``romoco run --plot``'s figures: the walking plots from the tracking and the (times, data)
+    of the error log, and with a momentum log's (times, data) the XO paper's Fig. 5-9."""
+    paths = plot_walking_run(out_dir, name, times, tracking, *errors)
+    if momentum is not None:
+        w = robot.config.walking
+        paths += plot_momentum_run(out_dir, name, *momentum, robot.total_mass, w.z0, w.t_ss, times,
+                                   tracking["measured"], tracking["wanted"], step_width=w.step_width)
+    return paths
+
+
 def plot_momentum_run(out_dir: Path, name: str, times: np.ndarray, data: np.ndarray, mass: float,
                       com_height: float, step_time: float, tracking_times: np.ndarray,
                       tracking_measured: np.ndarray, tracking_wanted: np.ndarray, *,
                       step_width: float | None = None) -> list[Path]:
-    """The XO paper's Fig. 5-9 from a momentum log (layout in ``metrics.MOMENTUM_LOG_SIZE``).
+    """The XO paper's Fig. 5-9 from a momentum log (a packed :class:`MomentumRecord` per column).
 
     Writes ``<name>_fig5_com.png``, ``_fig6_momentum.png``, ``_fig7_phase.png``,
     ``_fig8_contact_momentum.png`` and ``_fig9_velocity.png``; returns their paths. Desired is
@@ -116,18 +117,19 @@ def plot_momentum_run(out_dir: Path, name: str, times: np.ndarray, data: np.ndar
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = []
+    log = MomentumRecord.unpack(data)
 
     fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 6.5))
     for i, ax in enumerate(axes):
-        _desired_measured(ax, times, data[ROWS_COM_DESIRED][i], data[ROWS_COM][i], f"CoM {'xyz'[i]} [m]")
+        _desired_measured(ax, times, log.com_desired[i], log.com[i], f"CoM {'xyz'[i]} [m]")
     axes[-1].set_xlabel("time [s]")
     paths.append(_save(fig, f"{name}: CoM position (Fig. 5)", out_dir / f"{name}_fig5_com.png"))
 
     fig, axes = plt.subplots(3, 2, sharex=True, figsize=(11, 6.5))
     for i in range(3):
-        _desired_measured(axes[i, 0], times, np.zeros_like(times), data[ROWS_L_COM][i],
+        _desired_measured(axes[i, 0], times, np.zeros_like(times), log.l_com[i],
                           f"L_CoM,{'xyz'[i]} [kg·m²/s]")
-        _desired_measured(axes[i, 1], times, data[ROWS_MOMENTUM_DESIRED][i], data[ROWS_MOMENTUM][i],
+        _desired_measured(axes[i, 1], times, log.momentum_desired[i], log.momentum[i],
                           f"m v_CoM,{'xyz'[i]} [kg·m/s]")
     for ax in axes[-1]:
         ax.set_xlabel("time [s]")
@@ -138,7 +140,7 @@ def plot_momentum_run(out_dir: Path, name: str, times: np.ndarray, data: np.ndar
 
     fig, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 5))
     for ax, i, label in ((axes[0], 1, "L_cy [kg·m²/s]"), (axes[1], 0, "L_cx [kg·m²/s]")):
-        _desired_measured(ax, times, data[ROWS_L_CONTACT_PREDICTED][i], data[ROWS_L_CONTACT][i], label,
+        _desired_measured(ax, times, log.l_contact_predicted[i], log.l_contact[i], label,
                           desired_label="predicted at step end")
     axes[-1].set_xlabel("time [s]")
     paths.append(_save(fig, f"{name}: contact angular momentum about {{c}} (Fig. 8)",
@@ -172,12 +174,13 @@ def _phase_portraits(path: Path, name: str, times: np.ndarray, data: np.ndarray,
     Samples within SETTLE_S after a command change (or the log's start) are transitions and left
     out, as in the paper; an orbit is drawn for each non-zero command the kept samples were under.
     """
-    command = data[ROWS_COMMAND]
+    log = MomentumRecord.unpack(data)
+    command = log.command
     changed = np.ones(len(times), dtype=bool)
     changed[1:] = np.any(command[:, 1:] != command[:, :-1], axis=0)
     last_change = np.maximum.accumulate(np.where(changed, times, -np.inf))
-    kept = (data[ROW_STANCE] != 0) & (times - last_change >= SETTLE_S)
-    (p_x, p_y), (l_cx, l_cy) = data[ROWS_COM_IN_CONTACT], data[ROWS_L_CONTACT][:2]
+    kept = (log.stance != 0) & (times - last_change >= SETTLE_S)
+    (p_x, p_y), (l_cx, l_cy) = log.com_in_contact, log.l_contact[:2]
     t = np.linspace(0.0, t_step, 60)
 
     fig, (sagittal, frontal) = plt.subplots(1, 2, figsize=(11, 4.8))

@@ -1,25 +1,32 @@
-"""Run a scenario: simulate, optionally show or record it in Meshcat, summarise."""
+"""Run a scenario: simulate, optionally show or record it in Meshcat, summarise.
+
+The run summary is collected from the systems that measured it: the fall monitor, the
+estimator, the LCM link's two sides, and for walking the gait state machine, the command
+limiter, the whole-body controller, a VI-MPC planner and the momentum log (each one's
+``summary``), with velocity tracking from the state log (:mod:`~romoco_drake.metrics`).
+"""
 
 from __future__ import annotations
 
 import contextlib
-import gc
+import json
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 from pydrake.geometry import Meshcat
-from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 
+from romoco_drake.commands import fall_text, live_meshcat
+from romoco_drake.control.momentum_log import momentum_summary
+from romoco_drake.control.registry import traits
 from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces.hardware import link_summary
 from romoco_drake.interfaces.lcm_log import LcmLogRecorder
 from romoco_drake.interfaces.robot_sim import make_robot_sim, robot_summary
-from romoco_drake.metrics import finite_or_none, momentum_summary, velocity_tracking
+from romoco_drake.metrics import estimator_summary, log_samples, tracking_summary, velocity_tracking
+from romoco_drake.modes import LinkCounters
 from romoco_drake.planners.command import CommandSource, segments_from_log
-from romoco_drake.planners.heading import base_yaw
 from romoco_drake.robots.model import load_robot
 from romoco_drake.scenario import (
     MAX_DURATION_S,
@@ -27,32 +34,11 @@ from romoco_drake.scenario import (
     build_diagram,
     check_duration,
     initial_positions,
+    load_scenario,
     uses_motor_command,
+    with_overrides,
 )
-
-PROGRESS_WALL_S = 2.0  # print progress lines at most this often
-# Drake's report that the plant's discrete contact solver gave up on a step (v1.51,
-# multibody/plant/sap_driver.cc; the plants here use SAP).
-# Drake's SAP contact solver reports a diverged state with one of these.
-SAP_DIVERGED = ("The SAP solver failed to converge", "The Hessian of the momentum cost")
-# No robot's |q| or |v| (m, rad, m/s, rad/s) gets here; a blown-up simulation does within a
-# few steps, often without a solver noticing (then a controller trips on it).
-BLOWN_UP = 1e6
-MIN_WALKED_M = 0.1  # m: a shorter path gives no position drift per metre
-
-
-@contextlib.contextmanager
-def frozen_heap():
-    """Within: every Python object alive on entry (the diagram, its systems, the models) is out
-    of the garbage collector's view (``gc.freeze``), so the collections a run triggers scan only
-    what its ticks allocate (full collections over the diagram stretched G1's tick by about
-    20 %). On exit they are collectable again, so runs in one process do not pile up."""
-    gc.collect()
-    gc.freeze()
-    try:
-        yield
-    finally:
-        gc.unfreeze()
+from romoco_drake.simulation import RunEnd, make_lcm, simulate, stderr_progress
 
 
 def run_scenario(
@@ -93,68 +79,75 @@ def run_scenario(
         meshcat = Meshcat()
     lcm = make_lcm(lcm_url or ("memq://" if link == "via_lcm" else None)) if link != "sim" else None
     built = build_diagram(scenario, meshcat, law, link, lcm, teleop)
-    simulator = Simulator(built.diagram)
+    simulator = _simulator(built, scenario, realtime=link == "hardware" or teleop)
     context = simulator.get_mutable_context()
-    if built.plant_station is not None:
-        plant = built.plant_station.GetSubsystemByName("plant")
-        q0 = initial_positions(built.robot, scenario)
-        plant.SetPositions(plant.GetMyMutableContextFromRoot(context), q0)
-    if link == "hardware" or teleop:
-        simulator.set_target_realtime_rate(1.0)
     recorder = LcmLogRecorder(lcm, Path(lcm_log), clock=context.get_time) if lcm_log is not None else None
     if record is not None:
         meshcat.StartRecording(frames_per_second=30.0)
-    wall0 = time.perf_counter()
     simulator.Initialize()
-    last_print, last_t = wall0, 0.0
-    chunk = min(0.1, duration)
-    t, diverged, stopped = 0.0, None, None
     # The log is closed however the run ends (Ctrl-C on --hardware included).
-    with contextlib.ExitStack() as stack, frozen_heap():
+    with contextlib.ExitStack() as stack:
         if recorder is not None:
             stack.callback(recorder.close)
-        while t < duration - 1e-9:
-            t = min(duration, t + chunk)
-            try:
-                simulator.AdvanceTo(t)
-            except KeyboardInterrupt:
-                if not teleop:
-                    raise
-                duration = t = context.get_time()  # Ctrl-C ends a teleop run; summarise it
-                break
-            except Exception as e:
-                # A diverged simulation ends the run as a fall (the monitor may not have sampled
-                # it yet), without a traceback; anything else is a bug and goes up as it is.
-                if (reason := divergence(e, _plant_state(built, context))) is None:
-                    raise
-                diverged = (context.get_time(), reason)
-                break
-            if stop_after_fall is not None:
-                fall = built.monitor.summary(built.monitor.GetMyContextFromRoot(context))["fall_time_s"]
-                if fall is not None and t >= fall + stop_after_fall:
-                    stopped = t
-                    break
-            now = time.perf_counter()
-            if progress is not None and now - last_print > PROGRESS_WALL_S:
-                if teleop:
-                    rate = (t - last_t) / (now - last_print)
-                    progress(f"[{scenario.name} teleop] t = {t:.1f} s, {rate:.2f}x real time "
-                             "(Ctrl-C ends the run)")
-                else:
-                    progress(f"[{scenario.name}] t = {t:.1f}/{duration:.1f} s ({100 * t / duration:.0f}%)")
-                last_print, last_t = now, t
-    wall = time.perf_counter() - wall0
+        end = simulate(simulator, duration, lambda: _plant_state(built, context),
+                       _reporter(progress, scenario.name, duration, teleop),
+                       _fall_stop(built, context, stop_after_fall), ctrl_c_ends=teleop)
     if record is not None:
-        meshcat.StopRecording()
-        meshcat.PublishRecording()
-        record = Path(record)
-        try:
-            record.write_text(meshcat.StaticHtml())
-        except OSError as e:
-            raise RomocoError(f"{record}: cannot write the replay ({e.strerror})") from None
+        record = _write_replay(meshcat, Path(record))
     if inspect is not None:
         inspect(built, context)
-    monitor_context = built.monitor.GetMyContextFromRoot(context)
+    summary = _run_summary(built, context, scenario, link, end, end.time if end.interrupted else duration,
+                           plot_dir, recorder, teleop)
+    return summary | ({"record": str(record)} if record is not None else {})
+
+
+def _simulator(built, scenario: Scenario, realtime: bool) -> Simulator:
+    """A simulator of the built diagram, the simulated robot (if any) at its initial pose."""
+    simulator = Simulator(built.diagram)
+    if built.plant_station is not None:
+        plant = built.plant_station.GetSubsystemByName("plant")
+        q0 = initial_positions(built.robot, scenario)
+        plant.SetPositions(plant.GetMyMutableContextFromRoot(simulator.get_mutable_context()), q0)
+    if realtime:
+        simulator.set_target_realtime_rate(1.0)
+    return simulator
+
+
+def _reporter(progress, name: str, duration: float, teleop: bool):
+    """The run's progress line for :func:`~romoco_drake.simulation.simulate` (None: silent)."""
+    if progress is None:
+        return None
+    if teleop:
+        return lambda t, rate: progress(f"[{name} teleop] t = {t:.1f} s, {rate:.2f}x real time "
+                                        "(Ctrl-C ends the run)")
+    return lambda t, _: progress(f"[{name}] t = {t:.1f}/{duration:.1f} s ({100 * t / duration:.0f}%)")
+
+
+def _fall_stop(built, context, after: float | None):
+    """The stop condition: ``after`` s past the fall monitor's fall (None: never)."""
+    if after is None:
+        return None
+
+    def stop(t: float) -> bool:
+        fall = built.monitor.summary(built.monitor.GetMyContextFromRoot(context))["fall_time_s"]
+        return fall is not None and t >= fall + after
+
+    return stop
+
+
+def _write_replay(meshcat: Meshcat, record: Path) -> Path:
+    meshcat.StopRecording()
+    meshcat.PublishRecording()
+    try:
+        record.write_text(meshcat.StaticHtml())
+    except OSError as e:
+        raise RomocoError(f"{record}: cannot write the replay ({e.strerror})") from None
+    return record
+
+
+def _run_summary(built, context, scenario: Scenario, link: str, end: RunEnd, duration: float,
+                 plot_dir: Path | None, recorder: LcmLogRecorder | None, teleop: bool) -> dict:
+    """The run's facts and what each system measured (module docstring)."""
     summary = {
         "link": link,
         "scenario": scenario.name,
@@ -163,32 +156,24 @@ def run_scenario(
         "controller": scenario.controller.name,
         "estimator": scenario.estimator.name,
         "duration_s": duration,
-        "wall_s": round(wall, 3),
-        "realtime_factor": round(duration / wall, 3) if wall > 0 else None,
+        "wall_s": round(end.wall_s, 3),
+        "realtime_factor": round(duration / end.wall_s, 3) if end.wall_s > 0 else None,
     }
-    summary.update(built.monitor.summary(monitor_context))
-    if stopped is not None:
-        summary["stopped_s"] = stopped
-    if diverged is not None:
-        summary["simulation_error"] = diverged[1]
-        if not summary["fell"]:
-            summary.update(fell=True, fall_time_s=diverged[0], fall_reason="simulation_diverged")
+    summary |= end.outcome(built.monitor.summary(built.monitor.GetMyContextFromRoot(context)))
     # What a run measured is scored up to a fall: after it the state (diverged, in the worst
     # case) says nothing about tracking.
     until = summary["fall_time_s"]
-    summary.update(_estimator_summary(built, context, until))
+    summary |= estimator_summary(built, context, until)
     if link != "sim":
-        summary.update(link_summary(built.station, context))
+        summary |= link_summary(built.station, context)
     if built.robot_sim is not None:
         summary["robot_link"] = robot_summary(built.robot_sim, context)
     if recorder is not None:
         summary["lcm_log"] = {"path": str(recorder.path), "events": recorder.count}
     if built.walking is not None:
-        summary.update(_walking_summary(built, context, scenario, plot_dir, until))
+        summary |= _walking_summary(built, context, scenario, plot_dir, until)
     if teleop:
         summary["teleop_estop"] = built.command.estop_pressed(built.command.GetMyContextFromRoot(context))
-    if record is not None:
-        summary["record"] = str(record)
     return summary
 
 
@@ -203,9 +188,8 @@ def run_robot_sim(scenario: Scenario, duration: float | None = None, lcm_url: st
     check_duration(duration)
     lcm = make_lcm(lcm_url)
     robot = load_robot(scenario.robot)
-    motor_pd = uses_motor_command(scenario)
     robot_sim = make_robot_sim(robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link,
-                               wait_for_commands_s=wait_s, motor_pd=motor_pd,
+                               wait_for_commands_s=wait_s, motor_pd=uses_motor_command(scenario),
                                disturbances=scenario.disturbances)
     simulator = Simulator(robot_sim)
     context = simulator.get_mutable_context()
@@ -220,42 +204,14 @@ def run_robot_sim(scenario: Scenario, duration: float | None = None, lcm_url: st
     except RuntimeError as e:
         raise RomocoError(f"robot-sim: no motor command within {wait_s:g} s "
                           f"({str(e).splitlines()[0][:120]})") from None
-    last_print, diverged = time.perf_counter(), None
-    with frozen_heap():
-        while context.get_time() < duration - 1e-9:
-            try:
-                simulator.AdvanceTo(min(duration, context.get_time() + 0.1))
-            except Exception as e:  # a diverged simulation ends the run as a fall, as in run_scenario
-                state = plant.GetPositionsAndVelocities(plant.GetMyContextFromRoot(context))
-                if (reason := divergence(e, state)) is None:
-                    raise
-                diverged = (context.get_time(), reason)
-                break
-            if progress is not None and time.perf_counter() - last_print > PROGRESS_WALL_S:
-                progress(f"[robot-sim {robot.name}] t = {context.get_time():.1f}/{duration:.1f} s")
-                last_print = time.perf_counter()
+    report = None if progress is None else (
+        lambda t, _: progress(f"[robot-sim {robot.name}] t = {t:.1f}/{duration:.1f} s"))
+    end = simulate(simulator, duration,
+                   lambda: plant.GetPositionsAndVelocities(plant.GetMyContextFromRoot(context)), report)
     monitor = station.GetSubsystemByName("monitor")
-    summary = ({"robot": robot.name, "lcm_url": lcm.get_lcm_url(), "duration_s": duration}
-               | monitor.summary(monitor.GetMyContextFromRoot(context)) | robot_summary(robot_sim, context))
-    if diverged is not None:
-        summary["simulation_error"] = diverged[1]
-        if not summary["fell"]:
-            summary.update(fell=True, fall_time_s=diverged[0], fall_reason="simulation_diverged")
-    return summary
-
-
-def divergence(error: Exception, plant_state: np.ndarray | None) -> str | None:
-    """What to report if ``error``, raised while advancing the simulation, means it diverged; else None.
-
-    Diverged: Drake's SAP solver said so, or the plant state ``[q; v]`` (None without a plant)
-    is non-finite or blown up past ``BLOWN_UP``, whatever then raised (e.g. a controller's
-    "QuaternionToRotationMatrix(): All the elements in a quaternion are zero").
-    """
-    text = str(error).strip()
-    blown_up = plant_state is not None and not np.all(np.abs(plant_state) < BLOWN_UP)  # NaN included
-    if not blown_up and not any(marker in text for marker in SAP_DIVERGED):
-        return None
-    return text.splitlines()[0].split(". ")[0].rstrip(".") if text else type(error).__name__
+    return ({"robot": robot.name, "lcm_url": lcm.get_lcm_url(), "duration_s": duration}
+            | end.outcome(monitor.summary(monitor.GetMyContextFromRoot(context)))
+            | robot_summary(robot_sim, context))
 
 
 def _plant_state(built, context) -> np.ndarray | None:
@@ -266,117 +222,196 @@ def _plant_state(built, context) -> np.ndarray | None:
     return plant.GetPositionsAndVelocities(plant.GetMyContextFromRoot(context))
 
 
-def make_lcm(url: str | None) -> DrakeLcm:
-    """A DrakeLcm on ``url`` (None: Drake's default UDP multicast), or one line saying why not."""
-    try:
-        return DrakeLcm(url) if url is not None else DrakeLcm()
-    except RuntimeError as e:
-        reason = str(e).splitlines()[0]
-        raise RomocoError(f"cannot open LCM on {url or 'the default URL'}: {reason}") from None
-
-
-def log_samples(log, until: float | None) -> tuple[np.ndarray, np.ndarray]:
-    """A log's (times, data columns), up to time ``until`` if given."""
-    times, data = log.sample_times(), log.data()
-    if until is None:
-        return times, data
-    n = int(np.searchsorted(times, until, side="right"))
-    return times[:n], data[:, :n]
-
-
-def _estimator_summary(built, context, until: float | None) -> dict:
-    """A filtering estimator's health and, when the true state is known, its errors against it:
-    base velocity (rms of the error's norm, m/s), yaw drift (rad per minute, from the first to the
-    last sample) and horizontal position drift per metre walked (the error's change over the run
-    over the true path length; None when the robot walked under 0.1 m)."""
-    if not hasattr(built.estimator, "rejected_updates"):
-        return {}
-    out = {"estimator_rejected_updates": built.estimator.rejected_updates(
-        built.estimator.GetMyContextFromRoot(context))}
-    if built.plant_station is not None:
-        times, truth = log_samples(built.state_log.FindLog(context), until)
-        estimate = log_samples(built.estimate_log.FindLog(context), until)[1]
-        n = min(truth.shape[1], estimate.shape[1])
-        out.update(estimate_errors(built.robot, times[:n], truth[:, :n], estimate[:, :n]))
-    return out
-
-
-def estimate_errors(robot, times: np.ndarray, truth: np.ndarray, estimate: np.ndarray) -> dict:
-    """Estimator errors against the truth, state samples one per column (see _estimator_summary)."""
-    if len(times) < 2:
-        return dict.fromkeys(("velocity_estimate_rms_error", "yaw_drift_rad_per_min", "position_drift_per_m"))
-    j = robot.nq + robot.base_v_start + 3
-    error = np.linalg.norm(estimate[j:j + 3] - truth[j:j + 3], axis=0)
-    yaw_error = np.unwrap(base_yaw(robot, estimate) - base_yaw(robot, truth))
-    minutes = (times[-1] - times[0]) / 60.0
-    b = robot.base_q_start + 4
-    p_error = estimate[b:b + 2] - truth[b:b + 2]
-    walked = float(np.sum(np.linalg.norm(np.diff(truth[b:b + 2], axis=1), axis=0)))
-    drift = np.linalg.norm(p_error[:, -1] - p_error[:, 0]) / walked if walked > MIN_WALKED_M else np.nan
-    return {
-        "velocity_estimate_rms_error": finite_or_none([round(float(np.sqrt(np.mean(error**2))), 4)])[0],
-        "yaw_drift_rad_per_min": finite_or_none([round(float(yaw_error[-1] - yaw_error[0]) / minutes, 5)])[0],
-        "position_drift_per_m": finite_or_none([round(float(drift), 4)])[0],
-    }
-
-
-def stderr_progress(message: str) -> None:
-    print(message, file=sys.stderr, flush=True)
-
-
 def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, until: float | None) -> dict:
+    """The walking loop's contributions: tracking, gait, command limits, controller, MPC, momentum;
+    with ``plot_dir``, the walking (and momentum) figures."""
+    loop = built.walking
+
+    def own(system):
+        return system.GetMyContextFromRoot(context)
+
     times, states = log_samples(built.state_log.FindLog(context), until)
     command = built.command
     if built.command_log is not None:  # teleop: score against the commands the page gave
         command = CommandSource(segments_from_log(*log_samples(built.command_log.FindLog(context), until)))
     tracking = velocity_tracking(built.robot, command, times, states)
-    ticks = built.walking.tick_log.FindLog(context).data()[0, 1:]  # the first sample precedes any tick
-    loop = built.walking
-    schedule = loop.state_machine.schedule(loop.state_machine.GetMyContextFromRoot(context))
-    controller_context = loop.controller.GetMyContextFromRoot(context)
-    failures, safe_ticks, _, relaxed = loop.controller.stats_port.Eval(controller_context)
-    planner = loop.planner.summary(loop.planner.GetMyContextFromRoot(context))
-    return {
-        "planner": planner.pop("planner"),
-        "velocity_rms_error": finite_or_none(tracking["velocity_rms_error"]),
-        "mean_velocity": finite_or_none(tracking["mean_velocity"]),
-        "steps": schedule.steps,
-        "command_clipped_segments": sum(loop.limiter.clipped(seg.command) for seg in command.segments),
-        "qp_failures": int(failures),
-        "relaxed_ticks": int(relaxed),
-        "safe_mode_entries": schedule.safe_mode_entries,
-        "safe_mode_ticks": int(safe_ticks),
-        "controller_tick_ms": _tick_stats(ticks),
-    } | planner | _momentum(built, context, scenario, plot_dir, times, tracking, until)
-
-
-def _tick_stats(ticks: np.ndarray) -> dict:
-    """Median and 99th percentile of the controller tick times (ms); None when the tick log holds
-    no tick (a run that diverged or ended within one controller period)."""
-    if len(ticks) == 0:
-        return {"median": None, "p99": None}
-    return {"median": round(float(np.median(ticks)), 3), "p99": round(float(np.percentile(ticks, 99)), 3)}
-
-
-def _momentum(built, context, scenario: Scenario, plot_dir: Path | None, times, tracking, until) -> dict:
-    """The XO paper's summary keys and, with a plot directory, its figures (momentum runs), and the
-    walking plots."""
-    out, paths = {}, []
-    log = built.walking.momentum_log
-    if log is not None:
-        log_times, data = log_samples(log.FindLog(context), until)
-        out = momentum_summary(log_times, data)
-        if plot_dir is not None:
-            from romoco_drake.plots import plot_momentum_run
-
-            w = built.robot.config.walking
-            paths += plot_momentum_run(Path(plot_dir), scenario.name, log_times, data, built.robot.total_mass,
-                                       w.z0, w.t_ss, times, tracking["measured"], tracking["wanted"],
-                                       step_width=w.step_width)
+    ticks = loop.tick_log.FindLog(context).data()[0, 1:]  # the first sample precedes any tick
+    planner = loop.planner.summary(own(loop.planner))
+    out = ({"planner": planner.pop("planner")} | tracking_summary(tracking)
+           | loop.state_machine.summary(own(loop.state_machine)) | loop.limiter.summary(command.segments)
+           | loop.controller.summary(own(loop.controller), ticks) | planner)
+    momentum = None if loop.momentum_log is None else log_samples(loop.momentum_log.FindLog(context), until)
+    if momentum is not None:
+        out |= momentum_summary(*momentum)
     if plot_dir is not None:
-        from romoco_drake.plots import plot_walking_run
+        from romoco_drake.plots import plot_run
 
-        error_times, errors = log_samples(built.walking.error_log.FindLog(context), until)
-        paths = plot_walking_run(Path(plot_dir), scenario.name, times, tracking, error_times, errors) + paths
-        out["plots"] = [str(p) for p in paths]
+        errors = log_samples(loop.error_log.FindLog(context), until)
+        out["plots"] = [str(p) for p in plot_run(Path(plot_dir), scenario.name, built.robot, times, tracking,
+                                                 errors, momentum)]
     return out
+
+
+# add_run_args's flags that override the scenario, in with_overrides' order.
+OVERRIDES = ("planner", "controller", "command", "estimator", "solver", "push", "dropout")
+
+
+def register_run(sub) -> None:
+    """``romoco run``."""
+    p = sub.add_parser("run", help="simulate a scenario")
+    add_run_args(p)
+    p.set_defaults(func=_cmd_run)
+
+
+def add_run_args(p) -> None:
+    """The flags of ``romoco run``: the scenario, how it is shown, what overrides it, the link."""
+    p.add_argument("scenario", help="scenario name (diagrams/NAME.yaml) or a YAML path")
+    p.add_argument("--duration", type=float, default=None, help="simulated seconds")
+    p.add_argument("--meshcat", action="store_true", help="serve a live Meshcat view")
+    p.add_argument("--record", type=Path, metavar="FILE.html", help="write an offline Meshcat replay")
+    p.add_argument("--json", action="store_true", help="print the run summary as JSON (last line)")
+    p.add_argument("--no-wait", action="store_true", help="with --meshcat, exit when the run ends")
+    p.add_argument("--teleop", action="store_true",
+                   help="with --meshcat: drive the robot from the page (sliders, buttons, gamepad) at real "
+                        "time until Ctrl-C or --duration")
+    add_overlay_arg(p)
+    p.add_argument("--planner", help="override the scenario's planner (see romoco list)")
+    p.add_argument("--controller", help="override the scenario's controller (see romoco list)")
+    p.add_argument("--command", metavar="T:VX,VY,WZ;...",
+                   help="override the velocity command: piecewise constant from each time T (s)")
+    p.add_argument("--push", action="append", metavar="T:FX,FY,FZ[:DURATION]",
+                   help="push the base from time T (s) with force (N) in the heading frame, for DURATION "
+                        "(s, default 0.1); repeatable")
+    p.add_argument("--dropout", action="append", metavar="T:DURATION[:STREAM]",
+                   help="with --via-lcm: lose the link's STREAM (proprioception, commands or all; default "
+                        "proprioception) from time T (s) for DURATION (s); repeatable")
+    p.add_argument("--plot", type=Path, metavar="DIR", help="write velocity and tracking-error PNGs")
+    p.add_argument("--estimator",
+                   help="override the scenario's estimator: ground_truth, kalman or invariant_ekf")
+    p.add_argument("--solver", help="override the TSC-QP's QP solver: daqp or clarabel (the reference)")
+    p.add_argument("--via-lcm", action="store_true",
+                   help="run the robot and the controller over LCM in this process (memq:// by default)")
+    p.add_argument("--hardware", action="store_true",
+                   help="run only the controller, at real time, against a robot on LCM (see robot-sim)")
+    p.add_argument("--lcm-url", help="LCM URL for --via-lcm or --hardware")
+    p.add_argument("--lcm-log", type=Path, metavar="FILE", help="record the LCM traffic (LCM log format)")
+
+
+def scenario_from_args(args, flags: tuple[str, ...] = OVERRIDES) -> Scenario:
+    """The scenario ``args.scenario`` names with the override ``flags`` (those of ``OVERRIDES``
+    the subcommand has) applied; run, robot-sim and bench tick build their scenario here."""
+    return with_overrides(load_scenario(args.scenario, getattr(args, "overlay", None) or ()),
+                          *(getattr(args, flag) if flag in flags else None for flag in OVERRIDES))
+
+
+def add_overlay_arg(p) -> None:
+    """``--overlay NAME``, repeatable: partial scenarios merged onto the scenario in order."""
+    p.add_argument("--overlay", action="append", metavar="NAME",
+                   help="merge diagrams/overlays/NAME.yaml (or a YAML path) onto the scenario; repeatable, "
+                        "applied in order")
+
+
+def _cmd_run(args) -> int:
+    scenario = scenario_from_args(args)
+    if args.via_lcm and args.hardware:
+        raise RomocoError("--via-lcm and --hardware exclude each other")
+    link = "via_lcm" if args.via_lcm else "hardware" if args.hardware else "sim"
+    if args.lcm_url is not None and link == "sim":
+        raise RomocoError("--lcm-url needs --via-lcm or --hardware")
+    if args.teleop and not args.meshcat:
+        raise RomocoError("--teleop needs --meshcat (the page is the command source)")
+    if args.teleop and args.command is not None:
+        raise RomocoError("--teleop and --command exclude each other (the page gives the command)")
+    if args.teleop and not traits(scenario.controller.name).walking:
+        raise RomocoError(f"--teleop needs a walking controller, not '{scenario.controller.name}'")
+    summary = run_scenario(scenario, duration=args.duration, meshcat=live_meshcat(args.meshcat),
+                           record=args.record, progress=stderr_progress, plot_dir=args.plot, link=link,
+                           lcm_url=args.lcm_url, lcm_log=args.lcm_log, teleop=args.teleop)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        _print_run(summary, args.record)
+    if args.meshcat and not args.no_wait and sys.stdin.isatty():
+        try:
+            input("Press Enter to quit (the Meshcat page replays the run). ")
+        except (EOFError, KeyboardInterrupt):
+            pass
+    return 0
+
+
+def _print_run(summary: dict, record: Path | None) -> None:
+    """The run summary as text lines."""
+    print(f"{summary['scenario']} ({summary['robot']}): {summary['duration_s']} s simulated in "
+          f"{summary['wall_s']} s ({summary['realtime_factor']}x real time); {fall_text(summary)}; "
+          f"base height drift {summary['base_height_drift_m'] * 1000:.1f} mm")
+    if "velocity_rms_error" in summary:
+        print(f"  {summary['planner']} + {summary['controller']}: {summary['steps']} steps, "
+              f"velocity rms error (vx, vy, wz) {summary['velocity_rms_error']}, "
+              f"mean velocity {summary['mean_velocity']}, "
+              f"QP failures {summary['qp_failures']}, safe-mode entries {summary['safe_mode_entries']}, "
+              f"controller tick {summary['controller_tick_ms']['median']} ms median")
+    if "velocity_estimate_rms_error" in summary:
+        print(f"  {summary['estimator']}: base velocity estimate rms error "
+              f"{summary['velocity_estimate_rms_error']} m/s, "
+              f"yaw drift {summary['yaw_drift_rad_per_min']} "
+              f"rad/min, position drift {summary['position_drift_per_m']} per m walked, "
+              f"{summary['estimator_rejected_updates']} rejected updates")
+    if summary["link"] != "sim":
+        print("  link: " + ", ".join(f"{k} {summary[k]}" for k in LinkCounters().summary()))
+    if "robot_link" in summary:
+        print("  robot side: " + ", ".join(f"{k} {v}" for k, v in summary["robot_link"].items()))
+    if "lcm_log" in summary:
+        print(f"  LCM log {summary['lcm_log']['path']}: {summary['lcm_log']['events']} messages")
+    for path in summary.get("plots", []):
+        print(f"  wrote {path}")
+    if record:
+        print(f"replay written to {record}")
+
+
+def register_robot_sim(sub) -> None:
+    """``romoco robot-sim``."""
+    p = sub.add_parser("robot-sim", help="a simulated robot behind LCM, for `romoco run --hardware`")
+    p.add_argument("scenario", help="scenario name or YAML path (robot, plant step, sensors, link)")
+    p.add_argument("--lcm-url", help="LCM URL (default: Drake's UDP multicast)")
+    p.add_argument("--duration", type=float, default=None, help="seconds to run (default: the scenario's)")
+    p.add_argument("--meshcat", action="store_true", help="serve a live Meshcat view")
+    p.add_argument("--wait", type=float, default=60.0, metavar="S",
+                   help="seconds to wait for the controller's first command before starting")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON (last line)")
+    add_overlay_arg(p)
+    p.set_defaults(func=_cmd_robot_sim)
+
+
+def _cmd_robot_sim(args) -> int:
+    summary = run_robot_sim(scenario_from_args(args, ()), args.duration, args.lcm_url,
+                            live_meshcat(args.meshcat), progress=stderr_progress, wait_s=args.wait)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(f"robot-sim {summary['robot']} on {summary['lcm_url']}: {summary['duration_s']} s; "
+              f"{fall_text(summary)}; "
+              + ", ".join(f"{k} {summary[k]}" for k in ("stale_events", "rejected_messages", "estop")))
+    return 0
+
+
+def register_plot(sub) -> None:
+    """``romoco plot``: a run's figures and tracking numbers from its LCM log (``romoco run --lcm-log``)."""
+    p = sub.add_parser("plot", help="plot a run from its LCM log (romoco run --lcm-log)")
+    p.add_argument("log", type=Path)
+    p.add_argument("--out", type=Path, default=Path("plots"), metavar="DIR", help="where to write PNGs")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON (last line)")
+    p.set_defaults(func=_cmd_plot)
+
+
+def _cmd_plot(args) -> int:
+    from romoco_drake.interfaces.lcm_log import plot_status_log
+
+    s = plot_status_log(args.log, args.out)
+    if args.json:
+        print(json.dumps(s))
+    else:
+        print(f"{s['log']} ({s['robot']}, {s['duration_s']} s): velocity rms error (vx, vy, wz) "
+              f"{s['velocity_rms_error']}, mean velocity {s['mean_velocity']}")
+        for path in s["plots"]:
+            print(f"  wrote {path}")
+    return 0

@@ -177,7 +177,8 @@ def test_metrics_of_empty_logs_are_unmeasured():
     """A run that ends before any sample reports None (JSON null), never raises or warns."""
     import numpy as np
 
-    from romoco_drake.metrics import MOMENTUM_LOG_SIZE, finite_or_none, momentum_summary, velocity_tracking
+    from romoco_drake.control.momentum_log import MOMENTUM_LOG_SIZE, momentum_summary
+    from romoco_drake.metrics import finite_or_none, velocity_tracking
     from romoco_drake.planners.command import CommandSegment, CommandSource
     from romoco_drake.robots.model import load_robot
     from romoco_drake.rom.types import WalkCommand

@@ -21,7 +21,7 @@ from romoco_drake.control.inverse_kinematics import (
 from romoco_drake.control.terms.load_split import LoadSplitConfig, load_split_forces
 from romoco_drake.control.tscqp import TscQp, TscqpConfig
 from romoco_drake.embedding.references import EmbeddingCore
-from romoco_drake.modes import Mode
+from romoco_drake.modes import ControllerStats, Mode
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import load_robot
 from romoco_drake.rom.planners import PlannerParams, make_planner
@@ -305,7 +305,7 @@ def test_controller_system_ticks_damps_and_counts(kind):
     system, context, simulator, refs = _controller_standing(kind, x)
     simulator.AdvanceTo(3.5 * PERIOD)
     tau = system.actuation_port.Eval(context)
-    np.testing.assert_array_equal(system.stats_port.Eval(context), [0, 0, 0, 0])
+    assert system.stats_port.Eval(context) == ControllerStats(0, 0, 0, 0)
     # Standing still at the references: about the gravity compensation, within the limits.
     gravity = contact_gravity_compensation(robot, _references("g1", "standing")[0])
     np.testing.assert_allclose(tau, gravity, atol=0.25 * np.abs(gravity).max())
@@ -321,7 +321,7 @@ def test_controller_system_ticks_damps_and_counts(kind):
     bad = dataclasses.replace(refs, y_des=np.full(len(refs.y), np.nan))
     system.task_references_port.FixValue(context, bad)
     simulator.AdvanceTo(4.5 * PERIOD)
-    np.testing.assert_array_equal(system.stats_port.Eval(context), [1, 0, 1, 0])
+    assert system.stats_port.Eval(context) == ControllerStats(1, 0, 1, 0)
     np.testing.assert_allclose(system.actuation_port.Eval(context), tau, atol=1e-9)
 
     # Damping mode, then a NaN state: joint damping −K_d v, counted as safe ticks.
@@ -337,14 +337,14 @@ def test_controller_system_ticks_damps_and_counts(kind):
     system.mode_port.FixValue(context, Mode.STANDING)
     simulator.AdvanceTo(6.5 * PERIOD)
     np.testing.assert_allclose(system.actuation_port.Eval(context), -0.1 * robot.kd, atol=1e-9)
-    np.testing.assert_array_equal(system.stats_port.Eval(context), [1, 2, 1, 0])  # damping keeps the streak
+    assert system.stats_port.Eval(context) == ControllerStats(1, 2, 1, 0)  # damping keeps the streak
 
     # Back to a good state: control resumes (VEL-IK restarts its target at the measured joints).
     shifted = x.copy()
     shifted[robot.actuated_q_index] += 0.05
     system.kinematics_port.FixValue(context, RobotKinematics(robot, shifted))
     simulator.AdvanceTo(7.5 * PERIOD)
-    np.testing.assert_array_equal(system.stats_port.Eval(context), [1, 2, 0, 0])
+    assert system.stats_port.Eval(context) == ControllerStats(1, 2, 0, 0)
     if kind == "velocity":
         q_d = system.motor_command_port.Eval(context)[:robot.nu]
         np.testing.assert_allclose(q_d, shifted[robot.actuated_q_index], atol=0.01)
@@ -365,7 +365,7 @@ def test_controller_keeps_stale_commands_then_damps():
     simulator.AdvanceTo(4.5 * PERIOD)  # the third: damping
     np.testing.assert_allclose(system.actuation_port.Eval(context),
                                np.clip(-0.2 * robot.kd, -robot.effort_limits, robot.effort_limits), atol=1e-9)
-    np.testing.assert_array_equal(system.stats_port.Eval(context), [3, 0, 3, 0])
+    assert system.stats_port.Eval(context) == ControllerStats(3, 0, 3, 0)
 
 
 def test_mode_port_rejects_what_is_not_a_mode():

@@ -188,8 +188,8 @@ def test_system_standing_still_stays_at_the_nominal_pose_and_rejects_bad_inputs(
 
 def test_run_summary_errors_against_the_truth():
     """Yaw drift per minute and position drift per metre walked from state logs."""
+    from romoco_drake.metrics import estimate_errors
     from romoco_drake.robots.model import load_robot
-    from romoco_drake.runner import estimate_errors
 
     robot = load_robot("g1")
     times = np.linspace(0.0, 30.0, 301)

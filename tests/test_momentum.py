@@ -171,13 +171,13 @@ def test_unsolvable_ticks_and_nan_state_give_the_counted_safe_mode():
     system.mode_port.FixValue(context, Mode.WALKING)
     for _ in range(4):
         context.SetDiscreteState(system.EvalUniquePeriodicDiscreteUpdate(context))
-    failures, safe, streak, _ = system.stats_port.Eval(context)
-    assert (failures, streak) == (4, 4)
+    stats = system.stats_port.Eval(context)
+    assert (stats.failures, stats.failure_streak) == (4, 4)
     np.testing.assert_array_equal(system.motor_command_port.Eval(context)[-robot.nu:], robot.kd)  # damping
     nan = RobotKinematics(robot, np.full(robot.nq + robot.nv, np.nan))
     system.kinematics_port.FixValue(context, nan)
     context.SetDiscreteState(system.EvalUniquePeriodicDiscreteUpdate(context))
-    assert system.stats_port.Eval(context)[1] == safe + 1
+    assert system.stats_port.Eval(context).safe_ticks == stats.safe_ticks + 1
 
 
 def test_xo_walks_forward_then_sideways_like_the_alip_template():

@@ -9,21 +9,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from romoco_drake.metrics import (
-    MOMENTUM_LOG_SIZE,
-    ROW_STANCE,
-    ROW_T_IN_STEP,
-    ROWS_COM,
-    ROWS_COM_DESIRED,
-    ROWS_COM_IN_CONTACT,
-    ROWS_COMMAND,
-    ROWS_L_COM,
-    ROWS_L_CONTACT,
-    ROWS_L_CONTACT_PREDICTED,
-    ROWS_MOMENTUM,
-    ROWS_MOMENTUM_DESIRED,
-    momentum_summary,
-)
+from romoco_drake.control.momentum_log import MOMENTUM_LOG_SIZE, MomentumRecord, momentum_summary
 from romoco_drake.plots import _frontal_orbits, plot_momentum_run
 from romoco_drake.rom import alip_general
 from romoco_drake.spatial import GRAVITY
@@ -36,10 +22,8 @@ MASS, HEIGHT, T_STEP, WIDTH = 150.0, 1.0, 0.5, 0.4
 
 def _column(stance=0, t_in_step=0.0, cmd=WALK, l_com=(0.0, 0.0, 0.0), l_c=(math.nan,) * 3,
             pred=(math.nan,) * 2) -> np.ndarray:
-    col = np.full(MOMENTUM_LOG_SIZE, math.nan)
-    col[ROW_STANCE], col[ROW_T_IN_STEP], col[ROWS_COMMAND] = stance, t_in_step, cmd
-    col[ROWS_L_COM], col[ROWS_L_CONTACT], col[ROWS_L_CONTACT_PREDICTED] = l_com, l_c, pred
-    return col
+    return MomentumRecord(stance, t_in_step, np.array(cmd), l_com=np.array(l_com), l_contact=np.array(l_c),
+                          l_contact_predicted=np.array(pred)).pack()
 
 
 def _double_support() -> list[np.ndarray]:
@@ -61,12 +45,15 @@ def _log(columns: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     return np.arange(len(columns)) * DT, np.column_stack(columns)
 
 
-def test_layout_covers_every_row_once():
-    rows = [ROW_STANCE, ROW_T_IN_STEP]
-    for s in (ROWS_COMMAND, ROWS_COM, ROWS_COM_DESIRED, ROWS_L_COM, ROWS_MOMENTUM, ROWS_MOMENTUM_DESIRED,
-              ROWS_L_CONTACT, ROWS_COM_IN_CONTACT, ROWS_L_CONTACT_PREDICTED):
-        rows += list(range(MOMENTUM_LOG_SIZE))[s]
-    assert rows == list(range(MOMENTUM_LOG_SIZE))
+def test_record_packs_and_unpacks_by_name():
+    """Every row belongs to one field: a log unpacks to the record it was packed from, per column."""
+    data = np.arange(2.0 * MOMENTUM_LOG_SIZE).reshape(MOMENTUM_LOG_SIZE, 2)
+    assert MOMENTUM_LOG_SIZE == 26 and MomentumRecord().pack().shape == (MOMENTUM_LOG_SIZE,)
+    for k in range(2):
+        np.testing.assert_array_equal(MomentumRecord.unpack(data[:, k]).pack(), data[:, k])
+    log = MomentumRecord.unpack(data)
+    np.testing.assert_array_equal(log.stance, data[0])
+    np.testing.assert_array_equal(log.l_contact_predicted, data[24:26])
 
 
 def test_centroidal_ratio_over_walking_single_support_only():
@@ -145,9 +132,10 @@ def test_plot_momentum_run_writes_five_figures(tmp_path, step_width):
     for k in range(0, 50, 5):
         columns += _step(1 if k % 10 else -1, rng.normal(size=2), rng.normal(size=2), cmds=cmds[k:k + 5])
     times, data = _log(columns)
-    for rows in (ROWS_COM, ROWS_COM_DESIRED, ROWS_MOMENTUM, ROWS_MOMENTUM_DESIRED, ROWS_COM_IN_CONTACT):
-        data[rows] = rng.normal(size=data[rows].shape)
-    wanted = np.column_stack([data[ROWS_COMMAND].T, np.zeros(len(times))])
+    log = MomentumRecord.unpack(data)
+    for rows in (log.com, log.com_desired, log.momentum, log.momentum_desired, log.com_in_contact):
+        rows[:] = rng.normal(size=rows.shape)  # views into data
+    wanted = np.column_stack([log.command.T, np.zeros(len(times))])
     paths = plot_momentum_run(tmp_path / "figs", "xo", times, data, MASS, HEIGHT, T_STEP, times,
                               wanted + 0.01, wanted, step_width=step_width)
     assert [p.name for p in paths] == ["xo_fig5_com.png", "xo_fig6_momentum.png", "xo_fig7_phase.png",

@@ -11,8 +11,9 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
 from romoco_drake.control.standing import StandingController
-from romoco_drake.runner import divergence, run_scenario
+from romoco_drake.runner import run_scenario
 from romoco_drake.scenario import load_scenario
+from romoco_drake.simulation import divergence
 
 SANE = np.zeros(13)
 

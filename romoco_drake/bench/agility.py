@@ -23,11 +23,22 @@ from collections.abc import Callable
 
 import numpy as np
 
-from romoco_drake.bench.sweep import IN_PROCESS, SweepOptions, Variant, run_sweep
-from romoco_drake.metrics import AVERAGE_WINDOW_S, heading_velocity, moving_average
+from romoco_drake.bench.sweep import (
+    IN_PROCESS,
+    SweepOptions,
+    Variant,
+    add_sweep_args,
+    run_sweep,
+    sweep_options,
+)
+from romoco_drake.commands import names, print_rows
+from romoco_drake.errors import RomocoError
+from romoco_drake.metrics import AVERAGE_WINDOW_S, moving_average
+from romoco_drake.planners.heading import heading_velocity
 from romoco_drake.planners.vimpc import INERTIA_MODES
 from romoco_drake.runner import log_samples, run_scenario
 from romoco_drake.scenario import CommandPoint, Scenario, load_scenario
+from romoco_drake.simulation import stderr_progress
 
 MOTIONS = {"forward": (1.0, 0.0, 0.0), "diagonal": (1.0, 1.0, 0.0), "turning": (0.0, 0.0, 1.0),
            "circle": (1.0, 0.0, 1.0)}
@@ -130,3 +141,31 @@ def bench_agility(robot: str = "draco", modes=INERTIA_MODES, motions=tuple(MOTIO
                   ) -> list[dict]:
     """One ramp per inertia mode × motion (module docstring); ``top`` defaults to 1.5× the paper's best."""
     return run_sweep(agility_variants(robot, modes, motions, rate, top), sweep, progress)
+
+
+def register(bench) -> None:
+    """``romoco bench agility``."""
+    p = bench.add_parser("agility", help="VI-MPC: largest speed tracked per inertia mode and motion "
+                         "(paper §IV-B)")
+    p.add_argument("--robot", default="draco")
+    p.add_argument("--modes", help="comma-separated inertia modes (default: nominal,updated,network)")
+    p.add_argument("--motions", help="comma-separated (default: forward,diagonal,turning,circle)")
+    p.add_argument("--rate", type=float, default=0.1, help="command ramp, (m/s or rad/s) per s")
+    p.add_argument("--top", type=float, default=None, help="ramp ceiling (default: 1.5x the paper's best)")
+    p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
+    add_sweep_args(p)
+    p.set_defaults(func=_cmd_bench_agility)
+
+
+def _cmd_bench_agility(args) -> int:
+    modes = names(args.modes, INERTIA_MODES, "inertia mode", INERTIA_MODES)
+    motions = names(args.motions, tuple(MOTIONS), "motion", tuple(MOTIONS))
+    if not args.rate > 0.0:
+        raise RomocoError(f"--rate must be positive, got {args.rate}")
+    rows = bench_agility(args.robot, modes, motions, args.rate, args.top, sweep_options(args),
+                         progress=stderr_progress)
+    return print_rows(args.json, rows,
+                      "motion     inertia   tracked   settled   paper (case 3 / cases 1-2)   ended",
+                      lambda r: f"{r['motion']:10s} {r['inertia']:9s} {r['tracked']:7.2f}   "
+                                f"{r['settled']:7.2f}   {PAPER[r['motion']][0]:.1f} / "
+                                f"{PAPER[r['motion']][1]:.1f}{'':18s} {r['ended']}")

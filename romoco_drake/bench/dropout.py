@@ -14,12 +14,22 @@ import dataclasses
 
 import numpy as np
 
-from romoco_drake.bench.sweep import IN_PROCESS, SweepOptions, Variant, run_sweep
-from romoco_drake.interfaces.dropout import Dropout
-from romoco_drake.metrics import heading_velocity
+from romoco_drake.bench.sweep import (
+    IN_PROCESS,
+    SweepOptions,
+    Variant,
+    add_sweep_args,
+    run_sweep,
+    sweep_options,
+)
+from romoco_drake.commands import print_rows
+from romoco_drake.errors import RomocoError
+from romoco_drake.interfaces.dropout import STREAM_CHANNELS, Dropout
+from romoco_drake.planners.heading import heading_velocity
 from romoco_drake.robots.model import load_robot
 from romoco_drake.runner import log_samples, run_scenario
 from romoco_drake.scenario import CommandPoint, Scenario, load_scenario
+from romoco_drake.simulation import stderr_progress
 
 SPEED = 0.4  # m/s, the walking speed the dropout hits
 START_S = 4.0  # the first dropout starts here, 2 s into the cruise
@@ -64,3 +74,38 @@ def bench_dropout(robot: str = "g1", durations=(0.1, 0.3), phases: int = 4, stre
                          "phase": round(k / phases, 3)}, dropout_job)
                 for duration, k, t in starts]
     return run_sweep(variants, sweep, progress)
+
+
+def register(bench) -> None:
+    """``romoco bench dropout``."""
+    p = bench.add_parser("dropout", help="walking at 0.4 m/s over LCM through link dropouts at several "
+                         "gait phases")
+    p.add_argument("--robot", default="g1")
+    p.add_argument("--durations", default="0.1,0.3", help="comma-separated dropout lengths (s)")
+    p.add_argument("--phases", type=int, default=4, help="start times spread over one step")
+    p.add_argument("--stream", default="proprioception", help="proprioception, commands or all")
+    p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
+    add_sweep_args(p)
+    p.set_defaults(func=_cmd_bench_dropout)
+
+
+def _cmd_bench_dropout(args) -> int:
+    if args.stream not in STREAM_CHANNELS:
+        raise RomocoError(f"--stream must be one of: {', '.join(STREAM_CHANNELS)}")
+    try:
+        durations = [float(d) for d in args.durations.split(",")]
+    except ValueError:
+        raise RomocoError(f"--durations: '{args.durations}' is not a comma-separated list of seconds") \
+            from None
+    if not all(0.0 < d <= 10.0 for d in durations) or not 1 <= args.phases <= 20:
+        raise RomocoError("--durations must be in (0, 10] s and --phases in [1, 20]")
+    rows = bench_dropout(args.robot, durations, args.phases, args.stream, sweep_options(args),
+                         progress=stderr_progress)
+    return print_rows(args.json, rows,
+                      "dropout  start   phase  fell  ride-through  stand  damping  robot holds  "
+                      "end vx (m/s)",
+                      lambda r: f"{r['duration_s']:5.2f} s {r['t']:6.3f}  {r['phase']:5.2f}  "
+                                f"{'yes' if r['fell'] else 'no':4s}  {r['ride_through_events']:12d}  "
+                                f"{r['stand_events']:5d}  {r['damping_events']:7d}  "
+                                f"{r['robot_hold_events']:11d}  "
+                                f"{r['end_vx']:6.3f}")

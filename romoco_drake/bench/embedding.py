@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import time
 
 import numpy as np
@@ -73,3 +74,25 @@ def bench_embedding(robot_name: str = "g1", ticks: int = 2000, period: float = 0
 def _ms(ns: list[int]) -> dict:
     us = percentiles(ns)
     return {k: round(v / 1e3, 4) for k, v in us.items()}
+
+
+def register(bench) -> None:
+    """``romoco bench embedding``."""
+    p = bench.add_parser("embedding", help="per-tick cost of the output embedding")
+    p.add_argument("--robot", default="g1")
+    p.add_argument("--ticks", type=int, default=2000)
+    p.add_argument("--json", action="store_true", help="print the result as JSON (last line)")
+    p.set_defaults(func=_cmd_bench_embedding)
+
+
+def _cmd_bench_embedding(args) -> int:
+    s = bench_embedding(args.robot, ticks=args.ticks)
+    if args.json:
+        print(json.dumps(s))
+    else:
+        print(f"OutputEmbedding on {s['robot']}, {s['ticks']} ticks per mode:")
+        for mode in ("walking", "standing"):
+            r, u = s[mode]["references_ms"], s[mode]["swing_update_ms"]
+            print(f"  {mode:8s} references {r['median']} ms median ({r['p99']} p99); "
+                  f"swing update {u['median']} ms median ({u['p99']} p99)")
+    return 0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
@@ -49,3 +50,25 @@ def bench_inertia(robot: str = "draco", knots: int = 10, repeats: int = 5000, se
         system_ns.append(time.perf_counter_ns() - t0)
     return {"robot": robot, "knots": knots, "repeats": repeats, "predict_us": percentiles(predict_ns),
             "reference_tanh_matmul_us": percentiles(reference_ns), "system_eval_us": percentiles(system_ns)}
+
+
+def register(bench) -> None:
+    """``romoco bench inertia``."""
+    p = bench.add_parser("inertia", help="CCINN inertia prediction over an MPC horizon")
+    p.add_argument("--robot", default="draco")
+    p.add_argument("--knots", type=int, default=10)
+    p.add_argument("--repeats", type=int, default=5000)
+    p.add_argument("--weights", type=Path, metavar="FILE.npz", help="default: models/ROBOT/ccinn.npz")
+    p.add_argument("--json", action="store_true", help="print the result as JSON (last line)")
+    p.set_defaults(func=_cmd_bench_inertia)
+
+
+def _cmd_bench_inertia(args) -> int:
+    s = bench_inertia(args.robot, knots=args.knots, repeats=args.repeats, weights=args.weights)
+    if args.json:
+        print(json.dumps(s))
+    else:
+        print(f"CCINN on {s['robot']}, {s['knots']} knots, {s['repeats']} repeats:")
+        for key in ("predict_us", "system_eval_us", "reference_tanh_matmul_us"):
+            print(f"  {key[:-3]:26s} {s[key]['median']:8.2f} us median  {s[key]['p99']:8.2f} us p99")
+    return 0

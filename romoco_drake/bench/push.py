@@ -16,12 +16,23 @@ survived before it (0: none).
 from __future__ import annotations
 
 import dataclasses
+import json
 from collections.abc import Sequence
 
 from pydrake.systems.analysis import Simulator
 
-from romoco_drake.bench.sweep import IN_PROCESS, SweepOptions, Variant, run_sweep
+from romoco_drake.bench.sweep import (
+    IN_PROCESS,
+    SweepOptions,
+    Variant,
+    add_sweep_args,
+    run_sweep,
+    sweep_options,
+)
+from romoco_drake.commands import names, numbers
+from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces.disturbance import Disturbance
+from romoco_drake.robots.model import robot_names
 from romoco_drake.scenario import (
     CommandPoint,
     Scenario,
@@ -29,6 +40,7 @@ from romoco_drake.scenario import (
     initial_positions,
     load_scenario,
 )
+from romoco_drake.simulation import stderr_progress
 
 DIRECTIONS = {"forward": (1.0, 0.0), "backward": (-1.0, 0.0), "left": (0.0, 1.0), "right": (0.0, -1.0)}
 PHASES = (0.0, 0.25, 0.5, 0.75)
@@ -105,3 +117,54 @@ def bench_push(robot: str = "g1", impulses=IMPULSES, phases=PHASES, directions=t
             "speed_mps": speed, "push_s": push_s,
             "impulses": sorted(impulses), "step_s": round(step, 4), "criterion": CRITERION,
             "per_direction": per_direction, "cells": list(cells.values())}
+
+
+def register(bench) -> None:
+    """``romoco bench push``."""
+    p = bench.add_parser("push", help="largest push survived while walking, per direction and gait phase")
+    p.add_argument("--robot", default="g1")
+    p.add_argument("--impulses", default="10,15,20,25,30",
+                   help="N·s, comma-separated, tried in increasing order")
+    p.add_argument("--phases", default="0,0.25,0.5,0.75", help="push start as fractions of the step")
+    p.add_argument("--directions", help="comma-separated (default: forward,backward,left,right)")
+    p.add_argument("--overlay", action="append", metavar="NAME",
+                   help="settings merged onto <robot>_walk (diagrams/overlays/NAME.yaml or a path); "
+                        "repeatable (default: push_recovery)")
+    p.add_argument("--no-overlay", action="store_true", help="the shipped <robot>_walk settings as they are")
+    p.add_argument("--speed", type=float, default=0.4, help="forward walking speed (m/s)")
+    p.add_argument("--push-duration", type=float, default=0.1, help="how long each push lasts (s)")
+    p.add_argument("--json", action="store_true", help="print one JSON object (last line)")
+    add_sweep_args(p)
+    p.set_defaults(func=_cmd_bench_push)
+
+
+def _cmd_bench_push(args) -> int:
+    if args.robot not in robot_names():
+        raise RomocoError(f"unknown robot '{args.robot}' (known: {', '.join(robot_names())})")
+    directions = names(args.directions, tuple(DIRECTIONS), "direction", tuple(DIRECTIONS))
+    impulses, phases = numbers(args.impulses, "--impulses"), numbers(args.phases, "--phases")
+    if not all(0.0 < j <= 500.0 for j in impulses):
+        raise RomocoError(f"--impulses must be in (0, 500] N·s, got {args.impulses}")
+    if not all(0.0 <= ph < 1.0 for ph in phases):
+        raise RomocoError(f"--phases must be in [0, 1), got {args.phases}")
+    if not (0.0 <= args.speed <= 2.0 and 0.01 <= args.push_duration <= 1.0):
+        raise RomocoError("--speed must be in [0, 2] m/s and --push-duration in [0.01, 1] s")
+    overlays = () if args.no_overlay else (args.overlay or OVERLAYS)
+    result = bench_push(args.robot, impulses, phases, directions, overlays, speed=args.speed,
+                        push_s=args.push_duration, sweep=sweep_options(args), progress=stderr_progress)
+    if args.json:
+        print(json.dumps(result))
+    else:
+        _print_push(result, phases, directions)
+    return 0
+
+
+def _print_push(result: dict, phases, directions) -> None:
+    print(f"{result['robot']}: largest impulse survived (N·s), walking {result['speed_mps']} m/s, "
+          f"{result['push_s']} s pushes on the base, overlays: {', '.join(result['overlays']) or 'none'}")
+    print(f"survival: {result['criterion']}; phase: fraction of the {result['step_s']} s step")
+    print("direction  " + "".join(f"phase {ph:<5g}" for ph in phases) + "  min")
+    for d in directions:
+        row = [c for c in result["cells"] if c["direction"] == d]
+        cells = "".join(f"{c['survived']:>10g} " for c in row)
+        print(f"{d:10s} {cells}{result['per_direction'][d]:>5g}")

@@ -1,4 +1,4 @@
-"""The report of ``romoco reproduce``: report.md, a self-contained report.html, results.json.
+"""``romoco reproduce`` and its report: report.md, a self-contained report.html, results.json.
 
 Figures are written to ``DIR/figures/`` (the Markdown links them) and embedded in the HTML as
 base64 PNG, so the HTML file alone is the whole report.
@@ -11,6 +11,7 @@ import dataclasses
 import html
 import json
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -19,11 +20,16 @@ from romoco_drake.bench.reproduce import (
     ERRORS,
     FIG7_CONTROLLERS,
     FIG8_PLANNERS,
+    PAPERS,
+    QUICK_SHORTENS,
     Claim,
+    reproduce,
     speed_error,
     tracking_error,
 )
+from romoco_drake.bench.sweep import add_sweep_args, sweep_options
 from romoco_drake.errors import RomocoError
+from romoco_drake.simulation import stderr_progress
 
 NOTES = {
     "romoco": [
@@ -48,7 +54,7 @@ NOTES = {
         "than Fig. 8's (which passes Cassie's 0.5 m/s² command limiter) would make both fall or neither.",
     ],
     "xo": ["The Table I walk of diagrams/xo_walk.yaml (general-foot ALIP + momentum HQP); the ratios are "
-           "metrics.momentum_summary's; the figures are romoco run --plot's."],
+           "control.momentum_log.momentum_summary's; the figures are romoco run --plot's."],
     "vimpc": ["Agility: romoco bench agility's ramps (a speed is tracked while the 1 s average stays within "
               "20 % of the command). Solve time: romoco bench tick's mpc_solve on draco_walk at 0.5 m/s. "
               "Fig. 3: along the CCINN forward ramp, the plant's centroidal inertia against the CCINN's "
@@ -166,3 +172,38 @@ def _html(papers, claims, made, meta) -> str:
             f"</style></head><body><h1>romoco reproduce: {esc(', '.join(papers))}</h1>"
             f"<p>{esc(_header(meta))}</p>"
             f"<table><tr>{head}</tr>{rows}</table>{notes}<h2>Figures</h2>{figs}</body></html>")
+
+
+def register(sub) -> None:
+    """``romoco reproduce``."""
+    p = sub.add_parser("reproduce", help="rerun a paper's claims and report them beside the paper's numbers")
+    p.add_argument("paper", help="romoco, xo, vimpc or all")
+    p.add_argument("--out", type=Path, default=Path("reproduce"), metavar="DIR",
+                   help="where report.md, report.html and results.json go (default: reproduce/)")
+    p.add_argument("--quick", action="store_true",
+                   help="shorter runs and fewer cells, for CI and a first look")
+    p.add_argument("--json", action="store_true", help="print the summary and the file paths as JSON")
+    add_sweep_args(p)
+    p.set_defaults(func=_cmd_reproduce)
+
+
+def _cmd_reproduce(args) -> int:
+    papers = list(PAPERS) if args.paper == "all" else [args.paper]
+    if papers[0] not in PAPERS:
+        raise RomocoError(f"unknown paper '{args.paper}' (known: {', '.join(PAPERS)}, all)")
+    sweep = sweep_options(args)
+    t0 = time.perf_counter()
+    claims, rows = reproduce(papers, args.quick, sweep, progress=stderr_progress)
+    scored = [c for c in claims if c.holds is not None]
+    meta = {"papers": papers, "quick": args.quick, "quick_shortens": QUICK_SHORTENS, "runs": len(rows),
+            "workers": f"Ray cluster {args.ray_address}" if args.ray_address else f"{args.workers} worker(s)",
+            "wall_s": round(time.perf_counter() - t0, 1), "scored": len(scored),
+            "held": sum(c.holds for c in scored), "not_built": len(claims) - len(scored)}
+    paths = write_report(args.out, papers, claims, rows, meta)
+    if args.json:
+        print(json.dumps(meta | paths))
+    else:
+        print(claim_table_md(claims))
+        print(f"\n{meta['held']} of {meta['scored']} claims hold ({meta['not_built']} not built); "
+              f"{meta['runs']} runs in {meta['wall_s']} s; wrote {', '.join(paths.values())}")
+    return 0

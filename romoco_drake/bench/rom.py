@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from dataclasses import dataclass
@@ -15,7 +16,7 @@ from pydrake.systems.primitives import LogVectorOutput
 from romoco_drake.planners.command import CommandSegment, CommandSource
 from romoco_drake.planners.foot_placement import FootPlacementPlanner
 from romoco_drake.planners.template import GaitState, HybridLipTemplate
-from romoco_drake.rom.planners import PlannerParams, make_planner
+from romoco_drake.rom.planners import PlannerParams, foot_placement_laws, make_planner
 from romoco_drake.rom.types import WalkCommand, side_from_sign
 
 # (start s, vx m/s, vy m/s): standing start, forward up and down in speed, a lateral segment, stop.
@@ -220,3 +221,46 @@ def bench_rom(planner_name: str, robot: str = "g1", t_ds: float | None = None,
 
 def _max_or_none(values: list[int | None]) -> int | None:
     return None if any(v is None for v in values) else max(values)
+
+
+def register(bench) -> None:
+    """``romoco bench rom``."""
+    p = bench.add_parser("rom", help="planners walking the hybrid LIP template through a command profile")
+    p.add_argument("--planner", help="planner name (default: all)")
+    p.add_argument("--robot", default="g1", help="robot whose walking config sets z0, T_SS, T_DS, width")
+    p.add_argument("--t-ds", type=float, default=None, help="override the double-support time (s)")
+    p.add_argument("--gain", default="deadbeat", help="deadbeat, converging or lqr")
+    p.add_argument("--plot", type=Path, metavar="DIR", help="write velocity and phase-portrait PNGs")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON (last line)")
+    p.set_defaults(func=_cmd_bench_rom)
+
+
+def _cmd_bench_rom(args) -> int:
+    names = foot_placement_laws() if args.planner is None else [args.planner]
+    results = []
+    for name in names:
+        summary = bench_rom(name, robot=args.robot, t_ds=args.t_ds, gain=args.gain, plot_dir=args.plot)
+        results.append(summary)
+        if not args.json:
+            _print_rom_summary(summary)
+    if args.json:
+        print(json.dumps(results[0] if len(results) == 1 else results))
+    return 0
+
+
+def _print_rom_summary(s: dict) -> None:
+    cost = s["planner_cost"]
+    print(f"{s['planner']} on the {s['robot']} template (z0 {s['com_height_m']} m, T_SS {s['t_ss_s']} s, "
+          f"T_DS {s['t_ds_s']} s, width {s['step_width_m']} m, {s['gain']}): {s['steps']} steps, "
+          f"{s['duration_s']} s in {s['wall_s']} s")
+    print("  segment        command (vx, vy)   steps to converge   settled rms err   rms err")
+    for r in s["segments"]:
+        conv = r["steps_to_converge"] if r["steps_to_converge"] is not None else "never"
+        print(f"  {r['start_s']:5.1f}-{r['end_s']:5.1f} s   ({r['command'][0]:4.2f}, {r['command'][1]:4.2f})"
+              f"         {conv!s:>5}           {r['settled_rms_error']!s:>9}       {r['rms_error']!s:>8}")
+    update, output, ref = cost["update_us"], cost["system_eval_us"], cost["reference_us"]
+    print(f"  planner update {update['median']} us median ({update['p99']} p99); system output eval "
+          f"{output['median']} us median ({output['p99']} p99); reference (1000 multiply-adds) "
+          f"{ref['median']} us median")
+    for path in s.get("plots", []):
+        print(f"  wrote {path}")

@@ -174,3 +174,16 @@ class _Progress:
         outcome = f"fell at {fall:.2f} s" if fall is not None else "done"
         self.out(f"[{bar:20s}] {self.count}/{self.total} done, {left} left, "
                  f"ETA {int(eta) // 60}m{int(eta) % 60:02d}s | {variant.label()}: {outcome}")
+
+
+def add_sweep_args(p) -> None:
+    """A bench's --workers and --ray-address (read back with :func:`sweep_options`)."""
+    p.add_argument("--workers", type=int, default=1,
+                   help="parallel runs: 1 (default) in this process, N on a local Ray instance with N CPUs")
+    p.add_argument("--ray-address", metavar="ADDR",
+                   help="run on the Ray cluster at ADDR (host:port or ray://host:port) instead")
+
+
+def sweep_options(args) -> SweepOptions:
+    """The sweep's workers or Ray cluster from --workers and --ray-address."""
+    return SweepOptions(args.workers, args.ray_address)

@@ -2,20 +2,31 @@
 
 from __future__ import annotations
 
+import json
 import time
 
 import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.bench.rom import percentiles
-from romoco_drake.bench.sweep import IN_PROCESS, SweepOptions, Variant, run_sweep
+from romoco_drake.bench.sweep import (
+    IN_PROCESS,
+    SweepOptions,
+    Variant,
+    add_sweep_args,
+    run_sweep,
+    sweep_options,
+)
+from romoco_drake.commands import names, print_rows
 from romoco_drake.control.gravity import contact_gravity_compensation
+from romoco_drake.control.registry import CONTROLLERS, traits
 from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces.station import make_station
+from romoco_drake.planners.registry import PLANNERS
 from romoco_drake.planners.vimpc import VimpcPlanner
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.rom.types import WalkCommand, side_from_sign
-from romoco_drake.runner import frozen_heap, run_scenario
+from romoco_drake.runner import add_overlay_arg, run_scenario, scenario_from_args
 from romoco_drake.scenario import (
     Scenario,
     build_diagram,
@@ -24,6 +35,7 @@ from romoco_drake.scenario import (
     scenario_names,
     with_overrides,
 )
+from romoco_drake.simulation import frozen_heap, stderr_progress
 
 # The matrix's default robots (the RoMoCo paper's); any robot with a walking scenario can be asked for.
 WALKING_ROBOTS = ("g1", "cassie", "h1")
@@ -43,6 +55,7 @@ def walk_scenario(robot: str) -> Scenario:
     return load_scenario(name)
 
 
+TICK_PARTS = ("estimator", "kinematics", "state_machine", "planner", "embedding", "controller")
 MATRIX_KEYS = ("duration_s", "fell", "fall_time_s", "velocity_rms_error", "realtime_factor",
                "controller_tick_ms", "qp_failures", "steps")
 
@@ -82,6 +95,41 @@ def bench_tick(scenario: Scenario, warmup: float = 2.0, ticks: int = 500) -> dic
     measured in the same run that makes the numbers comparable across machines
     (``controller_to_plant``: the ratio of the medians of the total tick and the plant step).
     """
+    built, simulator, root = _walking(scenario, warmup)
+    loop, machine = built.walking, built.walking.state_machine
+    systems = {name: built.diagram.GetSubsystemByName(name)
+               for name in ("estimator", "kinematics", "rom_state", "state_machine", "planner",
+                            "embedding", "controller")}
+    ctx = {name: system.GetMyContextFromRoot(root) for name, system in systems.items()}
+    period = 1.0 / scenario.controller.rate_hz
+    times: dict[str, list[int]] = {n: [] for n in (*TICK_PARTS, "plant_step")}
+    mpc = loop.planner if isinstance(loop.planner, VimpcPlanner) else None
+    if mpc is not None:
+        times["mpc_update"], times["mpc_solve"] = [], _timed_qp(mpc)
+    t = root.get_time()
+    with frozen_heap():
+        for _ in range(ticks):
+            t += period
+            simulator.AdvanceTo(t)
+            kin, cmd = _timed_tick(systems, ctx, loop, t, times)
+            if mpc is not None:
+                sign, elapsed = machine.gait_phase_port.Eval(ctx["state_machine"]).tolist()
+                t7 = time.perf_counter_ns()
+                mpc.solve(kin, side_from_sign(sign), elapsed, cmd, t)
+                times["mpc_update"].append(time.perf_counter_ns() - t7)
+    times["plant_step"] = passive_plant_steps(built.robot, scenario, ticks)
+    result = {n: {k: round(v / 1e3, 4) for k, v in percentiles(ns).items()} for n, ns in times.items()}
+    total = np.sum([np.array(times[n]) for n in TICK_PARTS], axis=0)
+    result["total"] = {k: round(v / 1e3, 4) for k, v in percentiles(list(total)).items()}
+    mode = machine.schedule(ctx["state_machine"]).mode
+    return {"scenario": scenario.name, "planner": scenario.planner.name,
+            "controller": scenario.controller.name, "solver": scenario.controller.solver, "ticks": ticks,
+            "period_s": period, "mode": str(mode), "tick_ms": result,
+            "controller_to_plant": round(result["total"]["median"] / result["plant_step"]["median"], 3)}
+
+
+def _walking(scenario: Scenario, warmup: float):
+    """(built, simulator, root context) of ``scenario`` simulated for ``warmup`` s."""
     built = build_diagram(scenario)
     if built.walking is None:
         raise RomocoError(f"scenario '{scenario.name}' has no walking controller to time")
@@ -91,68 +139,49 @@ def bench_tick(scenario: Scenario, warmup: float = 2.0, ticks: int = 500) -> dic
     plant.SetPositions(plant.GetMyMutableContextFromRoot(root), initial_positions(built.robot, scenario))
     simulator.Initialize()
     simulator.AdvanceTo(warmup)
-    diagram, loop = built.diagram, built.walking
-    systems = {name: diagram.GetSubsystemByName(name)
-               for name in ("estimator", "kinematics", "rom_state", "state_machine", "planner",
-                            "embedding", "controller")}
-    ctx = {name: system.GetMyContextFromRoot(root) for name, system in systems.items()}
-    period = 1.0 / scenario.controller.rate_hz
-    names = ("estimator", "kinematics", "state_machine", "planner", "embedding", "controller")
-    times: dict[str, list[int]] = {n: [] for n in (*names, "plant_step")}
-    machine = loop.state_machine
-    mpc = loop.planner if isinstance(loop.planner, VimpcPlanner) else None  # its solve is timed apart
+    return built, simulator, root
+
+
+def _timed_qp(mpc: VimpcPlanner) -> list[int]:
+    """Times the planner's QP (this bench's planner only: the QP's own share of the update);
+    returns the list its solve times (ns) go to."""
     qp_ns: list[int] = []
-    if mpc is not None:
-        times["mpc_update"] = []
-        solve_qp = mpc.mpc.solve
+    solve_qp = mpc.mpc.solve
 
-        def timed_qp(*args):
-            start = time.perf_counter_ns()
-            out = solve_qp(*args)
-            qp_ns.append(time.perf_counter_ns() - start)
-            return out
+    def timed_qp(*args):
+        start = time.perf_counter_ns()
+        out = solve_qp(*args)
+        qp_ns.append(time.perf_counter_ns() - start)
+        return out
 
-        mpc.mpc.solve = timed_qp  # this bench's planner only: the QP's own share of the update
-    t = root.get_time()
-    with frozen_heap():
-        for _ in range(ticks):
-            t += period
-            simulator.AdvanceTo(t)
-            t0 = time.perf_counter_ns()
-            systems["estimator"].state_output.Eval(ctx["estimator"])
-            t1 = time.perf_counter_ns()
-            kin = systems["kinematics"].kinematics_port.Eval(ctx["kinematics"])
-            _ = kin.M, kin.C  # what the tick's consumers read
-            t2 = time.perf_counter_ns()
-            cmd = WalkCommand.from_vector(machine.command_port.Eval(ctx["state_machine"]))
-            contact = machine.foot_contact_port.Eval(ctx["state_machine"])
-            machine.next_schedule(machine.schedule(ctx["state_machine"]), t, kin, cmd, contact)
-            t3 = time.perf_counter_ns()
-            systems["rom_state"].rom_state_port.Eval(ctx["rom_state"])
-            loop.planner.planner_output_port.Eval(ctx["planner"])
-            t4 = time.perf_counter_ns()
-            loop.embedding.task_references_port.Eval(ctx["embedding"])
-            t5 = time.perf_counter_ns()
-            loop.controller.EvalUniquePeriodicDiscreteUpdate(ctx["controller"])
-            t6 = time.perf_counter_ns()
-            for name, ns in zip(names, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, t6 - t5), strict=True):
-                times[name].append(ns)
-            if mpc is not None:
-                sign, elapsed = machine.gait_phase_port.Eval(ctx["state_machine"]).tolist()
-                t7 = time.perf_counter_ns()
-                mpc.solve(kin, side_from_sign(sign), elapsed, cmd, t)
-                times["mpc_update"].append(time.perf_counter_ns() - t7)
-    if mpc is not None:
-        times["mpc_solve"] = qp_ns
-    times["plant_step"] = passive_plant_steps(built.robot, scenario, ticks)
-    result = {n: {k: round(v / 1e3, 4) for k, v in percentiles(ns).items()} for n, ns in times.items()}
-    total = np.sum([np.array(times[n]) for n in names], axis=0)
-    result["total"] = {k: round(v / 1e3, 4) for k, v in percentiles(list(total)).items()}
-    mode = machine.schedule(ctx["state_machine"]).mode
-    return {"scenario": scenario.name, "planner": scenario.planner.name,
-            "controller": scenario.controller.name, "solver": scenario.controller.solver, "ticks": ticks,
-            "period_s": period, "mode": str(mode), "tick_ms": result,
-            "controller_to_plant": round(result["total"]["median"] / result["plant_step"]["median"], 3)}
+    mpc.mpc.solve = timed_qp
+    return qp_ns
+
+
+def _timed_tick(systems: dict, ctx: dict, loop, t: float, times: dict[str, list[int]]):
+    """Evaluates one tick's components in pipeline order, each timed into ``times``; returns the
+    tick's kinematics and command (what the MPC is timed on)."""
+    machine = loop.state_machine
+    t0 = time.perf_counter_ns()
+    systems["estimator"].state_output.Eval(ctx["estimator"])
+    t1 = time.perf_counter_ns()
+    kin = systems["kinematics"].kinematics_port.Eval(ctx["kinematics"])
+    _ = kin.M, kin.C  # what the tick's consumers read
+    t2 = time.perf_counter_ns()
+    cmd = WalkCommand.from_vector(machine.command_port.Eval(ctx["state_machine"]))
+    contact = machine.foot_contact_port.Eval(ctx["state_machine"])
+    machine.next_schedule(machine.schedule(ctx["state_machine"]), t, kin, cmd, contact)
+    t3 = time.perf_counter_ns()
+    systems["rom_state"].rom_state_port.Eval(ctx["rom_state"])
+    loop.planner.planner_output_port.Eval(ctx["planner"])
+    t4 = time.perf_counter_ns()
+    loop.embedding.task_references_port.Eval(ctx["embedding"])
+    t5 = time.perf_counter_ns()
+    loop.controller.EvalUniquePeriodicDiscreteUpdate(ctx["controller"])
+    t6 = time.perf_counter_ns()
+    for name, ns in zip(TICK_PARTS, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, t6 - t5), strict=True):
+        times[name].append(ns)
+    return kin, cmd
 
 
 def passive_plant_steps(robot, scenario: Scenario, steps: int) -> list[int]:
@@ -177,3 +206,71 @@ def passive_plant_steps(robot, scenario: Scenario, steps: int) -> list[int]:
             simulator.AdvanceTo(k * scenario.time_step)
             out.append(time.perf_counter_ns() - t0)
     return out
+
+
+def register(bench) -> None:
+    """``romoco bench matrix``."""
+    p = bench.add_parser("matrix", help="every robot x planner x controller on its default walking profile")
+    p.add_argument("--robots", help="comma-separated, any with a <robot>_walk scenario "
+                   "(default: g1,cassie,h1)")
+    p.add_argument("--planners", help="comma-separated (default: hlip,mlip,dcm)")
+    p.add_argument("--controllers", help="comma-separated (default: tscqp)")
+    p.add_argument("--duration", type=float, default=None, help="simulated seconds per run")
+    p.add_argument("--estimator", help="run every scenario on this estimator (default: each scenario's own)")
+    p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
+    add_sweep_args(p)
+    p.set_defaults(func=_cmd_bench_matrix)
+
+
+def register_tick(bench) -> None:
+    """``romoco bench tick``."""
+    p = bench.add_parser("tick", help="per-component controller tick time on a running closed loop")
+    p.add_argument("--scenario", default="g1_walk")
+    add_overlay_arg(p)
+    p.add_argument("--planner")
+    p.add_argument("--controller")
+    p.add_argument("--solver", help="TSC-QP solver: daqp or clarabel (the reference)")
+    p.add_argument("--ticks", type=int, default=500)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_bench_tick)
+
+
+def _cmd_bench_matrix(args) -> int:
+    walking_controllers = [name for name in CONTROLLERS if traits(name).walking]
+    robots = names(args.robots, WALKING_ROBOTS, "robot", walking_robots())
+    planners = names(args.planners, ("hlip", "mlip", "dcm"), "planner", PLANNERS)
+    controllers = names(args.controllers, ("tscqp",), "walking controller", walking_controllers)
+    rows = bench_matrix(robots, planners, controllers, args.duration, sweep_options(args),
+                        progress=stderr_progress, estimator=args.estimator)
+
+    def line(r: dict) -> str:
+        fell = f"{r['fall_time_s']:.1f} s" if r["fell"] else "no"
+        return (f"{r['robot']:7s} {r['planner']:13s} {r['controller']:11s} {fell:6s} "
+                f"{r['velocity_rms_error']!s:26s} {r['realtime_factor']:8.2f}  "
+                f"{r['controller_tick_ms']['median']}" + _estimate_columns(r))
+
+    header = "robot   planner       controller  fell   vel rms err (vx, vy, wz)   realtime  tick ms"
+    if "velocity_estimate_rms_error" in (rows[0] if rows else {}):
+        header += "  est v rms  yaw drift rad/min  pos drift /m"
+    return print_rows(args.json, rows, header, line)
+
+
+def _estimate_columns(r: dict) -> str:
+    """A matrix row's estimator errors against the truth (filtering estimators only)."""
+    if "velocity_estimate_rms_error" not in r:
+        return ""
+    return (f"  {r['velocity_estimate_rms_error']!s:9s}  {r['yaw_drift_rad_per_min']!s:17s}  "
+            f"{r['position_drift_per_m']}")
+
+
+def _cmd_bench_tick(args) -> int:
+    s = bench_tick(scenario_from_args(args, ("planner", "controller", "solver")), ticks=args.ticks)
+    if args.json:
+        print(json.dumps(s))
+    else:
+        print(f"{s['scenario']}: {s['planner']} + {s['controller']} ({s['solver']}), {s['ticks']} ticks of "
+              f"{s['period_s'] * 1e3:g} ms while {s['mode']}")
+        for name, v in s["tick_ms"].items():
+            print(f"  {name:14s} {v['median']:8.3f} ms median  {v['p99']:8.3f} ms p99")
+        print(f"  total / plant step (medians): {s['controller_to_plant']}")
+    return 0

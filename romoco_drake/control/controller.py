@@ -22,7 +22,7 @@ from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.control.tasks import placeholder_references
 from romoco_drake.embedding.references import TaskReferences
-from romoco_drake.modes import Mode
+from romoco_drake.modes import ControllerStats, Mode
 from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_value
 from romoco_drake.robots.model import RobotModel
 
@@ -90,7 +90,7 @@ class WholeBodyController(LeafSystem):
     | ``mode`` | in | abstract | :class:`~romoco_drake.modes.Mode` |
     | ``actuation`` | out | nu | joint torques [N·m] of the command at the tick's state, clipped, held |
     | ``motor_command`` | out | 5·nu | q_d [rad], v_d [rad/s], τ_ff [N·m], K_p, K_d blocks; held |
-    | ``stats`` | out | 4 | solver failures, safe (damping) ticks, consecutive failures, relaxed ticks |
+    | ``stats`` | out | abstract | :class:`~romoco_drake.modes.ControllerStats` |
     | ``tick_ms`` | out | 1 | wall time of the last update [ms] (instrumentation, not control) |
 
     Discrete state: the command, the torque, the stats, the tick time and the solver's warm
@@ -107,19 +107,24 @@ class WholeBodyController(LeafSystem):
         self.mode_port = self.DeclareAbstractInputPort("mode", AbstractValue.Make(Mode.STANDING))
         self._command = self.DeclareDiscreteState(5 * robot.nu)  # zero: no torque until the first tick
         self._tau = self.DeclareDiscreteState(robot.nu)
-        self._stats = self.DeclareDiscreteState(4)
+        self._stats = self.DeclareDiscreteState(ControllerStats.size())
         self._tick = self.DeclareDiscreteState(1)
         self._warm = self.DeclareDiscreteState(max(solver.warm_start_size, 1))
         self.actuation_port = self.DeclareStateOutputPort("actuation", self._tau)
         self.motor_command_port = self.DeclareStateOutputPort("motor_command", self._command)
-        self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
+        self.stats_port = self.DeclareAbstractOutputPort(
+            "stats", lambda: AbstractValue.Make(ControllerStats()),
+            lambda c, v: v.set_value(ControllerStats.from_vector(c.get_discrete_state(self._stats).value())),
+            prerequisites_of_calc={self.discrete_state_ticket(self._stats)})
         self.tick_ms_port = self.DeclareStateOutputPort("tick_ms", self._tick)
         self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
 
     def _update(self, context, discrete_state) -> None:
         start = time.perf_counter()
         kin: RobotKinematics = self.kinematics_port.Eval(context)
-        failures, safe, streak, relaxed = context.get_discrete_state(self._stats).value()
+        stats = ControllerStats.from_vector(context.get_discrete_state(self._stats).value())
+        failures, safe, streak, relaxed = (stats.failures, stats.safe_ticks, stats.failure_streak,
+                                           stats.relaxed_ticks)
         previous = context.get_discrete_state(self._command).value()
         warm = context.get_discrete_state(self._warm).value()
         mode = Mode(self.mode_port.Eval(context))
@@ -131,7 +136,7 @@ class WholeBodyController(LeafSystem):
             except np.linalg.LinAlgError:  # non-finite references: the factorisations do not converge
                 result = SolverResult(previous, False)
             if result.ok and np.all(np.isfinite(result.command)):
-                command, streak, relaxed = result.command, 0.0, relaxed + result.relaxed
+                command, streak, relaxed = result.command, 0, relaxed + result.relaxed
                 if result.warm_start is not None:
                     discrete_state.get_mutable_vector(self._warm).SetFromVector(result.warm_start)
             else:
@@ -140,5 +145,21 @@ class WholeBodyController(LeafSystem):
                            else damping_command(self.robot, kin.x))
         discrete_state.get_mutable_vector(self._command).SetFromVector(command)
         discrete_state.get_mutable_vector(self._tau).SetFromVector(command_torque(self.robot, command, kin.x))
-        discrete_state.get_mutable_vector(self._stats).SetFromVector([failures, safe, streak, relaxed])
+        discrete_state.get_mutable_vector(self._stats).SetFromVector(
+            ControllerStats(failures, safe, streak, relaxed).vector())
         discrete_state.get_mutable_vector(self._tick).SetFromVector([1e3 * (time.perf_counter() - start)])
+
+    def summary(self, context, ticks_ms: np.ndarray) -> dict:
+        """The run summary's controller keys; ``ticks_ms``: the tick times logged from ``tick_ms``."""
+        stats: ControllerStats = self.stats_port.Eval(context)
+        return {"qp_failures": stats.failures, "relaxed_ticks": stats.relaxed_ticks,
+                "safe_mode_ticks": stats.safe_ticks, "controller_tick_ms": tick_stats(ticks_ms)}
+
+
+def tick_stats(ticks_ms: np.ndarray) -> dict:
+    """Median and 99th percentile of tick times (ms); None when there is no tick (a run that
+    diverged or ended within one controller period)."""
+    if len(ticks_ms) == 0:
+        return {"median": None, "p99": None}
+    return {"median": round(float(np.median(ticks_ms)), 3),
+            "p99": round(float(np.percentile(ticks_ms, 99)), 3)}

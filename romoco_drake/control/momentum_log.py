@@ -1,12 +1,16 @@
 """What a momentum-controlled run records each tick: the XO paper's momenta, references and predictions.
 
 :class:`MomentumLog` samples, at the controller's tick and from the tick's shared evaluation,
-the numbers behind the paper's Figs. 5-9 and the run summary's ``centroidal_am_ratio`` and
-``step_end_L_error`` (:func:`~romoco_drake.metrics.momentum_summary`); the row layout is
-:data:`~romoco_drake.metrics.MOMENTUM_LOG_SIZE` and the index constants next to it.
+the numbers behind the paper's Figs. 5-9 (:func:`~romoco_drake.plots.plot_momentum_run`) and
+the run summary's ``centroidal_am_ratio`` and ``step_end_L_error`` (:func:`momentum_summary`).
+Its record is a vector port, because a ``VectorLogSink`` logs it every tick;
+:class:`MomentumRecord` owns the layout, packed here and unpacked by whoever reads the log.
 """
 
 from __future__ import annotations
+
+import math
+from dataclasses import astuple, dataclass, field, fields
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -14,11 +18,56 @@ from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.control.tasks import placeholder_references
 from romoco_drake.embedding.references import TaskReferences
-from romoco_drake.metrics import MOMENTUM_LOG_SIZE
 from romoco_drake.modes import Mode
 from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_value
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.types import COMMAND_SIZE, ROM_STATE_SIZE, PlannerOutput
+
+COMMAND_ON = 1e-3  # m/s: a commanded |vx| or |vy| above this is walking somewhere
+
+
+def _nan(n: int):
+    return field(default_factory=lambda: np.full(n, np.nan))
+
+
+@dataclass(frozen=True)
+class MomentumRecord:
+    """One tick of the momentum log (world frame unless said), or with :meth:`unpack` of a
+    (MOMENTUM_LOG_SIZE, N) log, each field's samples (a row or rows per field, one column per tick).
+
+    {c} is the stance contact frame: origin at the stance sole centre, z up, x along the stance
+    foot's heading, y left. The contact fields are NaN out of single support (stance 0); desired
+    fields are NaN where there is no CoM reference.
+    """
+
+    stance: float = 0.0  # +1 left / -1 right single support, 0 otherwise (standing, double support)
+    t_in_step: float = 0.0  # time in the current step [s] (0 when not walking)
+    command: np.ndarray = _nan(2)  # commanded vx, vy in force [m/s] (heading frame)
+    com: np.ndarray = _nan(3)  # measured CoM position p_CoM [m]
+    com_desired: np.ndarray = _nan(3)  # desired CoM position [m]
+    l_com: np.ndarray = _nan(3)  # centroidal angular momentum L_CoM [kg·m²/s]
+    momentum: np.ndarray = _nan(3)  # measured linear momentum m v_CoM [kg·m/s]
+    momentum_desired: np.ndarray = _nan(3)  # desired linear momentum m ṗ_CoM,d [kg·m/s]
+    l_contact: np.ndarray = _nan(3)  # contact angular momentum (L_cx, L_cy, L_cz) about {c}, in {c}
+    com_in_contact: np.ndarray = _nan(2)  # CoM relative to {c}, (p_x, p_y) in {c} [m]
+    l_contact_predicted: np.ndarray = _nan(2)  # the planner's (L̂_cx, L̂_cy) at the step's end, in {c}
+
+    def pack(self) -> np.ndarray:
+        """The MOMENTUM_LOG_SIZE vector, fields in declaration order."""
+        return np.concatenate([np.atleast_1d(np.asarray(v, dtype=float)) for v in astuple(self)])
+
+    @classmethod
+    def unpack(cls, data: np.ndarray) -> MomentumRecord:
+        """The fields of a packed record (or of each column of a log); scalars are single rows."""
+        values, start = {}, 0
+        for f, n in zip(fields(cls), _SIZES, strict=True):
+            values[f.name] = data[start] if n == 1 else data[start:start + n]
+            start += n
+        return cls(**values)
+
+
+_SIZES = tuple(np.atleast_1d(np.asarray(v)).size for v in astuple(MomentumRecord()))
+MOMENTUM_LOG_SIZE = sum(_SIZES)
 
 
 class MomentumLog(LeafSystem):
@@ -31,7 +80,7 @@ class MomentumLog(LeafSystem):
     | ``planner_output`` | in | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` |
     | ``command`` | in | 6 | the walking command the planner follows |
     | ``rom_state`` | in | 6 | [p, L_c] about the stance contact frame {c} (the planner's input) |
-    | ``record`` | out | 26 | the tick's row (layout in :mod:`romoco_drake.metrics`), held |
+    | ``record`` | out | 26 | the tick's packed :class:`MomentumRecord`, held |
 
     One periodic discrete update every ``period`` s at ``offset``, the controller's tick.
     """
@@ -51,38 +100,98 @@ class MomentumLog(LeafSystem):
         self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
 
     def record(self, kin: RobotKinematics, refs: TaskReferences, plan: PlannerOutput, command: np.ndarray,
-               rom_state: np.ndarray) -> np.ndarray:
-        """The row for one tick (NaN where a quantity does not apply)."""
-        row = np.full(MOMENTUM_LOG_SIZE, np.nan)
-        row[2:4] = command[:2]
+               rom_state: np.ndarray) -> MomentumRecord:
+        """The record of one tick (NaN where a quantity does not apply)."""
         if not kin.finite:
-            row[:2] = 0.0
-            return row
+            return MomentumRecord(command=command[:2].copy())
         m = self.robot.total_mass
         A_G, _ = kin.centroidal_momentum_matrix()
         h = A_G @ kin.v
         p = kin.p_com
-        row[4:7], row[10:13], row[13:16] = p, h[:3], h[3:]
+        com_desired, momentum_desired = np.full(3, np.nan), np.full(3, np.nan)
         for i, name in enumerate(refs.names):
             if name.startswith("com_"):
                 axis = "xyz".index(name[-1])
-                row[7 + axis] = p[axis] - refs.error[i]
-                row[16 + axis] = m * refs.ydot_des[i]
+                com_desired[axis] = p[axis] - refs.error[i]
+                momentum_desired[axis] = m * refs.ydot_des[i]
         if refs.com_plan is not None:
-            row[7:9], row[16:18] = refs.com_plan[0], m * refs.com_plan[1]
-        single = refs.mode == Mode.WALKING and refs.domain.single_support
-        if not single:
-            row[:2] = 0.0
-            return row
-        row[0] = 1.0 if refs.stance_side == "left" else -1.0
-        row[1] = plan.t_ss - plan.time_to_touchdown
-        row[19:22], row[22:24] = rom_state[3:], rom_state[:2]
+            com_desired[:2], momentum_desired[:2] = refs.com_plan[0], m * refs.com_plan[1]
+        measured = {"command": command[:2].copy(), "com": p.copy(), "com_desired": com_desired,
+                    "l_com": h[:3], "momentum": h[3:], "momentum_desired": momentum_desired}
+        if not (refs.mode == Mode.WALKING and refs.domain.single_support):
+            return MomentumRecord(**measured)
+        predicted = np.full(2, np.nan)
         if plan.valid and plan.stance_side == refs.stance_side:
-            row[24], row[25] = -m * plan.pre_impact[1, 1], m * plan.pre_impact[0, 1]
-        return row
+            predicted[:] = -m * plan.pre_impact[1, 1], m * plan.pre_impact[0, 1]
+        return MomentumRecord(1.0 if refs.stance_side == "left" else -1.0, plan.t_ss - plan.time_to_touchdown,
+                              l_contact=rom_state[3:].copy(), com_in_contact=rom_state[:2].copy(),
+                              l_contact_predicted=predicted, **measured)
 
     def _update(self, context, discrete_state) -> None:
-        row = self.record(self.kinematics_port.Eval(context), self.task_references_port.Eval(context),
-                          self.planner_output_port.Eval(context), self.command_port.Eval(context),
-                          self.rom_state_port.Eval(context))
-        discrete_state.get_mutable_vector(self._record).SetFromVector(row)
+        record = self.record(self.kinematics_port.Eval(context), self.task_references_port.Eval(context),
+                             self.planner_output_port.Eval(context), self.command_port.Eval(context),
+                             self.rom_state_port.Eval(context))
+        discrete_state.get_mutable_vector(self._record).SetFromVector(record.pack())
+
+
+def momentum_summary(times: np.ndarray, data: np.ndarray) -> dict:
+    """How closely the robot's momenta follow the ALIP template (XO paper, Fig. 6 and 8).
+
+    ``data`` is the (MOMENTUM_LOG_SIZE, N) momentum log. Only single-support samples with a
+    non-zero command (|vx| or |vy| > COMMAND_ON) count.
+
+    - ``centroidal_am_ratio``: RMS ‖L_CoM‖ / RMS ‖L_c‖ over those samples. The paper finds the
+      centroidal angular momentum about an order of magnitude below the contact one (~0.1), the
+      ALIP model's assumption.
+    - ``step_end_L_error``: over complete steps (not cut off by the log's end, command non-zero
+      throughout), mean ‖L̂ − L_c‖ / mean ‖L_c‖ of the horizontal (x, y) contact momentum, where
+      L̂ is the step-end prediction made at the first sample at or past half the step (duration:
+      the last sample's time in step plus one sample period) and L_c is measured at the step's
+      last sample. The planner's feedback rests on this prediction; mid-step skips the impact
+      transient at the step's start.
+    - ``step_end_L_steps``: how many steps that mean is over.
+
+    Each ratio is rounded to 4 decimals, or None when nothing qualifies or it is not finite.
+    """
+    log = MomentumRecord.unpack(data)
+    walking = (log.stance != 0) & np.any(np.abs(log.command) > COMMAND_ON, axis=0)
+    l_com = np.linalg.norm(log.l_com[:, walking], axis=0)
+    l_c = np.linalg.norm(log.l_contact[:, walking], axis=0)
+    am_ratio = _ratio(np.sqrt(np.mean(l_com**2)), np.sqrt(np.mean(l_c**2))) if walking.any() else math.nan
+
+    period = float(np.median(np.diff(times))) if len(times) > 1 else math.nan
+    errors, sizes = [], []
+    for first, last in _single_support_steps(log.stance, log.t_in_step):
+        if last == len(times) - 1 or not walking[first:last + 1].all():
+            continue
+        t_in = log.t_in_step[first:last + 1]
+        past_half = t_in >= 0.5 * (t_in[-1] + period) - 1e-9  # tolerance: t_in is k times the period
+        if not past_half.any():  # a one-sample step has no second half
+            continue
+        mid = first + int(np.argmax(past_half))
+        measured = log.l_contact[:2, last]
+        errors.append(np.linalg.norm(log.l_contact_predicted[:, mid] - measured))
+        sizes.append(np.linalg.norm(measured))
+    step_error = _ratio(np.mean(errors), np.mean(sizes)) if errors else math.nan
+    am, step = (round(float(v), 4) for v in (am_ratio, step_error))
+    am, step = (v if math.isfinite(v) else None for v in (am, step))
+    return {"centroidal_am_ratio": am, "step_end_L_error": step, "step_end_L_steps": len(errors)}
+
+
+def _single_support_steps(stance: np.ndarray, t_in_step: np.ndarray) -> list[tuple[int, int]]:
+    """(first, last) sample index of each single-support step.
+
+    A step starts where the stance changes or the time in step goes back; it ends before the
+    next step's start or the next sample out of single support.
+    """
+    new = np.ones(len(stance), dtype=bool)
+    new[1:] = (stance[1:] != stance[:-1]) | (t_in_step[1:] < t_in_step[:-1])
+    firsts = np.flatnonzero(new & (stance != 0))
+    bounds = np.append(np.flatnonzero(new | (stance == 0)), len(stance))
+    lasts = bounds[np.searchsorted(bounds, firsts, side="right")] - 1
+    return list(zip(firsts.tolist(), lasts.tolist(), strict=True))
+
+
+def _ratio(num: float, den: float) -> float:
+    """num / den, NaN for a zero denominator (nothing to compare against)."""
+    return float(num) / float(den) if den > 0.0 else math.nan

@@ -26,15 +26,6 @@ from pydrake.systems.primitives import ConstantVectorSource
 
 from romoco_drake.interfaces.disturbance import Disturbance
 from romoco_drake.interfaces.dropout import Dropout
-from romoco_drake.interfaces.hardware import (
-    PUBLISH_DELAY,
-    EstopLatch,
-    Inbox,
-    LinkConfig,
-    damping_command,
-    publish,
-    subscribe,
-)
 from romoco_drake.interfaces.lcm_codec import (
     BASE_STATE_CHANNEL,
     ESTOP_CHANNEL,
@@ -46,12 +37,20 @@ from romoco_drake.interfaces.lcm_codec import (
     encode_base_state,
     encode_proprioception,
 )
+from romoco_drake.interfaces.link import (
+    PUBLISH_DELAY,
+    EstopLatch,
+    Inbox,
+    LinkConfig,
+    counters_port,
+    damping_command,
+    publish,
+    subscribe,
+)
 from romoco_drake.interfaces.sensors import SensorConfig
 from romoco_drake.interfaces.station import make_station
+from romoco_drake.modes import LinkStage, RobotLinkCounters
 from romoco_drake.robots.model import RobotModel
-
-# The robot side's stages of a command stream: fresh, holding the last posture, damping.
-_FRESH, _HOLD, _DAMPING = 0.0, 1.0, 2.0
 
 
 class CommandReceiver(LeafSystem):
@@ -64,7 +63,9 @@ class CommandReceiver(LeafSystem):
     | joint_state   | in  | 2·nj     | measured joints (damping holds these)                 |
     | motor_command | out | 5·nu     | newest q_d, v_d, τ_ff, K_p, K_d for the station (or damping) |
     | torque        | out | nu       | that command as torque at the measured joints (torque drives) |
-    | stats         | out | 5        | rejected messages, stale events, E-stop engagements, holds, dampings |
+    | stats         | out | abstract | :class:`~romoco_drake.modes.RobotLinkCounters`          |
+
+    Its stage (FRESH, HOLD or DAMPING, :class:`~romoco_drake.modes.LinkStage`) is discrete state.
     """
 
     def __init__(self, robot: RobotModel, config: LinkConfig, time_step: float = 0.001):
@@ -87,12 +88,12 @@ class CommandReceiver(LeafSystem):
         self.estop = EstopLatch(self)
         self.estop_port = self.estop.port
         self.joint_state_port = self.DeclareVectorInputPort("joint_state", 2 * len(robot.joint_names))
-        self._link = self.DeclareDiscreteState([float(_DAMPING)])
+        self._link = self.DeclareDiscreteState([float(LinkStage.DAMPING)])
         self._held = self.DeclareDiscreteState(5 * nu)  # the hold command, set when the stream is lost
-        self._stats = self.DeclareDiscreteState(5)
+        self._stats = self.DeclareDiscreteState(RobotLinkCounters.size())
         self.motor_command_port = self.DeclareVectorOutputPort("motor_command", 5 * nu, self._motor_command)
         self.torque_port = self.DeclareVectorOutputPort("torque", nu, self._torque)
-        self.stats_port = self.DeclareStateOutputPort("stats", self._stats)
+        self.stats_port = counters_port(self, "stats", RobotLinkCounters, self._stats)
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.receive_rate_hz, 0.0, self._update)
 
     def _torque(self, context, out) -> None:
@@ -116,11 +117,11 @@ class CommandReceiver(LeafSystem):
 
     def _motor_command(self, context, out) -> None:
         """The newest command while the stream is fresh, the hold after a loss, else damping."""
-        stage = context.get_discrete_state(self._link).GetAtIndex(0)
-        if self.estop.engaged(context) or stage == _DAMPING:
+        stage = LinkStage.decode(context.get_discrete_state(self._link).GetAtIndex(0))
+        if self.estop.engaged(context) or stage == LinkStage.DAMPING:
             q = self.joint_state_port.Eval(context)[self._joint_of_actuator]
             out.SetFromVector(damping_command(self.robot, q))
-        elif stage == _HOLD:
+        elif stage == LinkStage.HOLD:
             out.SetFromVector(context.get_discrete_state(self._held).value())
         else:
             out.SetFromVector(self.inbox.latest.Eval(context))
@@ -136,24 +137,23 @@ class CommandReceiver(LeafSystem):
                                np.where(torque_joint, self.robot.kd, kd)])
 
     def _update(self, context, state) -> None:
-        rejected, stale_events, estops, holds, dampings = context.get_discrete_state(self._stats).value()
-        rejected += not self.inbox.take(context, state)
+        rejected = not self.inbox.take(context, state)
         engaged, bad = self.estop.take(context, state)
-        estops, rejected = estops + engaged, rejected + bad
+        counts = RobotLinkCounters(rejected_messages=rejected + bad, estop=engaged)
         age, config = self.inbox.age(context, state), self.config
-        stage = (_FRESH if age <= config.timeout_s else _HOLD if age <= config.timeout_s + config.hold_s
-                 else _DAMPING)
-        was = context.get_discrete_state(self._link).GetAtIndex(0)
+        stage = (LinkStage.FRESH if age <= config.timeout_s
+                 else LinkStage.HOLD if age <= config.timeout_s + config.hold_s else LinkStage.DAMPING)
+        was = LinkStage.decode(context.get_discrete_state(self._link).GetAtIndex(0))
         discrete = state.get_mutable_discrete_state()
         if np.isfinite(age) and stage > was:  # a loss (before the first command nothing is lost)
-            stale_events += was == _FRESH
-            holds += stage == _HOLD
-            dampings += stage == _DAMPING
-            if stage == _HOLD:
+            counts += RobotLinkCounters(stale_events=was == LinkStage.FRESH,
+                                        hold_events=stage == LinkStage.HOLD,
+                                        damping_events=stage == LinkStage.DAMPING)
+            if stage == LinkStage.HOLD:
                 discrete.get_mutable_vector(int(self._held)).SetFromVector(self._hold(context))
-        discrete.get_mutable_vector(int(self._link)).SetFromVector([stage])
-        discrete.get_mutable_vector(int(self._stats)).SetFromVector([rejected, stale_events, estops, holds,
-                                                                     dampings])
+        discrete.get_mutable_vector(int(self._link)).SetFromVector([float(stage)])
+        counts += RobotLinkCounters.from_vector(context.get_discrete_state(self._stats).value())
+        discrete.get_mutable_vector(int(self._stats)).SetFromVector(counts.vector())
 
 
 class MeasurementSender(LeafSystem):
@@ -252,7 +252,4 @@ def make_robot_sim(robot: RobotModel, lcm: DrakeLcmInterface, time_step: float =
 def robot_summary(robot_sim: Diagram, context) -> dict:
     """The robot side's safety counters (``context``: the root context)."""
     receiver = robot_sim.GetSubsystemByName("receiver")
-    stats = receiver.stats_port.Eval(receiver.GetMyContextFromRoot(context))
-    rejected, stale, estops, holds, dampings = stats
-    return {"stale_events": int(stale), "hold_events": int(holds), "damping_events": int(dampings),
-            "rejected_messages": int(rejected), "estop": int(estops)}
+    return receiver.stats_port.Eval(receiver.GetMyContextFromRoot(context)).summary()

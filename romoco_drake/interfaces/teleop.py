@@ -5,7 +5,7 @@
 gamepad) set the walking command, which the same
 :class:`~romoco_drake.planners.command.CommandLimiter` clips and ramps as a scripted one. Its
 E-stop output carries ROMOCO_ESTOP messages, so one latch (:class:`EstopGate`, built on the LCM
-link's :class:`~romoco_drake.interfaces.hardware.EstopLatch`) damps the controller in any link,
+link's :class:`~romoco_drake.interfaces.link.EstopLatch`) damps the controller in any link,
 and on LCM links the same bytes are published for the robot side. :class:`PageDisplay` shows on
 the page what the controller does (mode, commanded vs measured velocity, planned foothold) and
 keeps the robot in view, live and in ``--record`` replays.
@@ -28,10 +28,10 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.embedding.contact import contact_frame
-from romoco_drake.interfaces.hardware import EstopLatch
 from romoco_drake.interfaces.lcm_codec import Estop, encode_estop
-from romoco_drake.metrics import heading_velocity
+from romoco_drake.interfaces.link import EstopLatch
 from romoco_drake.modes import Mode
+from romoco_drake.planners.heading import heading_velocity
 from romoco_drake.robots.kinematics import kinematics_model_value
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.types import COMMAND_SIZE, PlannerOutput
@@ -144,7 +144,7 @@ class EstopGate(LeafSystem):
     | port | kind | size | meaning |
     |---|---|---|---|
     | ``mode_in`` | in | abstract | :class:`~romoco_drake.modes.Mode` from the state machine |
-    | ``estop`` | in | abstract | ROMOCO_ESTOP bytes (:class:`~romoco_drake.interfaces.hardware.EstopLatch`) |
+    | ``estop`` | in | abstract | ROMOCO_ESTOP bytes (:class:`~romoco_drake.interfaces.link.EstopLatch`) |
     | ``mode`` | out | abstract | ``mode_in``, or DAMPING from the first engaged message on |
 
     The latch is the LCM link's, so a page E-stop acts on the controller as a ROMOCO_ESTOP

@@ -115,6 +115,10 @@ class CommandLimiter(LeafSystem):
         """Whether ``command`` asks for more than the velocity limits."""
         return bool(np.any(np.abs([command.vx, command.vy, command.wz]) > self._max))
 
+    def summary(self, segments: list[CommandSegment]) -> dict:
+        """The run summary's count of the command segments the limits clipped."""
+        return {"command_clipped_segments": sum(self.clipped(seg.command) for seg in segments)}
+
     def _update(self, context, discrete_state) -> None:
         held = context.get_discrete_state(self._velocity).value()
         target = np.nan_to_num(self.command_in_port.Eval(context)[:3], nan=0.0, posinf=0.0, neginf=0.0)

@@ -19,6 +19,15 @@ def base_yaw(robot: RobotModel, x: np.ndarray) -> float | np.ndarray:
     return np.arctan2(2.0 * (w * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
 
 
+def heading_velocity(robot: RobotModel, times: np.ndarray, states: np.ndarray) -> np.ndarray:
+    """(N, 3): base forward and lateral velocity in the base's heading frame, and yaw rate."""
+    j = robot.nq + robot.base_v_start
+    yaw = base_yaw(robot, states)
+    wz, vx, vy = states[j + 2], states[j + 3], states[j + 4]
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.column_stack([c * vx + s * vy, -s * vx + c * vy, wz])
+
+
 class HeadingHold(LeafSystem):
     """wz_out = wz + k (ψ_d − ψ), with ψ_d the integral of the commanded wz from the start heading.
 

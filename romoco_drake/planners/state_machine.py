@@ -9,7 +9,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
-from romoco_drake.modes import Mode
+from romoco_drake.modes import LinkStage, Mode
 from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_value
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.robots.posture import base_fault
@@ -23,9 +23,6 @@ from romoco_drake.rom.types import (
 )
 from romoco_drake.values import SharedValue
 
-# The station's LinkStage.STAND: measurements lost past the ride-through (interfaces import
-# planners, not the other way round, so the value is repeated here; a test checks it).
-BLIND_STAGE = 2
 # A command component below these counts as zero (m/s, m/s, rad/s).
 _ZERO_COMMAND = (1e-3, 1e-3, 1e-3)
 
@@ -88,7 +85,7 @@ class GaitStateMachine(LeafSystem):
     | ``kinematics`` | in | abstract | :class:`~romoco_drake.robots.kinematics.RobotKinematics` of the state |
     | ``command`` | in | 6 | :class:`WalkCommand` vector |
     | ``foot_contact`` | in | 2 | contact switches [left, right], 1.0 in contact |
-    | ``link_stage`` | in | 1 | the station's ``LinkStage`` (interfaces/hardware.py; 0: fresh) |
+    | ``link_stage`` | in | 1 | the station's :class:`~romoco_drake.modes.LinkStage` |
     | ``planner_output`` | in | abstract | optional :class:`PlannerOutput`: an adapted step time |
     | ``mode`` | out | abstract | :class:`~romoco_drake.modes.Mode` |
     | ``gait_phase`` | out | 2 | stance (+1 left, −1 right), time in step [s] |
@@ -133,6 +130,11 @@ class GaitStateMachine(LeafSystem):
 
     def schedule(self, context) -> GaitSchedule:
         return context.get_abstract_state(self._schedule).get_value()
+
+    def summary(self, context) -> dict:
+        """The run summary's gait keys: steps taken and safe-mode entries."""
+        s = self.schedule(context)
+        return {"steps": s.steps, "safe_mode_entries": s.safe_mode_entries}
 
     def _calc_phase(self, context, out) -> None:
         s = self.schedule(context)
@@ -192,10 +194,11 @@ class GaitStateMachine(LeafSystem):
 
     def _update(self, context, state) -> None:
         plan = self.planner_output_port.Eval(context) if self.planner_output_port.HasValue(context) else None
+        blind = LinkStage.decode(self.link_stage_port.Eval(context)[0]) >= LinkStage.STAND
         s = self.next_schedule(self.schedule(context), context.get_time(), self.kinematics_port.Eval(context),
                                WalkCommand.from_vector(self.command_port.Eval(context)),
                                self.foot_contact_port.Eval(context),
-                               self.link_stage_port.Eval(context)[0] >= BLIND_STAGE, plan)
+                               blind, plan)
         state.get_mutable_abstract_state(int(self._schedule)).set_value(s)
 
     def _feet_down(self, kin: RobotKinematics, on: np.ndarray) -> bool:

@@ -51,7 +51,7 @@ from romoco_drake.embedding.outputs import sole_frame
 from romoco_drake.errors import RomocoError
 from romoco_drake.inertia.ccinn import load_ccinn, predict_inertia_horizon, rpy_from_rotations
 from romoco_drake.inertia.wbo import load_wbo
-from romoco_drake.modes import Mode
+from romoco_drake.modes import Mode, MpcStats
 from romoco_drake.planners.settings import PlannerSettings
 from romoco_drake.robots.centroidal import centroidal_inertia
 from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_value
@@ -170,9 +170,8 @@ class VimpcPlanner(LeafSystem):
     def summary(self, context) -> dict:
         """The run summary's planner keys: solves, failed solves, updates on the fallback, the
         inertia mode."""
-        solves, failed, fallback = self.mpc_stats_port.Eval(context)
-        return {"planner": self.config.name, "mpc_solves": int(solves), "mpc_failures": int(failed),
-                "mpc_fallback_updates": int(fallback), "vimpc_inertia": self.config.inertia}
+        stats = MpcStats.from_vector(self.mpc_stats_port.Eval(context)).summary()
+        return {"planner": self.config.name} | stats | {"vimpc_inertia": self.config.inertia}
 
     # ------------------------------------------------------------------ the MPC tick
     def _update(self, context, state) -> None:

@@ -1,0 +1,279 @@
+"""The controller side's measurement receiver: LCM measurements in, the station's ports out,
+predicted while they are missing (:mod:`~romoco_drake.interfaces.hardware` describes the link).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.common.eigen_geometry import Quaternion
+from pydrake.common.value import Value
+from pydrake.systems.framework import LeafSystem
+
+from romoco_drake.estimation.ground_truth import plant_state
+from romoco_drake.interfaces.lcm_codec import decode_base_state, decode_proprioception
+from romoco_drake.interfaces.link import Inbox, LinkConfig, counters_port, link_stage
+from romoco_drake.interfaces.predictor import ContactPredictor, PredictedState
+from romoco_drake.modes import LinkCounters, LinkStage
+from romoco_drake.robots.model import RobotModel
+from romoco_drake.spatial import GRAVITY, quaternion_exp
+
+
+def predict_base_state(values: np.ndarray, dt: float) -> np.ndarray:
+    """[quaternion; position; ω_W; v_W] (motion capture) ``dt`` s later at constant velocity."""
+    out = values.copy()
+    out[:4] = _turned(values[:4], values[7:10] * dt, body=False)
+    out[4:7] += dt * values[10:13]
+    return out
+
+
+def _turned(wxyz: np.ndarray, theta: np.ndarray, body: bool) -> np.ndarray:
+    """The unit quaternion ``wxyz`` turned by the rotation vector θ, in its body frame or the world."""
+    angle = float(np.linalg.norm(theta))
+    if angle == 0.0 or not np.isfinite(angle):
+        return wxyz.copy()
+    dq = Quaternion(wxyz=quaternion_exp(theta))
+    q = Quaternion(wxyz=wxyz / np.linalg.norm(wxyz))
+    return (q.multiply(dq) if body else dq.multiply(q)).wxyz()
+
+
+def nominal_measurements(robot: RobotModel) -> dict[str, np.ndarray]:
+    """The station outputs of the robot standing still in its nominal pose (the start values)."""
+    q = robot.nominal.q
+    nj = len(robot.joint_names)
+    qb = robot.base_q_start
+    return {
+        "joint_state": np.concatenate([q[robot.joint_q_index], np.zeros(nj)]),
+        "imu": np.concatenate([q[qb:qb + 4], np.zeros(3), [0.0, 0.0, GRAVITY]]),
+        "foot_contact": np.ones(2),
+        "base_pose": q[qb:qb + 7].copy(),
+        "base_velocity": np.zeros(6),
+    }
+
+
+@dataclass(frozen=True)
+class BlindPrediction:
+    """A receiver's prediction while proprioception is missing: the :class:`PredictedState`, the
+    last IMU message and the prediction's base orientation when it started (the predicted IMU
+    orientation turns the last measured one by the base's predicted rotation since)."""
+
+    state: PredictedState
+    imu: np.ndarray
+    base_wxyz: np.ndarray
+
+
+@dataclass(frozen=True)
+class MissedUpdate:
+    """A receive update without a new proprioception message, kept while the stream is still
+    fresh: what the prediction catches up on if it goes stale."""
+
+    command: np.ndarray  # the motor command being sent
+    base: np.ndarray | None  # the motion capture's last values (None before its first message)
+    base_fresh: bool  # whether they reset the predicted base (the stream is fresh)
+
+
+class BlindPredictor:
+    """A receiver's prediction of the robot while proprioception is missing (the receiver's docstring).
+
+    Like :class:`~romoco_drake.interfaces.link.Inbox` it declares its state on its owner: the
+    current :class:`BlindPrediction` (None while none runs) and the :class:`MissedUpdate` values kept
+    while the stream is still fresh, both abstract state; :meth:`advance` runs inside the
+    owner's unrestricted update.
+    """
+
+    def __init__(self, system: LeafSystem, robot: RobotModel, config: LinkConfig, proprioception: Inbox,
+                 base_state: Inbox):
+        self.robot, self.config = robot, config
+        self.proprioception, self.base_state = proprioception, base_state
+        self.predictor = ContactPredictor(robot)
+        self._blind = system.DeclareAbstractState(Value[object](None))
+        self._missed = system.DeclareAbstractState(Value[object](()))
+
+    def current(self, context) -> BlindPrediction | None:
+        """The current prediction (None until the update before proprioception goes stale)."""
+        return context.get_abstract_state(int(self._blind)).get_value()
+
+    def base(self, blind: BlindPrediction) -> np.ndarray:
+        """[quaternion; position; ω_W; v_W] of the prediction."""
+        return blind.state.x[self._base_rows()]
+
+    def _base_rows(self) -> np.ndarray:
+        """Indices of [quaternion; position; ω_W; v_W] in x."""
+        r = self.robot
+        return np.r_[r.base_q_start:r.base_q_start + 7, r.nq + r.base_v_start:r.nq + r.base_v_start + 6]
+
+    def measurements(self, blind: BlindPrediction) -> np.ndarray:
+        """[q; v; imu; contact] of the prediction (the receiver's docstring)."""
+        r, x = self.robot, blind.state.x
+        base = x[r.base_q_start:r.base_q_start + 4]
+        R_WB = Quaternion(wxyz=base / np.linalg.norm(base)).rotation()
+        turned = Quaternion(wxyz=blind.base_wxyz).inverse().multiply(Quaternion(wxyz=base))
+        wxyz = Quaternion(wxyz=blind.imu[:4] / np.linalg.norm(blind.imu[:4])).multiply(turned).wxyz()
+        w = r.nq + r.base_v_start
+        gyro = R_WB.T @ x[w:w + 3]
+        accelerometer = R_WB.T @ (blind.state.base_acceleration - r.plant.gravity_field().gravity_vector())
+        return np.concatenate([x[r.joint_q_index], x[r.nq + r.joint_v_index], wxyz, gyro, accelerometer,
+                               np.array(blind.state.contact, dtype=float)])
+
+    def _start(self, state, base: np.ndarray | None) -> BlindPrediction:
+        """The prediction from the last proprioception message and the motion capture ``base``
+        (the receiver's docstring)."""
+        r, nj = self.robot, len(self.robot.joint_names)
+        values = state.get_discrete_state().get_vector(int(self.proprioception.values)).value()
+        imu, contact = values[2 * nj:2 * nj + 10], values[2 * nj + 10:] > 0.5
+        if base is not None:
+            x = plant_state(r, values[:2 * nj], base[:7], base[7:])
+        else:
+            wxyz = imu[:4] if np.all(np.isfinite(imu[:4])) else r.nominal.q[r.base_q_start:r.base_q_start + 4]
+            R_WB = Quaternion(wxyz=wxyz / np.linalg.norm(wxyz)).rotation()
+            pose = np.concatenate([wxyz, r.nominal.q[r.base_q_start + 4:r.base_q_start + 7]])
+            x = plant_state(r, values[:2 * nj], pose, np.concatenate([R_WB @ imu[4:7], np.zeros(3)]))
+            lin = r.nq + r.base_v_start + 3
+            x[lin:lin + 3] = self.predictor.contact_velocity(x, contact)
+        base_wxyz = x[r.base_q_start:r.base_q_start + 4].copy()
+        return BlindPrediction(self.predictor.start(x, contact), imu.copy(), base_wxyz)
+
+    def advance(self, context, state, command: np.ndarray, stage: LinkStage) -> None:
+        """Keeps this update (``command``: the motor command being sent) for a catch-up, or starts,
+        steps or ends the prediction (the receiver's docstring)."""
+        blind, missed = self.current(context), context.get_abstract_state(int(self._missed)).get_value()
+        abstract = state.get_mutable_abstract_state
+        _, arrival, received = state.get_discrete_state().get_vector(int(self.proprioception.meta)).value()
+        if not received or arrival == context.get_time():
+            if blind is not None:
+                abstract(int(self._blind)).set_value(None)
+            if missed:
+                abstract(int(self._missed)).set_value(())
+            return
+        if stage == LinkStage.DAMPING and blind is not None:
+            return
+        base = state.get_discrete_state().get_vector(int(self.base_state.values)).value().copy()
+        update = MissedUpdate(command.copy(),
+                              base if self.base_state.age(context, state) < np.inf else None,
+                              self.base_state.fresh(context, state, self.config.timeout_s))
+        # The outputs read the stream's age at any time before the next update: the prediction is
+        # there from the last update before it goes stale (half an update early against round-off).
+        h = 1.0 / self.config.receive_rate_hz
+        if self.proprioception.fresh(context, state, self.config.timeout_s - 1.5 * h):
+            abstract(int(self._missed)).set_value((*missed, update))
+            return
+        pending = (*missed, update)
+        if missed:
+            abstract(int(self._missed)).set_value(())
+        blind = blind or self._start(state, pending[0].base)
+        p = self._caught_up(blind.state, pending, h)
+        abstract(int(self._blind)).set_value(dataclasses.replace(blind, state=p))
+
+    def _caught_up(self, p: PredictedState, pending: tuple[MissedUpdate, ...], h: float) -> PredictedState:
+        """``p`` stepped ``h`` under each pending update's command, its base reset to fresh motion
+        capture; held where it was when a step fails or blows up."""
+        for u in pending:
+            reset = p
+            if u.base_fresh:
+                x = p.x.copy()
+                x[self._base_rows()] = u.base
+                reset = dataclasses.replace(p, x=x)
+            try:
+                stepped = self.predictor.step(reset, u.command, h)
+            except (RuntimeError, np.linalg.LinAlgError):  # a degenerate state, e.g. of a fallen robot
+                break
+            if not np.all(np.isfinite(stepped.x)):  # a prediction that blows up is held where it last was
+                break
+            p = stepped
+        return p
+
+
+class MeasurementReceiver(LeafSystem):
+    """Proprioception and motion-capture messages → the station's measurement ports.
+
+    | port            | dir | size     | meaning                                              |
+    |-----------------|-----|----------|------------------------------------------------------|
+    | proprioception  | in  | abstract | raw bytes of ROMOCO_PROPRIOCEPTION                    |
+    | base_state      | in  | abstract | raw bytes of ROMOCO_BASE_STATE                        |
+    | command         | in  | 5·nu     | the motor command being sent (drives the prediction)  |
+    | joint_state, imu, …, base_velocity | out | as the station | newest good values, or predicted |
+    | link            | out | 1        | the :class:`~romoco_drake.modes.LinkStage` of the needed streams |
+    | stats           | out | abstract | ``LinkCounters``: rejected, stale events, stages entered |
+
+    When proprioception goes stale (``timeout_s``) the receiver predicts the robot
+    (:class:`BlindPredictor`) from the last message on: its
+    joints, the base from the motion capture of the first update after it (without any: the
+    IMU's orientation and gyro, the velocity that keeps the feet in contact still) and its
+    contact flags, propagated one update period per update under the ``command`` input, with the
+    base reset to the motion capture's while that stream is fresh. Nothing is predicted while
+    the stream is fresh: the updates without a new message keep their command and motion capture
+    (:class:`MissedUpdate`), and in the last update before the stream goes stale the prediction
+    starts and catches up on them. The outputs carry the prediction (joints, contacts, the IMU
+    turned, its gyro and accelerometer from the predicted base motion) through ride-through and
+    STAND; in DAMPING it stops where it was. A new message ends it. A stale base stream with
+    fresh proprioception is predicted at constant velocity (:func:`predict_base_state`). The
+    command input has no feedthrough: the outputs are the state of the last update.
+    """
+
+    def __init__(self, robot: RobotModel, config: LinkConfig, require_base_state: bool = False):
+        """``require_base_state``: the estimator reads the base ports (ground truth from motion
+        capture), so a stale or missing ROMOCO_BASE_STATE stream breaks the link too."""
+        super().__init__()
+        self.robot, self.config, self.require_base_state = robot, config, require_base_state
+        nj = len(robot.joint_names)
+        start = nominal_measurements(robot)
+
+        def proprioception(data):
+            m = decode_proprioception(data, nj)
+            return m.utime, np.concatenate([m.q, m.v, m.imu, m.foot_contact])
+
+        def base_state(data):
+            m = decode_base_state(data)
+            return m.utime, np.concatenate([m.quaternion, m.position, m.angular_velocity, m.linear_velocity])
+
+        first = np.concatenate([start["joint_state"], start["imu"], start["foot_contact"]])
+        self.proprioception = Inbox(self, "proprioception", proprioception, first)
+        self.base_state = Inbox(self, "base_state", base_state,
+                                np.concatenate([start["base_pose"], start["base_velocity"]]))
+        self.command_port = self.DeclareVectorInputPort("command", 5 * robot.nu)
+        self.predictor = BlindPredictor(self, robot, config, self.proprioception, self.base_state)
+        self._link = self.DeclareDiscreteState([float(LinkStage.DAMPING)])
+        self._stats = self.DeclareDiscreteState(LinkCounters.size())
+        layout = {"joint_state": (self.proprioception, 0, 2 * nj),
+                  "imu": (self.proprioception, 2 * nj, 2 * nj + 10),
+                  "foot_contact": (self.proprioception, 2 * nj + 10, 2 * nj + 12),
+                  "base_pose": (self.base_state, 0, 7), "base_velocity": (self.base_state, 7, 13)}
+        for name, (inbox, a, b) in layout.items():
+            self.DeclareVectorOutputPort(
+                name, b - a, lambda context, out, inbox=inbox, a=a, b=b:
+                out.SetFromVector(self._measured(context, inbox)[a:b]),
+                prerequisites_of_calc={inbox.latest.ticket(), self.time_ticket(), self.all_state_ticket()})
+        self.link_port = self.DeclareStateOutputPort("link", self._link)
+        self.stats_port = counters_port(self, "stats", LinkCounters, self._stats)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.receive_rate_hz, 0.0, self._update)
+
+    def _measured(self, context, inbox: Inbox) -> np.ndarray:
+        """The inbox's newest values, or predicted while its stream is stale."""
+        age = inbox.age(context)
+        if age <= self.config.timeout_s or not np.isfinite(age):
+            return inbox.latest.Eval(context)
+        blind = self.predictor.current(context)
+        if blind is None:  # only the base stream is stale
+            stored = context.get_discrete_state(inbox.values).value()
+            return predict_base_state(stored, min(age, self.config.timeout_s + self.config.ride_through_s))
+        if inbox is self.proprioception:
+            return self.predictor.measurements(blind)
+        return self.predictor.base(blind)
+
+    def _update(self, context, state) -> None:
+        counts = LinkCounters.from_vector(context.get_discrete_state(self._stats).value())
+        rejected = sum(not inbox.take(context, state) for inbox in (self.proprioception, self.base_state))
+        age = self.proprioception.age(context, state)
+        if self.require_base_state:
+            age = max(age, self.base_state.age(context, state))
+        stage = link_stage(age, self.config)
+        was = LinkStage.decode(context.get_discrete_state(self._link).GetAtIndex(0))
+        counts += LinkCounters(stale_events=was == LinkStage.FRESH and stage != LinkStage.FRESH,
+                               rejected_messages=rejected)
+        if np.isfinite(age) and stage > was:  # each stage entered counts (not before the first message,
+            counts = counts.entered(stage)  # nothing was lost yet); skipped ones (ride_through_s 0) do not
+        self.predictor.advance(context, state, self.command_port.Eval(context), stage)
+        state.get_mutable_discrete_state().get_mutable_vector(int(self._link)).SetFromVector([float(stage)])
+        state.get_mutable_discrete_state().get_mutable_vector(int(self._stats)).SetFromVector(counts.vector())
