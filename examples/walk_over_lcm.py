@@ -21,12 +21,8 @@ from romoco_drake.estimation.settings import EstimatorSettings
 from romoco_drake.interfaces.hardware import link_summary
 from romoco_drake.interfaces.lcm_codec import ESTOP_CHANNEL, Estop, encode_estop
 from romoco_drake.interfaces.robot_sim import robot_summary
-from romoco_drake.scenario import (
-    CommandPoint,
-    Scenario,
-    build_diagram,
-    initial_positions,
-)
+from romoco_drake.scenario import CommandPoint, Scenario
+from romoco_drake.wiring import build_diagram, initial_positions
 
 
 def main(duration: float = 4.0) -> dict:

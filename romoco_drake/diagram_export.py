@@ -14,7 +14,8 @@ import subprocess
 from pathlib import Path
 
 from romoco_drake.errors import RomocoError
-from romoco_drake.scenario import Scenario, build_diagram
+from romoco_drake.scenario import Scenario
+from romoco_drake.wiring import build_diagram
 
 FORMATS = ("dot", "svg", "png", "pdf")
 

@@ -28,17 +28,9 @@ from romoco_drake.metrics import estimator_summary, log_samples, tracking_summar
 from romoco_drake.modes import LinkCounters
 from romoco_drake.planners.command import CommandSource, segments_from_log
 from romoco_drake.robots.model import load_robot
-from romoco_drake.scenario import (
-    MAX_DURATION_S,
-    Scenario,
-    build_diagram,
-    check_duration,
-    initial_positions,
-    load_scenario,
-    uses_motor_command,
-    with_overrides,
-)
+from romoco_drake.scenario import MAX_DURATION_S, Scenario, check_duration, load_scenario, with_overrides
 from romoco_drake.simulation import RunEnd, make_lcm, simulate, stderr_progress
+from romoco_drake.wiring import build_diagram, initial_positions, uses_motor_command
 
 
 def run_scenario(

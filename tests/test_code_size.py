@@ -10,21 +10,9 @@ GENERATED = PACKAGE / "interfaces" / "lcmtypes"
 MAX_MODULE_LINES = 450
 MAX_FUNCTION_LINES = 60
 
-_SPLITTING = "split in progress on branch loop/terms/config (issue 31)"
 # "path" (a module) or "path::qualname" (a function, methods and nested functions included),
 # paths relative to romoco_drake/, each with the reason it may stay over its limit.
-EXCEPTIONS: dict[str, str] = {
-    "bench/walking.py::bench_tick": _SPLITTING,
-    "cli.py": _SPLITTING,
-    "cli.py::make_parser": _SPLITTING,
-    "control/momentum.py": _SPLITTING,
-    "control/momentum.py::MomentumHqp.compute": _SPLITTING,
-    "interfaces/hardware.py": _SPLITTING,
-    "runner.py::run_scenario": _SPLITTING,
-    "scenario.py": _SPLITTING,
-    "scenario.py::build_diagram": _SPLITTING,
-    "scenario.py::_add_walking_loop": _SPLITTING,
-}
+EXCEPTIONS: dict[str, str] = {}
 
 
 def _modules() -> list[Path]:

@@ -12,13 +12,8 @@ from romoco_drake.estimation.registry import ESTIMATORS
 from romoco_drake.planners.settings import FootPlacementConfig
 from romoco_drake.robots.model import RobotModel, load_robot_config_file
 from romoco_drake.robots.source import ROBOTS_DIR
-from romoco_drake.scenario import (
-    Scenario,
-    build_diagram,
-    load_scenario,
-    validate_scenario,
-    with_overrides,
-)
+from romoco_drake.scenario import Scenario, load_scenario, validate_scenario, with_overrides
+from romoco_drake.wiring import build_diagram
 
 
 def _write(tmp_path, name, data):

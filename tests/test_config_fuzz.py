@@ -179,7 +179,7 @@ def test_mutated_scenario_is_one_line_or_a_truthful_run(tmp_path_factory, case):
 def test_mutated_robot_is_one_line_or_a_truthful_run(tmp_path_factory, case):
     def run(path, name):
         robot = RobotModel(load_robot_config_file(path), path)
-        with mock.patch("romoco_drake.scenario.load_robot", return_value=robot):
+        with mock.patch("romoco_drake.wiring.load_robot", return_value=robot):
             return run_scenario(load_scenario(f"{name}_stand"), duration=RUN_S)
 
     summary = _one_line_or_run(tmp_path_factory, case, run)

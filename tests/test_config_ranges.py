@@ -14,7 +14,8 @@ from romoco_drake.errors import ConfigError, RomocoError
 from romoco_drake.robots.model import RobotModel, load_robot_config, load_robot_config_file, robot_names
 from romoco_drake.robots.source import DIAGRAMS_DIR, ROBOTS_DIR
 from romoco_drake.runner import run_scenario
-from romoco_drake.scenario import Scenario, build_diagram, load_scenario, scenario_names
+from romoco_drake.scenario import Scenario, load_scenario, scenario_names
+from romoco_drake.wiring import build_diagram
 
 
 def _scenario_file(tmp_path, base="g1_stand", **edits):

@@ -14,14 +14,8 @@ from pydrake.systems.analysis import Simulator
 from romoco_drake.errors import ConfigError, RomocoError
 from romoco_drake.interfaces.disturbance import Disturbance, DisturbanceSource
 from romoco_drake.robots.model import load_robot
-from romoco_drake.scenario import (
-    Scenario,
-    build_diagram,
-    initial_positions,
-    load_scenario,
-    parse_push,
-    with_overrides,
-)
+from romoco_drake.scenario import Scenario, load_scenario, parse_push, with_overrides
+from romoco_drake.wiring import build_diagram, initial_positions
 
 
 def _source(pushes, yaw=0.0, meshcat=None):

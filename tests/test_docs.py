@@ -13,7 +13,8 @@ import pytest
 from docs_check import guide_blocks
 
 from romoco_drake.cli import make_parser
-from romoco_drake.scenario import build_diagram, load_scenario, scenario_names
+from romoco_drake.scenario import load_scenario, scenario_names
+from romoco_drake.wiring import build_diagram
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"

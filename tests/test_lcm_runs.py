@@ -23,7 +23,8 @@ from romoco_drake.interfaces.hardware import link_summary
 from romoco_drake.interfaces.robot_sim import robot_summary
 from romoco_drake.robots.model import load_robot
 from romoco_drake.runner import log_samples, run_scenario
-from romoco_drake.scenario import build_diagram, initial_positions, load_scenario, with_overrides
+from romoco_drake.scenario import load_scenario, with_overrides
+from romoco_drake.wiring import build_diagram, initial_positions
 
 DROPOUT_T = 3.0  # s: when the walking run's measurements are lost
 

@@ -19,7 +19,8 @@ from romoco_drake.bench.reproduce import (
 )
 from romoco_drake.cli import main
 from romoco_drake.inertia.ccinn import entries_from_inertia
-from romoco_drake.scenario import build_diagram, load_scenario
+from romoco_drake.scenario import load_scenario
+from romoco_drake.wiring import build_diagram
 
 TRACE = {"t": [0.0, 0.1], "measured": [[0.0] * 3, [0.1, 0.0, 0.0]], "wanted": [[0.0] * 3, [0.2, 0.0, 0.0]]}
 

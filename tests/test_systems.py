@@ -21,7 +21,8 @@ from romoco_drake.robots import kinematics as kinematics_module
 from romoco_drake.robots.kinematics import RobotKinematics, RobotKinematicsSystem
 from romoco_drake.robots.model import load_robot
 from romoco_drake.rom.types import WalkCommand
-from romoco_drake.scenario import build_diagram, initial_positions, load_scenario
+from romoco_drake.scenario import load_scenario
+from romoco_drake.wiring import build_diagram, initial_positions
 
 PERIOD = 0.002
 

@@ -18,7 +18,8 @@ from romoco_drake.control.terms.joint_limits import JointLimitConfig
 from romoco_drake.control.tscqp import TscQp, TscqpConfig
 from romoco_drake.modes import Domain
 from romoco_drake.robots.kinematics import RobotKinematics
-from romoco_drake.scenario import build_diagram, initial_positions, load_scenario, with_overrides
+from romoco_drake.scenario import load_scenario, with_overrides
+from romoco_drake.wiring import build_diagram, initial_positions
 
 TICKS_PER_DOMAIN = 8
 

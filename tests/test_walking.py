@@ -15,7 +15,8 @@ from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import load_robot
 from romoco_drake.rom.planners import HlipLaw, PlannerParams
 from romoco_drake.rom.types import WalkCommand
-from romoco_drake.scenario import CommandPoint, build_diagram, load_scenario
+from romoco_drake.scenario import CommandPoint, load_scenario
+from romoco_drake.wiring import build_diagram
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +79,7 @@ def test_tscqp_respects_torque_and_friction_limits(g1):
 
 def _closed_loop(scenario):
     """The scenario's diagram, a simulator on it and the plant set to the initial pose."""
-    from romoco_drake.scenario import initial_positions
+    from romoco_drake.wiring import initial_positions
 
     built = build_diagram(scenario)
     simulator = Simulator(built.diagram)

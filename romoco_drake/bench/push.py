@@ -33,14 +33,9 @@ from romoco_drake.commands import names, numbers
 from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces.disturbance import Disturbance
 from romoco_drake.robots.model import robot_names
-from romoco_drake.scenario import (
-    CommandPoint,
-    Scenario,
-    build_diagram,
-    initial_positions,
-    load_scenario,
-)
+from romoco_drake.scenario import CommandPoint, Scenario, load_scenario
 from romoco_drake.simulation import stderr_progress
+from romoco_drake.wiring import build_diagram, initial_positions
 
 DIRECTIONS = {"forward": (1.0, 0.0), "backward": (-1.0, 0.0), "left": (0.0, 1.0), "right": (0.0, -1.0)}
 PHASES = (0.0, 0.25, 0.5, 0.75)

@@ -27,15 +27,9 @@ from romoco_drake.planners.vimpc import VimpcPlanner
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.rom.types import WalkCommand, side_from_sign
 from romoco_drake.runner import add_overlay_arg, run_scenario, scenario_from_args
-from romoco_drake.scenario import (
-    Scenario,
-    build_diagram,
-    initial_positions,
-    load_scenario,
-    scenario_names,
-    with_overrides,
-)
+from romoco_drake.scenario import Scenario, load_scenario, scenario_names, with_overrides
 from romoco_drake.simulation import frozen_heap, stderr_progress
+from romoco_drake.wiring import build_diagram, initial_positions
 
 # The matrix's default robots (the RoMoCo paper's); any robot with a walking scenario can be asked for.
 WALKING_ROBOTS = ("g1", "cassie", "h1")

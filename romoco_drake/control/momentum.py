@@ -48,17 +48,8 @@ lateral row (across the stance line) joins the task level with ``lateral_task_we
 point contact gives no moment about any horizontal axis, so in its single support both
 horizontal rows do (with them strict a point-foot biped fell within a second).
 
-Where the angular rows sit is a gain (``MomentumGains.weighted_axes``): the axes named there
-leave level 1 and join the task level with ``angular_task_weight``. Measured on ``xo_walk``
-(Table I, range rows on every joint): all three strict (``""``, the paper's order) walks it
-with ``centroidal_am_ratio`` 0.030 but vy rms 0.051 m/s; x, y strict and yaw weighted, 0.045
-and 0.052; all three weighted at 1000 (the default), 0.059 and 0.040 (0.035 and 0.043 with
-range rows on the locked joints only, the default). Strict, every bit of momentum the swing
-leg makes must be cancelled by the arms or the pelvis at once, which drives the arms hard;
-weighted, L_G trades a little against the pelvis and the swing foot.
-
-With the defaults (vx, vy rms, m/s): ``xo_walk`` 0.030, 0.043; ``g1_walk`` 0.035, 0.037;
-``h1_walk`` 0.029, 0.056 (0.087, 0.24 with range rows on every joint and a strict lateral row).
+Where the angular rows sit, and what it measured, is a gain:
+:class:`~romoco_drake.control.momentum_types.MomentumGains`.
 
 When level 0's constraints cannot all hold (a joint moving fast toward its stop needs more
 torque to stop than it has), the tick is solved again without the torque limits (the motors
@@ -71,16 +62,12 @@ alone, so level 1 is skipped.
 
 from __future__ import annotations
 
-import dataclasses
-from dataclasses import dataclass
-
 import daqp
 import numpy as np
 
-from romoco_drake.config import Range, declare_ranges, positive
 from romoco_drake.control.controller import SolverResult, torque_command
 from romoco_drake.control.hqp import Level, null_space, solve_hierarchy
-from romoco_drake.control.settings import ControllerSettings
+from romoco_drake.control.momentum_types import ContactSpace, MomentumGains, MomentumSolution
 from romoco_drake.control.tasks import DEFAULT_TASK_GAINS, TaskGain, TaskStack
 from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.embedding.outputs import leg_chain, sole_frame
@@ -90,33 +77,6 @@ from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.wrench_cone import rectangle_wrench_cone
 from romoco_drake.spatial import GRAVITY, skew
-
-
-@dataclass(frozen=True)
-class MomentumGains:
-    """Gains of eq. 22 and the regularisation level.
-
-    ``kp``, ``kd`` (1/s², 1/s): horizontal CoM toward the ALIP plan; ``k_angular`` (1/s): the
-    decay rate of L_G; ``angular_weight``: the angular rows' weight against the linear ones,
-    both scaled to CoM-acceleration units (linear ÷ m, angular ÷ m z0); ``posture_kp``,
-    ``posture_kd``: the weak joint PD toward the nominal pose; ``wrench_weight``: the contact
-    wrenches' weight (per N², against joint accelerations per (rad/s²)²);
-    ``weighted_axes``, ``angular_task_weight``: which angular rows sit at the task level (module
-    docstring) and their weight there, in those units; ``lateral_task_weight``: the same for
-    the lateral CoM row of a line contact's single support (module docstring; on ``h1_walk``
-    100 gave vy rms 0.099 m/s, 1000 0.056, 3000 0.058, 10000 0.093).
-    """
-
-    kp: float = 15.0
-    kd: float = 6.0
-    k_angular: float = 10.0
-    angular_weight: float = 0.5
-    posture_kp: float = 20.0
-    posture_kd: float = 8.0
-    wrench_weight: float = 1e-6
-    weighted_axes: str = "xyz"
-    angular_task_weight: float = 1000.0
-    lateral_task_weight: float = 1000.0
 
 
 def _ankle_joints(robot: RobotModel, side: str, sole: tuple) -> list[tuple]:
@@ -139,46 +99,6 @@ def _ankle_joints(robot: RobotModel, side: str, sole: tuple) -> list[tuple]:
     return out
 
 
-@dataclass(frozen=True)
-class MomentumSolution:
-    """One tick: torque, v̇, contact wrenches λ (6 a foot, then internal forces), the desired and
-    reached centroidal momentum rate [k̇; ṁv] (6,), the failed level (None: solved) and what was
-    relaxed to solve it (module docstring)."""
-
-    tau: np.ndarray
-    vdot: np.ndarray
-    wrenches: np.ndarray
-    hdot_desired: np.ndarray
-    hdot: np.ndarray
-    failed: str | None
-    relaxed: str | None = None  # what was given up to answer: a limit group or a skipped level
-
-
-@dataclass
-class MomentumConfig(ControllerSettings):
-    """The momentum controller's settings (``name: momentum``): ``gains`` (:class:`MomentumGains`),
-    level 0's ``friction_margin`` and ``cop_margin`` (m) inside each sole's wrench cone, and the
-    locked joints' range rows (stop within ``limit_horizon`` s, ``limit_margin`` rad inside)."""
-
-    name: str = "momentum"
-    gains: MomentumGains = dataclasses.field(default_factory=MomentumGains)
-    friction_margin: float = 0.1
-    cop_margin: float = 0.01
-    limit_horizon: float = 0.1
-    limit_margin: float = 0.02
-
-
-# Gains beyond 1e4 (1/s², 1/s) outrun a 1 kHz tick; weights as the XO paper's (≤ 1e6 apart is a
-# hard priority already); a friction margin of 1 leaves no friction, a CoP margin past 0.1 m no sole.
-declare_ranges(MomentumGains, kp=Range(0.0, 1e4, "1/s²"), kd=Range(0.0, 1e3, "1/s"),
-               k_angular=Range(0.0, 1e3, "1/s"), angular_weight=Range(0.0, 1e6),
-               posture_kp=Range(0.0, 1e4, "1/s²"), posture_kd=Range(0.0, 1e3, "1/s"),
-               wrench_weight=Range(0.0, 1e6), angular_task_weight=Range(0.0, 1e6),
-               lateral_task_weight=Range(0.0, 1e6))
-declare_ranges(MomentumConfig, friction_margin=Range(0.0, 1.0, hi_open=True), cop_margin=Range(0.0, 0.1, "m"),
-               limit_horizon=positive(1.0, "s"), limit_margin=Range(0.0, 0.5, "rad"))
-
-
 class MomentumHqp:
     """The hierarchical momentum controller for one robot (module docstring).
 
@@ -190,12 +110,13 @@ class MomentumHqp:
 
     warm_start_size = 0
 
-    def __init__(self, robot: RobotModel, contact: ContactModel, gains: MomentumGains = MomentumGains(),
+    def __init__(self, robot: RobotModel, contact: ContactModel, gains: MomentumGains | None = None,
                  task_gains: tuple[TaskGain, ...] = DEFAULT_TASK_GAINS, constraint_damping: float = 0.0,
                  friction_margin: float = 0.1, cop_margin: float = 0.01,
                  effort_limits: np.ndarray | None = None, limit_horizon: float = 0.1,
                  limit_margin: float = 0.02):
-        self.robot, self.contact, self.gains, self.k_h = robot, contact, gains, constraint_damping
+        self.robot, self.contact, self.k_h = robot, contact, constraint_damping
+        self.gains = gains or MomentumGains()
         B = robot.B
         selection = np.all((B == 0.0) | (B == 1.0)) and np.all(B.sum(axis=0) == 1.0)
         if not (selection and np.all(B.sum(axis=1) <= 1.0)):
@@ -245,13 +166,36 @@ class MomentumHqp:
 
     def compute(self, kin: RobotKinematics, refs: TaskReferences) -> MomentumSolution:
         """The hierarchy's solution at the state of ``kin`` for the references ``refs``."""
-        r, g = self.robot, self.gains
-        nv, v, m = r.nv, kin.v, r.total_mass
-        feet = refs.domain.feet
-        # Contact rows: each foot's sole-centre spatial Jacobian in its sole frame S (the wrench
-        # [τ; f] is then in S, where its cone is constant), then the internal loops.
+        space = self._contact_space(kin, refs)
+        E, e, G, lower, upper = self._level_zero(kin, space)
+        tasks = self._tasks.evaluate(refs, kin.q)
+        a_cmd = tasks.yddot_des - tasks.kp * tasks.error - tasks.kd * (tasks.J @ kin.v - tasks.ydot_des)
+        A_G, Adot_v = kin.centroidal_momentum_matrix()
+        hdot_des, levels = self._levels(kin, refs, space, tasks, a_cmd, A_G, Adot_v)
+        result = solve_hierarchy(E, e, G, lower, upper, levels)
+        relaxed = result.skipped
+        # Level 0 infeasible: the joint-range rows ask for a stop the torque limits cannot give.
+        # Give up the torque limits first (the motor clips the torque), then the joint ranges.
+        nu = self.robot.nu
+        limits = len(G) - len(self._limited_v)
+        for name, rows in (("torque limits", slice(0, nu)), ("joint ranges", slice(limits, None))):
+            if result.failed is None:
+                break
+            lower[rows], upper[rows] = -np.inf, np.inf
+            result = solve_hierarchy(E, e, G, lower, upper, levels)
+            relaxed = name
+        x = result.x
+        vdot = space.vdot0 + space.P @ x
+        tau = space.F[self._rows_a] @ x + space.f0[self._rows_a]
+        hdot = A_G @ vdot + Adot_v
+        return MomentumSolution(tau, vdot, x[space.nz:], hdot_des, hdot, result.failed, relaxed)
+
+    def _contact_space(self, kin: RobotKinematics, refs: TaskReferences) -> ContactSpace:
+        """v̇ = v̇₀ + P x in the null space of the active contacts (module docstring): each foot's
+        sole-centre spatial Jacobian in its sole frame S (the wrench [τ; f] is then in S, where its
+        cone is constant), then the internal loops."""
         J_rows, bias_rows, cones = [], [], []
-        for side in feet:
+        for side in refs.domain.feet:
             J, bias = self.sole_motion(kin, side)
             J_rows.append(J)
             bias_rows.append(bias)
@@ -261,7 +205,8 @@ class MomentumHqp:
         bias_rows.append(refs.holonomic.Jdot_v[n_f:])
         Jc = np.vstack(J_rows)
         U_r, s_r, V_r, Z = null_space(Jc)
-        vdot0 = V_r @ ((U_r.T @ (-np.concatenate(bias_rows) - self.k_h * (Jc @ v))) / s_r) if len(s_r) \
+        nv = self.robot.nv
+        vdot0 = V_r @ ((U_r.T @ (-np.concatenate(bias_rows) - self.k_h * (Jc @ kin.v))) / s_r) if len(s_r) \
             else np.zeros(nv)
         nz, nl = Z.shape[1], Jc.shape[0]
         n = nz + nl
@@ -271,30 +216,39 @@ class MomentumHqp:
         F = np.empty((nv, n))
         F[:, :nz] = kin.M @ Z
         F[:, nz:] = -Jc.T
-        f0 = kin.M @ vdot0 + kin.C
-        u, a = self._rows_u, self._rows_a
-        E, e = F[u], -f0[u]
-        n_cone, n_lim = sum(len(c) for c in cones), len(self._limited_v)
-        G = np.zeros((r.nu + n_cone + n_lim, n))
+        return ContactSpace(vdot0, P, F, kin.M @ vdot0 + kin.C, nz, nl, cones)
+
+    def _level_zero(self, kin: RobotKinematics, space: ContactSpace):
+        """Level 0: the unactuated dynamics rows (E x = e) and the torque limits, each sole's wrench
+        cone and the limited joints' acceleration bounds (lower ≤ G x ≤ upper)."""
+        nu, F, f0, a = self.robot.nu, space.F, space.f0, self._rows_a
+        E, e = F[self._rows_u], -f0[self._rows_u]
+        n_cone, n_lim = sum(len(c) for c in space.cones), len(self._limited_v)
+        G = np.zeros((nu + n_cone + n_lim, F.shape[1]))
         lower = np.full(len(G), -np.inf)
         upper = np.zeros(len(G))
-        G[:r.nu] = F[a]
-        lower[:r.nu] = -self._effort - f0[a]
-        upper[:r.nu] = self._effort - f0[a]
-        row, col = r.nu, nz
-        for cone in cones:
+        G[:nu] = F[a]
+        lower[:nu] = -self._effort - f0[a]
+        upper[:nu] = self._effort - f0[a]
+        row, col = nu, space.nz
+        for cone in space.cones:
             G[row:row + len(cone), col:col + cone.shape[1]] = cone
             row, col = row + len(cone), col + cone.shape[1]
-        G[row:] = P[self._limited_v]
+        G[row:] = space.P[self._limited_v]
         lo_acc, hi_acc = self._joint_acceleration_bounds(kin)
-        lower[row:], upper[row:] = lo_acc - vdot0[self._limited_v], hi_acc - vdot0[self._limited_v]
-        tasks = self._tasks.evaluate(refs, kin.q)
-        a_cmd = tasks.yddot_des - tasks.kp * tasks.error - tasks.kd * (tasks.J @ v - tasks.ydot_des)
+        lower[row:] = lo_acc - space.vdot0[self._limited_v]
+        upper[row:] = hi_acc - space.vdot0[self._limited_v]
+        return E, e, G, lower, upper
+
+    def _levels(self, kin: RobotKinematics, refs: TaskReferences, space: ContactSpace, tasks, a_cmd,
+                A_G, Adot_v) -> tuple[np.ndarray, list[Level]]:
+        """(the desired momentum rate, NaN in the air; levels 1-3 of the hierarchy)."""
+        g, m, feet = self.gains, self.robot.total_mass, refs.domain.feet
+        P, vdot0 = space.P, space.vdot0
         k_out = int(np.count_nonzero(refs.active))
         names = [name for name, on in zip(refs.names, refs.active, strict=True) if on]
         com = [i for i, name in enumerate(names) if name.startswith("com_")]
         other = [i for i in range(k_out) if i not in com]
-        A_G, Adot_v = kin.centroidal_momentum_matrix()
         hdot_des = np.full(6, np.nan)
         levels = []
         if feet:
@@ -324,21 +278,8 @@ class MomentumHqp:
                                      np.full(3, g.lateral_task_weight / m**2)])
             task_w = np.concatenate([task_w, w_soft[soft]])
         levels.append(Level("tasks", task_A, task_b, task_w))
-        levels.append(self._regularization(kin, tasks, a_cmd, k_out, P, vdot0, nz, nl))
-        result = solve_hierarchy(E, e, G, lower, upper, levels)
-        relaxed = result.skipped
-        # Level 0 infeasible: the joint-range rows ask for a stop the torque limits cannot give.
-        # Give up the torque limits first (the motor clips the torque), then the joint ranges.
-        for name, rows in (("torque limits", slice(0, r.nu)), ("joint ranges", slice(row, None))):
-            if result.failed is None:
-                break
-            lower[rows], upper[rows] = -np.inf, np.inf
-            result = solve_hierarchy(E, e, G, lower, upper, levels)
-            relaxed = name
-        x = result.x
-        vdot = vdot0 + P @ x
-        tau = F[a] @ x + f0[a]
-        return MomentumSolution(tau, vdot, x[nz:], hdot_des, A_G @ vdot + Adot_v, result.failed, relaxed)
+        levels.append(self._regularization(kin, tasks, a_cmd, k_out, P, vdot0, space.nz, space.nl))
+        return hdot_des, levels
 
     def _line_frame(self, kin: RobotKinematics, side: str) -> np.ndarray:
         """(2×2) world xy → the stance sole's heading frame: rows along and across its toe-heel line."""

@@ -16,7 +16,8 @@ from dataclasses import dataclass
 from romoco_drake.config import LINK_TICK_OFFSET
 from romoco_drake.control.inverse_dynamics import IdConfig, InverseDynamics
 from romoco_drake.control.inverse_kinematics import IkConfig, IkSolver
-from romoco_drake.control.momentum import MomentumConfig, MomentumHqp
+from romoco_drake.control.momentum import MomentumHqp
+from romoco_drake.control.momentum_types import MomentumConfig
 from romoco_drake.control.mpc_wbc import MpcWbc, WbcConfig
 from romoco_drake.control.settings import ControllerSettings
 from romoco_drake.control.standing import StandingController

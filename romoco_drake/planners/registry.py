@@ -3,7 +3,7 @@
 Each factory takes ``(robot, config)`` and returns the planner system. A planner system
 declares what it reads: its input ports are named after the loop's signals (``rom_state``,
 ``swing_foot``, ``gait_phase``, ``command``, ``kinematics``, ``mode``; see
-:func:`~romoco_drake.scenario.build_diagram`) and the loop connects each one it has, listed in
+:func:`~romoco_drake.wiring.build_diagram`) and the loop connects each one it has, listed in
 its ``loop_inputs``. It also states the double-support time it plans with (``t_ds``) and whether
 the state machine should follow its adapted step times (``adapts_timing``).
 """
