@@ -23,14 +23,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from romoco_drake.bench.sweep import (
-    IN_PROCESS,
-    SweepOptions,
-    Variant,
-    add_sweep_args,
-    run_sweep,
-    sweep_options,
-)
+from romoco_drake.bench.sweep import SweepOptions, Variant, add_sweep_args, run_sweep, sweep_options
 from romoco_drake.commands import names, print_rows
 from romoco_drake.errors import RomocoError
 from romoco_drake.metrics import AVERAGE_WINDOW_S, moving_average
@@ -137,7 +130,7 @@ def agility_variants(robot: str, modes, motions, rate: float, top: float | None,
 
 
 def bench_agility(robot: str = "draco", modes=INERTIA_MODES, motions=tuple(MOTIONS), rate: float = 0.1,
-                  top: float | None = None, sweep: SweepOptions = IN_PROCESS, progress=None
+                  top: float | None = None, sweep: SweepOptions | None = None, progress=None
                   ) -> list[dict]:
     """One ramp per inertia mode × motion (module docstring); ``top`` defaults to 1.5× the paper's best."""
     return run_sweep(agility_variants(robot, modes, motions, rate, top), sweep, progress)

@@ -14,14 +14,7 @@ import dataclasses
 
 import numpy as np
 
-from romoco_drake.bench.sweep import (
-    IN_PROCESS,
-    SweepOptions,
-    Variant,
-    add_sweep_args,
-    run_sweep,
-    sweep_options,
-)
+from romoco_drake.bench.sweep import SweepOptions, Variant, add_sweep_args, run_sweep, sweep_options
 from romoco_drake.commands import print_rows
 from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces.dropout import STREAM_CHANNELS, Dropout
@@ -64,7 +57,7 @@ def dropout_job(scenario: Scenario) -> dict:
 
 
 def bench_dropout(robot: str = "g1", durations=(0.1, 0.3), phases: int = 4, stream: str = "proprioception",
-                  sweep: SweepOptions = IN_PROCESS, progress=None) -> list[dict]:
+                  sweep: SweepOptions | None = None, progress=None) -> list[dict]:
     """One row per (dropout length, start time); see the module docstring."""
     walking = load_robot(robot).config.walking
     step = walking.t_ss + walking.t_ds

@@ -21,14 +21,7 @@ from collections.abc import Sequence
 
 from pydrake.systems.analysis import Simulator
 
-from romoco_drake.bench.sweep import (
-    IN_PROCESS,
-    SweepOptions,
-    Variant,
-    add_sweep_args,
-    run_sweep,
-    sweep_options,
-)
+from romoco_drake.bench.sweep import SweepOptions, Variant, add_sweep_args, run_sweep, sweep_options
 from romoco_drake.commands import names, numbers
 from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces.disturbance import Disturbance
@@ -82,7 +75,7 @@ def pushed(scenario: Scenario, t: float, impulse: float, direction: str, push_s:
 
 def bench_push(robot: str = "g1", impulses=IMPULSES, phases=PHASES, directions=tuple(DIRECTIONS),
                overlays: Sequence[str] = OVERLAYS, speed: float = SPEED, push_s: float = PUSH_S,
-               sweep: SweepOptions = IN_PROCESS, progress=None) -> dict:
+               sweep: SweepOptions | None = None, progress=None) -> dict:
     """The push table (module docstring): per cell the largest impulse survived, and per direction
     the smallest of those over the phases. The result names the overlays and echoes the planner
     and controller settings they gave."""

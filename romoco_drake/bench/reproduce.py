@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from romoco_drake.bench.agility import MOTIONS, PAPER, agility_variants
-from romoco_drake.bench.sweep import IN_PROCESS, SweepOptions, Variant, run_sweep
+from romoco_drake.bench.sweep import SweepOptions, Variant, run_sweep
 from romoco_drake.bench.walking import WALKING_ROBOTS, bench_tick, walk_scenario
 from romoco_drake.control.registry import CONTROLLERS
 from romoco_drake.errors import RomocoError
@@ -392,7 +392,7 @@ SECTIONS: dict[str, tuple[Callable[[Settings], list[Variant]], Callable[[list[di
     "vimpc": (vimpc_variants, vimpc_claims)}
 
 
-def reproduce(papers: list[str], quick: bool = False, sweep: SweepOptions = IN_PROCESS, progress=None
+def reproduce(papers: list[str], quick: bool = False, sweep: SweepOptions | None = None, progress=None
               ) -> tuple[list[Claim], list[dict]]:
     """The claims of ``papers`` and the rows of their runs (one sweep for all)."""
     unknown = [p for p in papers if p not in PAPERS]

@@ -90,9 +90,10 @@ def _check_reachable(address: str, timeout_s: float = 5.0) -> None:
     except OSError as e:
         raise RomocoError(f"--ray-address {address}: no Ray cluster reachable ({e.strerror or e})") from None
 
-def run_sweep(variants: Sequence[Variant], options: SweepOptions = IN_PROCESS,
+def run_sweep(variants: Sequence[Variant], options: SweepOptions | None = None,
               progress: Callable[[str], None] | None = None) -> list[dict]:
-    """One row per variant, in order (module docstring)."""
+    """One row per variant, in order (module docstring); no ``options``: in this process."""
+    options = options or IN_PROCESS
     if not variants:
         return []
     meter = _Progress(len(variants), progress)

@@ -9,14 +9,7 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.bench.rom import percentiles
-from romoco_drake.bench.sweep import (
-    IN_PROCESS,
-    SweepOptions,
-    Variant,
-    add_sweep_args,
-    run_sweep,
-    sweep_options,
-)
+from romoco_drake.bench.sweep import SweepOptions, Variant, add_sweep_args, run_sweep, sweep_options
 from romoco_drake.commands import names, print_rows
 from romoco_drake.control.gravity import contact_gravity_compensation
 from romoco_drake.control.registry import CONTROLLERS, traits
@@ -61,7 +54,7 @@ def matrix_job(scenario: Scenario, duration: float | None) -> dict:
             | {k: s[k] for k in ESTIMATE_ERRORS if k in s})
 
 
-def bench_matrix(robots, planners, controllers, duration: float | None, sweep: SweepOptions = IN_PROCESS,
+def bench_matrix(robots, planners, controllers, duration: float | None, sweep: SweepOptions | None = None,
                  progress=None, estimator: str | None = None) -> list[dict]:
     """One closed-loop run per robot × planner × controller on the robot's default profile, on
     ``estimator`` if given (a filter's rows add its errors against the truth)."""
