@@ -20,9 +20,9 @@ What the simulation plant adds (:meth:`RobotModel.add_to_builder`) is added here
 
 What cannot match SAP exactly (documented in the README): MuJoCo's contact is a soft constraint
 (solref time constant and damping ratio, solimp impedance) where SAP's point contact is a
-compliant force law with Hunt-Crossley dissipation. The contact time constant here is that of
-Drake's default stiffness estimate (penetration allowance 1 mm, damping ratio 1: the whole robot on
-its sole points), floored at two plant steps, MuJoCo's stability limit. SAP regularises friction
+compliant force law with Hunt-Crossley dissipation, near-rigid at the plant steps used here. The
+contact time constant (``CONTACT_TIME_STEPS`` plant steps, damping ratio 1) is the one that matched
+SAP's standing sink and PD-standing base path best (measured). SAP regularises friction
 (a stiction tolerance); MuJoCo's elliptic cone has its own regularisation. Joint limits are SAP
 constraints in Drake and soft MuJoCo limits here (the same time constant).
 
@@ -44,11 +44,15 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.tree import PrismaticJoint, RevoluteJoint
 
 from romoco_drake.errors import RomocoError
-from romoco_drake.robots.model import SOLE_SPHERE_RADIUS, RobotModel, load_robot
+from romoco_drake.robots.model import SOLE_SPHERE_RADIUS, RobotModel
 
 INSTALL_HINT = "pip install 'romoco-drake[mujoco]'"
 EQUALITY_TIME_CONSTANTS = 2.0  # plant steps: the stiffest solref MuJoCo integrates stably
-DRAKE_PENETRATION_ALLOWANCE = 1e-3  # m, MultibodyPlantConfig's default, behind SAP's stiffness
+# The contact's solref time constant in plant steps. SAP's default point contact is near-rigid at
+# these steps, so its sink scales with the step, not with the stiffness Drake estimates from its
+# penetration allowance. Measured (1 s of PD standing from the nominal pose, time constants 2-20 ms):
+# 10 steps matched Drake's standing sink and base path best on H1 (1 ms step) and G1 (2 ms).
+CONTACT_TIME_STEPS = 10.0
 _ONE_DOF = {"revolute": "hinge", "prismatic": "slide"}
 _NO_DOF = ("weld",)
 _FREE = ("quaternion_floating",)
@@ -89,7 +93,7 @@ class MujocoModel:
         qpos[0:3], qpos[3:7] = q[b + 4:b + 7], q[b:b + 4]
         qpos[self.joint_qpos] = q[r.joint_q_index]
         quat = q[b:b + 4]
-        R_WB = RotationMatrix(_unit_quaternion(quat)).matrix()
+        R_WB = quaternion_rotation(quat)
         qvel[0:3], qvel[3:6] = v[bv + 3:bv + 6], R_WB.T @ v[bv:bv + 3]
         qvel[self.joint_dof] = v[r.joint_v_index]
         return qpos, qvel
@@ -101,7 +105,7 @@ class MujocoModel:
         b, bv = r.base_q_start, r.base_v_start
         q[b:b + 4], q[b + 4:b + 7] = qpos[3:7], qpos[0:3]
         q[r.joint_q_index] = qpos[self.joint_qpos]
-        R_WB = RotationMatrix(_unit_quaternion(qpos[3:7])).matrix()
+        R_WB = quaternion_rotation(qpos[3:7])
         v[bv:bv + 3], v[bv + 3:bv + 6] = R_WB @ qvel[3:6], qvel[0:3]
         v[r.joint_v_index] = qvel[self.joint_dof]
         return np.concatenate([q, v])
@@ -113,16 +117,21 @@ class MujocoModel:
         T = np.zeros((self.model.nv, r.nv))
         bv = r.base_v_start
         T[0:3, bv + 3:bv + 6] = np.eye(3)
-        T[3:6, bv:bv + 3] = RotationMatrix(_unit_quaternion(q[r.base_q_start:r.base_q_start + 4])).matrix().T
+        T[3:6, bv:bv + 3] = quaternion_rotation(q[r.base_q_start:r.base_q_start + 4]).T
         T[self.joint_dof, r.joint_v_index] = 1.0
         return T
 
 
-def _unit_quaternion(wxyz: np.ndarray):
-    from pydrake.common.eigen_geometry import Quaternion
-
+def quaternion_rotation(wxyz: np.ndarray) -> np.ndarray:
+    """R (3×3) of the quaternion ``wxyz`` after normalising it (identity when it has no finite
+    length, a diverged state); numpy, as this runs twice per plant step."""
     norm = np.linalg.norm(wxyz)
-    return Quaternion(wxyz=wxyz / norm if np.isfinite(norm) and norm > 1e-12 else np.array([1.0, 0, 0, 0]))
+    if not (np.isfinite(norm) and norm > 1e-12):
+        return np.eye(3)
+    w, x, y, z = wxyz / norm
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
 def build_mujoco_model(robot: RobotModel, time_step: float) -> MujocoModel:
@@ -143,8 +152,8 @@ def build_mujoco_model(robot: RobotModel, time_step: float) -> MujocoModel:
     try:
         model = spec.compile()
     except Exception as e:  # MuJoCo's compiler error: one line naming the element
-        raise RomocoError(f"{robot.name}: MuJoCo cannot compile the model ({str(e).strip().splitlines()[0]})") \
-            from None
+        reason = str(e).strip().splitlines()[0]
+        raise RomocoError(f"{robot.name}: MuJoCo cannot compile the model ({reason})") from None
     for k, c in enumerate(robot.config.distance_constraints):
         eq = model.equality(f"distance_{k}")
         eq.data[0] = c.length - model.tendon_length0[model.tendon(f"distance_{k}").id]
@@ -152,9 +161,10 @@ def build_mujoco_model(robot: RobotModel, time_step: float) -> MujocoModel:
 
 
 @functools.cache
-def mujoco_model(robot_name: str, time_step: float) -> MujocoModel:
-    """The cached MuJoCo model of the shipped robot ``robot_name`` (built once per process and step)."""
-    return build_mujoco_model(load_robot(robot_name), time_step)
+def mujoco_model(robot: RobotModel, time_step: float) -> MujocoModel:
+    """:func:`build_mujoco_model`, once per robot and step in a process (stations copy the MjModel
+    they change)."""
+    return build_mujoco_model(robot, time_step)
 
 
 def _check_supported(robot: RobotModel) -> None:
@@ -253,18 +263,14 @@ def _add_joint(mujoco, body, joint, X_BM: RigidTransform, robot: RobotModel) -> 
             mj_joint.armature = float(actuator.default_reflected_inertia())
 
 
-def contact_time_constant(robot: RobotModel, time_step: float) -> float:
-    """MuJoCo's contact solref time constant (s): the period/2π of the whole robot bouncing on all its
-    sole points with Drake's default point stiffness (m·g/allowance per geometry, two in series per
-    contact), floored at two plant steps."""
-    points = sum(foot.sim_points.shape[1] for foot in robot.feet.values())
-    omega = np.sqrt(points * 9.81 / (2.0 * DRAKE_PENETRATION_ALLOWANCE))
-    return max(1.0 / omega, EQUALITY_TIME_CONSTANTS * time_step)
+def contact_time_constant(time_step: float) -> float:
+    """MuJoCo's contact solref time constant (s): ``CONTACT_TIME_STEPS`` plant steps."""
+    return CONTACT_TIME_STEPS * time_step
 
 
 def _add_contact(mujoco, spec, robot: RobotModel, time_step: float) -> None:
     mu = robot.config.feet.friction
-    solref = [contact_time_constant(robot, time_step), 1.0]
+    solref = [contact_time_constant(time_step), 1.0]
     spec.worldbody.add_geom(name="ground", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0.0, 0.0, 1.0],
                             contype=2, conaffinity=1, friction=[mu, 0.0, 0.0], condim=3, solref=solref)
     for side, foot in robot.feet.items():
@@ -318,6 +324,6 @@ def _maps(mujoco, robot: RobotModel, model, time_step: float) -> MujocoModel:
         joint_dof=np.array([int(j.dofadr[0]) for j in joints], dtype=int),
         actuator_joint_dof=np.array([int(j.dofadr[0]) for j in actuated], dtype=int),
         body_ids=body_ids,
-        foot_body_ids=(model.body(robot.feet["left"].body_name).id, model.body(robot.feet["right"].body_name).id),
+        foot_body_ids=tuple(model.body(robot.feet[side].body_name).id for side in ("left", "right")),
         base_id=model.body(robot.config.base_body).id,
     )
