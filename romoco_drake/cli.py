@@ -106,12 +106,14 @@ def _follow_sliders(sliders, plant, diagram, context, period: float = 0.05) -> N
 
 def _cmd_run(args) -> int:
     from romoco_drake.control.registry import CONTROLLERS
+    from romoco_drake.interfaces.engines import with_engine
     from romoco_drake.interfaces.hardware import LINK_COUNTERS
     from romoco_drake.runner import run_scenario, stderr_progress
     from romoco_drake.scenario import load_scenario, with_overrides
 
     scenario = with_overrides(load_scenario(args.scenario), args.planner, args.controller, args.command,
                               args.estimator, args.solver, args.push, args.dropout)
+    scenario = with_engine(scenario, args.engine)
     if args.via_lcm and args.hardware:
         raise RomocoError("--via-lcm and --hardware exclude each other")
     link = "via_lcm" if args.via_lcm else "hardware" if args.hardware else "sim"
@@ -206,12 +208,14 @@ def _cmd_new_robot(args) -> int:
 
 
 def _cmd_robot_sim(args) -> int:
+    from romoco_drake.interfaces.engines import with_engine
     from romoco_drake.runner import run_robot_sim, stderr_progress
     from romoco_drake.scenario import load_scenario
 
     meshcat = _live_meshcat(args.meshcat)
-    summary = run_robot_sim(load_scenario(args.scenario), args.duration, args.lcm_url, meshcat,
-                            progress=stderr_progress, wait_s=args.wait)
+    scenario = with_engine(load_scenario(args.scenario), args.engine)
+    summary = run_robot_sim(scenario, args.duration, args.lcm_url, meshcat, progress=stderr_progress,
+                            wait_s=args.wait)
     if args.json:
         print(json.dumps(summary))
     else:
@@ -322,6 +326,11 @@ def _add_sweep_args(p: argparse.ArgumentParser) -> None:
                    help="parallel runs: 1 (default) in this process, N on a local Ray instance with N CPUs")
     p.add_argument("--ray-address", metavar="ADDR",
                    help="run on the Ray cluster at ADDR (host:port or ray://host:port) instead")
+
+
+def _add_engine_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--engine", help="the simulated robot's physics engine: drake or mujoco (default: the "
+                                    "scenario's station.engine)")
 
 
 def _names(text: str | None, default, what: str, known) -> list[str]:
@@ -573,6 +582,7 @@ def make_parser() -> argparse.ArgumentParser:
                    help="run only the controller, at real time, against a robot on LCM (see robot-sim)")
     p.add_argument("--lcm-url", help="LCM URL for --via-lcm or --hardware")
     p.add_argument("--lcm-log", type=Path, metavar="FILE", help="record the LCM traffic (LCM log format)")
+    _add_engine_arg(p)
     p.set_defaults(func=_cmd_run)
     p = sub.add_parser("diagram", help="draw a scenario's wired Drake diagram (every system and port)")
     p.add_argument("scenario")
@@ -596,6 +606,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--wait", type=float, default=60.0, metavar="S",
                    help="seconds to wait for the controller's first command before starting")
     p.add_argument("--json", action="store_true", help="print the summary as JSON (last line)")
+    _add_engine_arg(p)
     p.set_defaults(func=_cmd_robot_sim)
     p = sub.add_parser("plot", help="plot a run from its LCM log (romoco run --lcm-log)")
     p.add_argument("log", type=Path)

@@ -162,6 +162,7 @@ def run_scenario(
         "robot": scenario.robot,
         "controller": scenario.controller.name,
         "estimator": scenario.estimator.name,
+        "engine": scenario.station.engine,
         "duration_s": duration,
         "wall_s": round(wall, 3),
         "realtime_factor": round(duration / wall, 3) if wall > 0 else None,
@@ -206,7 +207,7 @@ def run_robot_sim(scenario: Scenario, duration: float | None = None, lcm_url: st
     motor_pd = uses_motor_command(scenario)
     robot_sim = make_robot_sim(robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link,
                                wait_for_commands_s=wait_s, motor_pd=motor_pd,
-                               disturbances=scenario.disturbances)
+                               disturbances=scenario.disturbances, engine=scenario.station.engine)
     simulator = Simulator(robot_sim)
     context = simulator.get_mutable_context()
     station = robot_sim.GetSubsystemByName("station")

@@ -44,6 +44,7 @@ from romoco_drake.estimation.registry import ESTIMATORS
 from romoco_drake.estimation.rom_state import RomStateFromRobot
 from romoco_drake.interfaces.disturbance import Disturbance, body_names
 from romoco_drake.interfaces.dropout import STREAM_CHANNELS, Dropout
+from romoco_drake.interfaces.engines import StationConfig, make_engine_station
 from romoco_drake.interfaces.hardware import (
     PUBLISH_DELAY,
     LinkConfig,
@@ -55,7 +56,6 @@ from romoco_drake.interfaces.lcm_codec import ESTOP_CHANNEL, STATUS_CHANNEL
 from romoco_drake.interfaces.monitor import FallMonitor
 from romoco_drake.interfaces.robot_sim import make_robot_sim
 from romoco_drake.interfaces.sensors import SensorConfig
-from romoco_drake.interfaces.station import make_station
 from romoco_drake.interfaces.teleop import RADIO_PERIOD, EstopGate, MeshcatRadio, PageDisplay
 from romoco_drake.planners.command import CommandLimiter, CommandSegment, CommandSource
 from romoco_drake.planners.foot_placement import FootPlacementPlanner
@@ -213,6 +213,8 @@ class Scenario:
     # Extra height of the base above the nominal pose at t = 0 (m): a drop test.
     initial_height_offset: float = 0.0
     sensors: SensorConfig = dataclasses.field(default_factory=SensorConfig)
+    # The simulated station's physics engine (interfaces/engines.py): drake or mujoco.
+    station: StationConfig = dataclasses.field(default_factory=StationConfig)
     link: LinkConfig = dataclasses.field(default_factory=LinkConfig)
     # Pushes on the simulated robot (interfaces/disturbance.py); none on hardware.
     disturbances: list[Disturbance] = dataclasses.field(default_factory=list)
@@ -518,8 +520,8 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
     offset = LINK_TICK_OFFSET
     plant_station = robot_sim = None
     if link == "sim":
-        station = make_station(robot, scenario.time_step, meshcat, motor_pd, scenario.sensors,
-                               disturbances=scenario.disturbances)
+        station = make_engine_station(scenario.station.engine, robot, scenario.time_step, meshcat, motor_pd,
+                                      scenario.sensors, disturbances=scenario.disturbances)
         plant_station = builder.AddNamedSystem("station", station)
     else:
         station = builder.AddNamedSystem(
@@ -529,7 +531,8 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
         if link == "via_lcm":
             robot_sim = builder.AddNamedSystem("robot", make_robot_sim(
                 robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link, motor_pd=motor_pd,
-                disturbances=scenario.disturbances, dropouts=scenario.dropouts))
+                disturbances=scenario.disturbances, dropouts=scenario.dropouts,
+                engine=scenario.station.engine))
             plant_station = robot_sim.GetSubsystemByName("station")
     estimator = _add_estimator(builder, scenario, robot, station, link != "hardware", offset)
     kinematics = builder.AddNamedSystem("kinematics", RobotKinematicsSystem(robot))

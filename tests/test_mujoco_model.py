@@ -42,7 +42,7 @@ def _mujoco_terms(mm, q, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def test_dynamics_match_drake(robot_name):
     """Mass matrix, Coriolis and gravity forces against Drake's at random states (≤ 1e-9)."""
     robot = load_robot(robot_name)
-    mm = mujoco_model(robot_name, 0.001)
+    mm = mujoco_model(robot, 0.001)
     plant = robot.plant
     context = plant.CreateDefaultContext()
     for seed in range(2):
@@ -57,7 +57,7 @@ def test_dynamics_match_drake(robot_name):
 
 def test_state_map_round_trip_and_joint_names(robot_name):
     robot = load_robot(robot_name)
-    mm = mujoco_model(robot_name, 0.001)
+    mm = mujoco_model(robot, 0.001)
     q, v = _random_state(robot, 3)
     x = np.concatenate([q, v])
     np.testing.assert_allclose(mm.to_drake(*mm.to_mujoco(x)), x, atol=1e-14)
@@ -71,7 +71,7 @@ def test_state_map_round_trip_and_joint_names(robot_name):
 def test_joint_map_follows_names_not_order(name):
     """H1's and XO's joints (the ports' order) are not in their state layout's order; the map
     pairs each with the MuJoCo joint of its name."""
-    mm = mujoco_model(name, 0.001)
+    mm = mujoco_model(load_robot(name), 0.001)
     robot = mm.robot
     assert not np.all(np.diff(robot.joint_q_index) > 0)
     for k, joint_name in enumerate(robot.joint_names):
@@ -82,7 +82,7 @@ def test_joint_map_follows_names_not_order(name):
 def test_closed_loops_hold_at_nominal(name):
     """At the nominal pose (which satisfies the loops) the equality residuals are ~0."""
     robot = load_robot(name)
-    mm = mujoco_model(name, 0.001)
+    mm = mujoco_model(load_robot(name), 0.001)
     data = mujoco.MjData(mm.model)
     data.qpos[:], data.qvel[:] = mm.to_mujoco(np.concatenate([robot.nominal.q, np.zeros(robot.nv)]))
     mujoco.mj_forward(mm.model, data)

@@ -10,6 +10,7 @@ so the controller diagram, the runner and the benches never change with the engi
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Literal
 
@@ -54,3 +55,12 @@ def make_engine_station(
     from romoco_drake.interfaces.mujoco_station import make_mujoco_station
 
     return make_mujoco_station(robot, time_step, meshcat, motor_pd, sensors, truth_log_period, disturbances)
+
+
+def with_engine(scenario, engine: str | None):
+    """``scenario`` (a :class:`~romoco_drake.scenario.Scenario`) on ``engine`` (the --engine flag;
+    None keeps the scenario's)."""
+    if engine is None:
+        return scenario
+    station = dataclasses.replace(scenario.station, engine=check_engine(engine))
+    return dataclasses.replace(scenario, station=station)
