@@ -9,6 +9,7 @@ import select
 import sys
 from pathlib import Path
 
+from romoco_drake.bench.engines_cli import add_sim2sim_parsers
 from romoco_drake.errors import RomocoError
 
 
@@ -281,7 +282,7 @@ def _cmd_bench_matrix(args) -> int:
     planners = _names(args.planners, ("hlip", "mlip", "dcm"), "planner", PLANNERS)
     controllers = _names(args.controllers, ("tscqp",), "walking controller", walking_controllers)
     rows = bench_matrix(robots, planners, controllers, args.duration, _sweep(args), progress=stderr_progress,
-                        estimator=args.estimator)
+                        estimator=args.estimator, engine=args.engine)
 
     def line(r: dict) -> str:
         fell = f"{r['fall_time_s']:.1f} s" if r["fell"] else "no"
@@ -407,7 +408,7 @@ def _cmd_bench_push(args) -> int:
     result = bench_push(args.robot, impulses, phases, directions, adapt=not args.no_adapt,
                         ankle_gain=args.ankle_gain, angular_momentum_weight=am_weight,
                         speed=args.speed, push_s=args.push_duration, sweep=_sweep(args),
-                        progress=stderr_progress)
+                        progress=stderr_progress, engine=args.engine or "drake")
     if args.json:
         print(json.dumps(result))
         return 0
@@ -637,7 +638,9 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--estimator", help="run every scenario on this estimator (default: each scenario's own)")
     p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
     _add_sweep_args(p)
+    _add_engine_arg(p)
     p.set_defaults(func=_cmd_bench_matrix)
+    add_sim2sim_parsers(bench, _add_sweep_args)
     p = bench.add_parser("agility", help="VI-MPC: largest speed tracked per inertia mode and motion "
                          "(paper §IV-B)")
     p.add_argument("--robot", default="draco")
@@ -671,6 +674,7 @@ def make_parser() -> argparse.ArgumentParser:
                         "of it on pitch (default: 30; 0: off)")
     p.add_argument("--speed", type=float, default=0.4, help="forward walking speed (m/s)")
     p.add_argument("--push-duration", type=float, default=0.1, help="how long each push lasts (s)")
+    _add_engine_arg(p)
     p.add_argument("--json", action="store_true", help="print one JSON object (last line)")
     _add_sweep_args(p)
     p.set_defaults(func=_cmd_bench_push)

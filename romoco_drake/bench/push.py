@@ -19,6 +19,7 @@ from pydrake.systems.analysis import Simulator
 
 from romoco_drake.bench.sweep import IN_PROCESS, SweepOptions, Variant, run_sweep
 from romoco_drake.interfaces.disturbance import Disturbance
+from romoco_drake.interfaces.engines import with_engine
 from romoco_drake.scenario import (
     CommandPoint,
     Scenario,
@@ -89,10 +90,11 @@ def bench_push(robot: str = "g1", impulses=IMPULSES, phases=PHASES, directions=t
                adapt: bool = True, ankle_gain: float = 0.0,
                angular_momentum_weight: float = ANGULAR_MOMENTUM_WEIGHT,
                speed: float = SPEED, push_s: float = PUSH_S, sweep: SweepOptions = IN_PROCESS,
-               progress=None) -> dict:
+               progress=None, engine: str = "drake") -> dict:
     """The push table (module docstring): per cell the largest impulse survived, and per direction
-    the smallest of those over the phases."""
+    the smallest of those over the phases; the robot simulated on ``engine``."""
     scenario = walking_scenario(robot, adapt, ankle_gain, angular_momentum_weight, speed)
+    scenario = with_engine(scenario, engine)
     start, step = step_clock(scenario)
     cells = {(d, ph): {"direction": d, "phase": ph, "push_time_s": round(start + ph * step, 4),
                        "survived": 0.0, "fell_at": None, "fall_time_s": None}
@@ -112,7 +114,7 @@ def bench_push(robot: str = "g1", impulses=IMPULSES, phases=PHASES, directions=t
         if not alive:
             break
     per_direction = {d: min(cells[(d, ph)]["survived"] for ph in phases) for d in directions}
-    return {"robot": robot, "step_adaptation": adapt, "ankle_gain": ankle_gain,
+    return {"robot": robot, "engine": engine, "step_adaptation": adapt, "ankle_gain": ankle_gain,
             "angular_momentum_weight": angular_momentum_weight,
             "angular_momentum_axes": list(ANGULAR_MOMENTUM_AXES), "speed_mps": speed, "push_s": push_s,
             "impulses": sorted(impulses), "step_s": round(step, 4), "criterion": CRITERION,

@@ -11,6 +11,7 @@ from romoco_drake.bench.rom import percentiles
 from romoco_drake.bench.sweep import IN_PROCESS, SweepOptions, Variant, run_sweep
 from romoco_drake.control.gravity import contact_gravity_compensation
 from romoco_drake.errors import RomocoError
+from romoco_drake.interfaces.engines import with_engine
 from romoco_drake.interfaces.station import make_station
 from romoco_drake.planners.vimpc import VimpcPlanner
 from romoco_drake.robots.kinematics import RobotKinematics
@@ -55,11 +56,11 @@ def matrix_job(scenario: Scenario, duration: float | None) -> dict:
 
 
 def bench_matrix(robots, planners, controllers, duration: float | None, sweep: SweepOptions = IN_PROCESS,
-                 progress=None, estimator: str | None = None) -> list[dict]:
+                 progress=None, estimator: str | None = None, engine: str | None = None) -> list[dict]:
     """One closed-loop run per robot × planner × controller on the robot's default profile, on
-    ``estimator`` if given (a filter's rows add its errors against the truth)."""
-    variants = [Variant(with_overrides(walk_scenario(robot), planner=planner, controller=controller,
-                                       estimator=estimator),
+    ``estimator`` if given (a filter's rows add its errors against the truth), on ``engine`` if given."""
+    variants = [Variant(with_engine(with_overrides(walk_scenario(robot), planner=planner,
+                                                   controller=controller, estimator=estimator), engine),
                         {"robot": robot, "planner": planner, "controller": controller}, matrix_job,
                         {"duration": duration})
                 for robot in robots for planner in planners for controller in controllers]
