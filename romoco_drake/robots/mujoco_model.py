@@ -24,7 +24,7 @@ compliant force law with Hunt-Crossley dissipation, near-rigid at the plant step
 contact time constant (``CONTACT_TIME_STEPS`` plant steps, damping ratio 1) is the one that matched
 SAP's standing sink and PD-standing base path best (measured). SAP regularises friction
 (a stiction tolerance); MuJoCo's elliptic cone has its own regularisation. Joint limits are SAP
-constraints in Drake and soft MuJoCo limits here (the same time constant).
+constraints in Drake and soft MuJoCo limits here (as stiff as the loops' equalities).
 
 The state maps (:class:`MujocoModel`) hold the explicit joint map: the two engines order their
 joints differently (H1's and XO's), and the floating base is [q_WB (w x y z); p_WB] with velocity
@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.math import RigidTransform, RotationMatrix
-from pydrake.multibody.tree import PrismaticJoint, RevoluteJoint
+from pydrake.multibody.tree import BodyIndex, ForceElementIndex, RevoluteJoint
 
 from romoco_drake.errors import RomocoError
 from romoco_drake.robots.model import SOLE_SPHERE_RADIUS, RobotModel
@@ -53,7 +53,7 @@ EQUALITY_TIME_CONSTANTS = 2.0  # plant steps: the stiffest solref MuJoCo integra
 # penetration allowance. Measured (1 s of PD standing from the nominal pose, time constants 2-20 ms):
 # 10 steps matched Drake's standing sink and base path best on H1 (1 ms step) and G1 (2 ms).
 CONTACT_TIME_STEPS = 10.0
-_ONE_DOF = {"revolute": "hinge", "prismatic": "slide"}
+_ONE_DOF = ("revolute", "prismatic")
 _NO_DOF = ("weld",)
 _FREE = ("quaternion_floating",)
 # kg and kg·m²: MuJoCo's floor under a moving body's mass and principal moments (its own check is
@@ -145,7 +145,7 @@ def build_mujoco_model(robot: RobotModel, time_step: float) -> MujocoModel:
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
     _check_supported(robot)
-    _add_tree(mujoco, spec, robot)
+    _add_tree(mujoco, spec, robot, time_step)
     _add_contact(mujoco, spec, robot, time_step)
     _add_actuators(mujoco, spec, robot)
     _add_loops(mujoco, spec, robot, time_step)
@@ -181,14 +181,12 @@ def _check_supported(robot: RobotModel) -> None:
             raise RomocoError(f"{robot.name}: MuJoCo engine: a second floating body "
                               f"'{joint.child_body().name()}' is not supported")
     for i in range(1, plant.num_force_elements()):  # element 0 is gravity
-        from pydrake.multibody.tree import ForceElementIndex
-
         element = plant.get_force_element(ForceElementIndex(i))
         raise RomocoError(f"{robot.name}: MuJoCo engine: force element {type(element).__name__} is not "
                           "supported")
 
 
-def _add_tree(mujoco, spec, robot: RobotModel) -> None:
+def _add_tree(mujoco, spec, robot: RobotModel, time_step: float) -> None:
     """Every body below the world, depth first, at its inboard joint's zero configuration."""
     plant = robot.plant
     children: dict[int, list] = {}
@@ -199,11 +197,11 @@ def _add_tree(mujoco, spec, robot: RobotModel) -> None:
     while pending:
         parent_spec, parent_index = pending.pop()
         for joint in children.get(parent_index, []):
-            body = _add_body(mujoco, parent_spec, joint, robot)
+            body = _add_body(mujoco, parent_spec, joint, robot, time_step)
             pending.append((body, int(joint.child_body().index())))
 
 
-def _add_body(mujoco, parent_spec, joint, robot: RobotModel):
+def _add_body(mujoco, parent_spec, joint, robot: RobotModel, time_step: float):
     """The child body of ``joint``, its inertia and the joint itself (none for a weld)."""
     child = joint.child_body()
     kind = joint.type_name()
@@ -217,7 +215,7 @@ def _add_body(mujoco, parent_spec, joint, robot: RobotModel):
     if kind in _FREE:
         body.add_freejoint(name=joint.name())
     elif kind in _ONE_DOF:
-        _add_joint(mujoco, body, joint, X_BM, robot)
+        _add_joint(mujoco, body, joint, X_BM, robot, time_step)
     return body
 
 
@@ -241,18 +239,20 @@ def _set_inertia(body, M_BBo_B, moving: bool) -> None:
         body.inertia = [floor] * 3
 
 
-def _add_joint(mujoco, body, joint, X_BM: RigidTransform, robot: RobotModel) -> None:
+def _add_joint(mujoco, body, joint, X_BM: RigidTransform, robot: RobotModel, time_step: float) -> None:
+    """A hinge or slide at the joint's child frame, with its damping, limits (as stiff as the loops)
+    and the actuator's reflected inertia as armature."""
     axis_F = joint.revolute_axis() if isinstance(joint, RevoluteJoint) else joint.translation_axis()
     mj_joint = body.add_joint(name=joint.name(), pos=X_BM.translation(),
                               axis=X_BM.rotation().matrix() @ axis_F)
     mj_joint.type = (mujoco.mjtJoint.mjJNT_HINGE if isinstance(joint, RevoluteJoint)
                      else mujoco.mjtJoint.mjJNT_SLIDE)
-    assert isinstance(joint, RevoluteJoint | PrismaticJoint)
     mj_joint.damping = [float(joint.default_damping()), 0.0, 0.0]  # linear damping only
     lower, upper = joint.position_lower_limits()[0], joint.position_upper_limits()[0]
     if np.isfinite(lower) and np.isfinite(upper):
         mj_joint.limited = mujoco.mjtLimited.mjLIMITED_TRUE
         mj_joint.range = [lower, upper]
+        mj_joint.solref_limit = [EQUALITY_TIME_CONSTANTS * time_step, 1.0]
     elif np.isfinite(lower) or np.isfinite(upper):
         raise RomocoError(f"{robot.name}: MuJoCo engine: joint '{joint.name()}' has a one-sided position "
                           "limit, which MuJoCo cannot represent")
@@ -315,8 +315,6 @@ def _maps(mujoco, robot: RobotModel, model, time_step: float) -> MujocoModel:
     actuated = [model.joint(name) for name in robot.actuator_names]
     body_ids = np.zeros(plant.num_bodies(), dtype=int)
     for i in range(1, plant.num_bodies()):
-        from pydrake.multibody.tree import BodyIndex
-
         body_ids[i] = model.body(plant.get_body(BodyIndex(i)).name()).id
     return MujocoModel(
         robot=robot, model=model, time_step=time_step,
