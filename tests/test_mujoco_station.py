@@ -183,3 +183,14 @@ def test_mujoco_not_installed_is_a_one_line_error(monkeypatch):
     scenario = dataclasses.replace(load_scenario("g1_stand"))
     with pytest.raises(RomocoError, match=r"pip install 'romoco-drake\[mujoco\]'"):
         with_engine(scenario, "mujoco")
+
+
+def test_cli_engine_errors_are_one_line(capsys, monkeypatch):
+    from romoco_drake.cli import main
+
+    assert main(["run", "g1_stand", "--engine", "bullet", "--duration", "0.01"]) == 2
+    assert capsys.readouterr().err.strip() == "romoco: error: unknown engine 'bullet' (known: drake, mujoco)"
+    monkeypatch.setitem(sys.modules, "mujoco", None)
+    assert main(["bench", "engines", "--robots", "g1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "pip install 'romoco-drake[mujoco]'" in err
