@@ -194,3 +194,13 @@ def test_cli_engine_errors_are_one_line(capsys, monkeypatch):
     assert main(["bench", "engines", "--robots", "g1"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "pip install 'romoco-drake[mujoco]'" in err
+
+
+def test_the_lcm_robot_side_runs_on_mujoco():
+    """The robot behind LCM (``romoco robot-sim --engine mujoco``'s diagram) with the controller over
+    memq in one process: G1 stands, and the robot side counted no trouble."""
+    scenario = with_engine(load_scenario("g1_stand"), "mujoco")
+    summary = run_scenario(scenario, duration=0.5, link="via_lcm")
+    assert not summary["fell"] and summary["engine"] == "mujoco"
+    assert summary["robot_link"]["damping_events"] == 0 and summary["robot_link"]["stale_events"] == 0
+    assert summary["base_height_drift_m"] < 0.01
