@@ -204,3 +204,18 @@ def test_the_lcm_robot_side_runs_on_mujoco():
     assert not summary["fell"] and summary["engine"] == "mujoco"
     assert summary["robot_link"]["damping_events"] == 0 and summary["robot_link"]["stale_events"] == 0
     assert summary["base_height_drift_m"] < 0.01
+
+
+def test_meshcat_draws_the_mujoco_state():
+    """A geometry-only plant draws the MuJoCo state under the Drake station's ``robot`` prefix."""
+    from pydrake.geometry import Meshcat
+
+    robot = load_robot("bolt")
+    meshcat = Meshcat()
+    station = make_engine_station("mujoco", robot, 0.001, meshcat=meshcat)
+    context = station.CreateDefaultContext()
+    plant = station.GetSubsystemByName("plant")
+    plant.SetPositions(plant.GetMyMutableContextFromRoot(context), robot.nominal.q)
+    station.GetInputPort("actuation").FixValue(context, np.zeros(robot.nu))
+    station.ForcedPublish(context)
+    assert meshcat.HasPath(f"/drake/robot/{robot.name}/{robot.config.base_body}")
