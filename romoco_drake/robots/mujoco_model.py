@@ -37,6 +37,7 @@ second floating body) raises a one-line :class:`~romoco_drake.errors.RomocoError
 from __future__ import annotations
 
 import functools
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,11 +63,17 @@ MIN_INERTIA = 1e-12
 
 
 def import_mujoco():
-    """The ``mujoco`` module, or a one-line error giving the install command."""
+    """The ``mujoco`` module, or a one-line error giving the install command.
+
+    MuJoCo's warnings go to the ``romoco_drake.mujoco`` logger instead of its default, a
+    MUJOCO_LOG.TXT in the working directory: the station acts on the one that matters (a reset
+    after a diverged step) itself."""
     try:
         import mujoco
     except ImportError:
         raise RomocoError(f"the MuJoCo engine needs the mujoco extra: {INSTALL_HINT}") from None
+    if mujoco.get_mju_user_warning() is None:
+        mujoco.set_mju_user_warning(logging.getLogger("romoco_drake.mujoco").warning)
     return mujoco
 
 
