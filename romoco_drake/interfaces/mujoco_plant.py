@@ -86,7 +86,7 @@ class MujocoPlant(LeafSystem):
             "body_poses", lambda: AbstractValue.Make([RigidTransform()]), self._body_poses,
             prerequisites_of_calc={self.xd_ticket()})
 
-    # The plant calls the runner and benches make (duck-typed on MultibodyPlant's).
+    # What the runner and benches call on a station's "plant" (MultibodyPlant's names).
     def SetPositions(self, context, q: np.ndarray) -> None:
         x = context.get_mutable_discrete_state(STATE).get_mutable_value()
         x[:self._mm.robot.nq] = q
@@ -102,7 +102,7 @@ class MujocoPlant(LeafSystem):
         x = context.get_discrete_state(STATE).value()
         if not np.all(np.isfinite(x)):
             raise RuntimeError(f"{DIVERGED_MESSAGE} before t = {context.get_time():.4f} s "
-                               "(a non-finite acceleration; MuJoCo reset its data)")
+                               "(its last step was non-finite and MuJoCo reset its data)")
         for w in self._warnings:
             d.warning[w].number = 0
         d.xfrc_applied[:] = 0.0
