@@ -15,8 +15,9 @@ What the simulation plant adds (:meth:`RobotModel.add_to_builder`) is added here
 - the effort limits: one general actuator per Drake actuator, force ``ctrl − K_p q − K_d q̇``
   (the gains are set per step by the station) clipped at ± the effort limit.
 - the internal loops as stiff equality constraints (solref ``EQUALITY_TIME_CONSTANTS`` plant
-  steps): a distance constraint (Cassie's rods) as a spatial tendon between two sites held at its
-  length, a coupler (DRACO's rolling knees) as a joint equality q_f = ρ q_l.
+  steps, impedance ``EQUALITY_SOLIMP``): a distance constraint (Cassie's rods) as a spatial tendon
+  between two sites held at its length, a coupler (DRACO's rolling knees) as a joint equality
+  q_f = ρ q_l.
 
 What cannot match SAP exactly (documented in the README): MuJoCo's contact is a soft constraint
 (solref time constant and damping ratio, solimp impedance) where SAP's point contact is a
@@ -49,6 +50,9 @@ from romoco_drake.robots.model import SOLE_SPHERE_RADIUS, RobotModel
 
 INSTALL_HINT = "pip install 'romoco-drake[mujoco]'"
 EQUALITY_TIME_CONSTANTS = 2.0  # plant steps: the stiffest solref MuJoCo integrates stably
+# Impedance 0.9999 (MuJoCo's default 0.9-0.95 lets a loaded loop give): measured over 4 s of walking,
+# DRACO's rolling-knee error 6e-3 rad → 1.2e-5 rad and Cassie's rods 1.4e-4 m → 3.5e-5 m (SAP: 5e-7 rad).
+EQUALITY_SOLIMP = [0.9999, 0.9999, 0.001, 0.5, 2.0]
 # The contact's solref time constant in plant steps. SAP's default point contact is near-rigid at
 # these steps, so its sink scales with the step, not with the stiffness Drake estimates from its
 # penetration allowance. Measured (1 s of PD standing from the nominal pose, time constants 2-20 ms):
@@ -309,10 +313,11 @@ def _add_loops(mujoco, spec, robot: RobotModel, time_step: float) -> None:
         tendon.wrap_site(f"distance_{k}_a")
         tendon.wrap_site(f"distance_{k}_b")
         spec.add_equality(name=f"distance_{k}", type=mujoco.mjtEq.mjEQ_TENDON, name1=f"distance_{k}",
-                          objtype=mujoco.mjtObj.mjOBJ_TENDON, solref=solref)
+                          objtype=mujoco.mjtObj.mjOBJ_TENDON, solref=solref, solimp=EQUALITY_SOLIMP)
     for k, c in enumerate(robot.config.coupler_constraints):
         eq = spec.add_equality(name=f"coupler_{k}", type=mujoco.mjtEq.mjEQ_JOINT, name1=c.follower,
-                               name2=c.leader, objtype=mujoco.mjtObj.mjOBJ_JOINT, solref=solref)
+                               name2=c.leader, objtype=mujoco.mjtObj.mjOBJ_JOINT, solref=solref,
+                               solimp=EQUALITY_SOLIMP)
         eq.data[:5] = [0.0, c.ratio, 0.0, 0.0, 0.0]
 
 
