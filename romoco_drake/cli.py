@@ -162,7 +162,17 @@ def _default_inertia_data(robot: str) -> Path:
 
 
 def make_parser() -> argparse.ArgumentParser:
-    from romoco_drake.bench import agility, dropout, embedding, inertia, push, report, rom, walking
+    from romoco_drake.bench import (
+        agility,
+        dropout,
+        embedding,
+        engines_cli,
+        inertia,
+        push,
+        report,
+        rom,
+        walking,
+    )
     from romoco_drake.runner import register_plot, register_robot_sim, register_run
 
     parser = argparse.ArgumentParser(prog="romoco", description=__doc__)
@@ -186,7 +196,7 @@ def make_parser() -> argparse.ArgumentParser:
     register_plot(sub)
     bench = sub.add_parser("bench", help="benchmarks that print numbers").add_subparsers(
         dest="bench", required=True)
-    for module in (rom, embedding, walking, agility, dropout, push):
+    for module in (rom, embedding, walking, engines_cli, agility, dropout, push):
         module.register(bench)
     walking.register_tick(bench)
     inertia.register(bench)

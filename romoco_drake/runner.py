@@ -21,6 +21,7 @@ from romoco_drake.commands import fall_text, live_meshcat
 from romoco_drake.control.momentum_log import momentum_summary
 from romoco_drake.control.registry import traits
 from romoco_drake.errors import RomocoError
+from romoco_drake.interfaces.engines import with_engine
 from romoco_drake.interfaces.hardware import link_summary
 from romoco_drake.interfaces.lcm_log import LcmLogRecorder
 from romoco_drake.interfaces.robot_sim import make_robot_sim, robot_summary
@@ -147,6 +148,7 @@ def _run_summary(built, context, scenario: Scenario, link: str, end: RunEnd, dur
         "robot": scenario.robot,
         "controller": scenario.controller.name,
         "estimator": scenario.estimator.name,
+        "engine": scenario.station.engine,
         "duration_s": duration,
         "wall_s": round(end.wall_s, 3),
         "realtime_factor": round(duration / end.wall_s, 3) if end.wall_s > 0 else None,
@@ -182,7 +184,7 @@ def run_robot_sim(scenario: Scenario, duration: float | None = None, lcm_url: st
     robot = load_robot(scenario.robot)
     robot_sim = make_robot_sim(robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link,
                                wait_for_commands_s=wait_s, motor_pd=uses_motor_command(scenario),
-                               disturbances=scenario.disturbances)
+                               disturbances=scenario.disturbances, engine=scenario.station.engine)
     simulator = Simulator(robot_sim)
     context = simulator.get_mutable_context()
     station = robot_sim.GetSubsystemByName("station")
@@ -287,13 +289,21 @@ def add_run_args(p) -> None:
                    help="run only the controller, at real time, against a robot on LCM (see robot-sim)")
     p.add_argument("--lcm-url", help="LCM URL for --via-lcm or --hardware")
     p.add_argument("--lcm-log", type=Path, metavar="FILE", help="record the LCM traffic (LCM log format)")
+    add_engine_arg(p)
 
 
 def scenario_from_args(args, flags: tuple[str, ...] = OVERRIDES) -> Scenario:
     """The scenario ``args.scenario`` names with the override ``flags`` (those of ``OVERRIDES``
     the subcommand has) applied; run, robot-sim and bench tick build their scenario here."""
-    return with_overrides(load_scenario(args.scenario, getattr(args, "overlay", None) or ()),
-                          *(getattr(args, flag) if flag in flags else None for flag in OVERRIDES))
+    scenario = with_overrides(load_scenario(args.scenario, getattr(args, "overlay", None) or ()),
+                              *(getattr(args, flag) if flag in flags else None for flag in OVERRIDES))
+    return with_engine(scenario, getattr(args, "engine", None))
+
+
+def add_engine_arg(p) -> None:
+    """``--engine``: the simulated robot's physics engine (interfaces/engines.py)."""
+    p.add_argument("--engine", help="the simulated robot's physics engine: drake or mujoco (default: the "
+                                    "scenario's station.engine)")
 
 
 def add_overlay_arg(p) -> None:
@@ -371,6 +381,7 @@ def register_robot_sim(sub) -> None:
                    help="seconds to wait for the controller's first command before starting")
     p.add_argument("--json", action="store_true", help="print the summary as JSON (last line)")
     add_overlay_arg(p)
+    add_engine_arg(p)
     p.set_defaults(func=_cmd_robot_sim)
 
 

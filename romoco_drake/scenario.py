@@ -34,6 +34,7 @@ from romoco_drake.estimation.registry import ESTIMATORS
 from romoco_drake.estimation.settings import EstimatorSettings
 from romoco_drake.interfaces.disturbance import Disturbance, body_names
 from romoco_drake.interfaces.dropout import STREAM_CHANNELS, Dropout
+from romoco_drake.interfaces.engines import StationConfig
 from romoco_drake.interfaces.hardware import (
     LinkConfig,
 )
@@ -82,6 +83,8 @@ class Scenario:
     # Extra height of the base above the nominal pose at t = 0 (m): a drop test.
     initial_height_offset: float = 0.0
     sensors: SensorConfig = dataclasses.field(default_factory=SensorConfig)
+    # The simulated station's physics engine (interfaces/engines.py): drake or mujoco.
+    station: StationConfig = dataclasses.field(default_factory=StationConfig)
     link: LinkConfig = dataclasses.field(default_factory=LinkConfig)
     # Pushes on the simulated robot (interfaces/disturbance.py); none on hardware.
     disturbances: list[Disturbance] = dataclasses.field(default_factory=list)

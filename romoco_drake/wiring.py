@@ -30,6 +30,7 @@ from romoco_drake.estimation.ground_truth import GroundTruthEstimator
 from romoco_drake.estimation.kalman_estimator import KalmanEstimator
 from romoco_drake.estimation.registry import ESTIMATORS
 from romoco_drake.estimation.rom_state import RomStateFromRobot
+from romoco_drake.interfaces.engines import make_engine_station
 from romoco_drake.interfaces.hardware import (
     PUBLISH_DELAY,
     StatusSender,
@@ -39,7 +40,6 @@ from romoco_drake.interfaces.hardware import (
 from romoco_drake.interfaces.lcm_codec import ESTOP_CHANNEL, STATUS_CHANNEL
 from romoco_drake.interfaces.monitor import FallMonitor
 from romoco_drake.interfaces.robot_sim import make_robot_sim
-from romoco_drake.interfaces.station import make_station
 from romoco_drake.interfaces.teleop import RADIO_PERIOD, EstopGate, MeshcatRadio, PageDisplay
 from romoco_drake.planners.command import CommandLimiter, CommandSegment, CommandSource
 from romoco_drake.planners.foot_placement import FootPlacementPlanner
@@ -188,8 +188,8 @@ def _add_station(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel,
     side or None) for ``link``."""
     motor_pd = uses_motor_command(scenario)
     if link == "sim":
-        station = make_station(robot, scenario.time_step, meshcat, motor_pd, scenario.sensors,
-                               disturbances=scenario.disturbances)
+        station = make_engine_station(scenario.station.engine, robot, scenario.time_step, meshcat, motor_pd,
+                                      scenario.sensors, disturbances=scenario.disturbances)
         return builder.AddNamedSystem("station", station), station, None
     station = builder.AddNamedSystem("station", make_hardware_station(
         robot, lcm, 1.0 / scenario.controller.rate_hz, motor_pd, scenario.link, LINK_TICK_OFFSET,
@@ -198,7 +198,7 @@ def _add_station(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel,
         return station, None, None
     robot_sim = builder.AddNamedSystem("robot", make_robot_sim(
         robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link, motor_pd=motor_pd,
-        disturbances=scenario.disturbances, dropouts=scenario.dropouts))
+        disturbances=scenario.disturbances, dropouts=scenario.dropouts, engine=scenario.station.engine))
     return station, robot_sim.GetSubsystemByName("station"), robot_sim
 
 

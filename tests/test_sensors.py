@@ -211,19 +211,14 @@ def test_a_diverged_state_reads_as_malformed_measurements_not_an_exception(quate
     """After a fall the plant's state can blow up; the IMU and motion capture then read NaN
     (which the estimators reject and count) instead of raising "Quaternion is not normalized"
     from inside the simulator's step."""
-    from pydrake.common.value import AbstractValue
-    from pydrake.multibody.math import SpatialAcceleration
-    from pydrake.multibody.plant import ContactResults
-
     run = simulate(EXACT, standing=False)
     sensors, robot = run.sensors, run.robot
     context = sensors.CreateDefaultContext()
     x = np.concatenate([robot.nominal.q, np.zeros(robot.nv)])
     x[robot.base_q_start:robot.base_q_start + 4] = quaternion
     sensors.plant_state_input.FixValue(context, x)
-    sensors.accelerations_input.FixValue(
-        context, AbstractValue.Make([SpatialAcceleration()] * run.plant.num_bodies()))
-    sensors.contact_results_input.FixValue(context, AbstractValue.Make(ContactResults()))
+    sensors.base_acceleration_input.FixValue(context, np.zeros(3))
+    sensors.foot_forces_input.FixValue(context, np.zeros(2))
     imu = sensors.imu_output.Eval(context)
     pose = sensors.base_pose_output.Eval(context)
     assert np.isnan(imu).all()
@@ -261,18 +256,13 @@ def test_biases_walk_and_the_onboard_yaw_drifts_with_the_vertical_gyro_error():
 def test_contact_switch_debounces_a_noisy_force():
     """A foot's switch changes only after its thresholded, noisy force has disagreed with it for the
     debounce time: a load under the threshold by less than the noise flickers raw but not debounced."""
-    from pydrake.common.value import AbstractValue
-    from pydrake.multibody.math import SpatialAcceleration
-    from pydrake.multibody.plant import ContactResults
-
     config = SensorConfig(contact_debounce_s=0.003, contact_force_noise_std=0.0)
     run = simulate(config, standing=False)
     sensors, robot = run.sensors, run.robot
     context = sensors.CreateDefaultContext()
     sensors.plant_state_input.FixValue(context, np.concatenate([robot.nominal.q, np.zeros(robot.nv)]))
-    sensors.accelerations_input.FixValue(
-        context, AbstractValue.Make([SpatialAcceleration()] * run.plant.num_bodies()))
-    sensors.contact_results_input.FixValue(context, AbstractValue.Make(ContactResults()))
+    sensors.base_acceleration_input.FixValue(context, np.zeros(3))
+    sensors.foot_forces_input.FixValue(context, np.zeros(2))
     state = context.get_mutable_discrete_state(0)
     state.SetAtIndex(7, 1.0)  # both switches on, the feet unloaded
     state.SetAtIndex(8, 1.0)

@@ -25,7 +25,9 @@ from romoco_drake.bench.sweep import SweepOptions, Variant, add_sweep_args, run_
 from romoco_drake.commands import names, numbers
 from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces.disturbance import Disturbance
+from romoco_drake.interfaces.engines import with_engine
 from romoco_drake.robots.model import robot_names
+from romoco_drake.runner import add_engine_arg
 from romoco_drake.scenario import CommandPoint, Scenario, load_scenario
 from romoco_drake.simulation import stderr_progress
 from romoco_drake.wiring import build_diagram, initial_positions
@@ -75,11 +77,11 @@ def pushed(scenario: Scenario, t: float, impulse: float, direction: str, push_s:
 
 def bench_push(robot: str = "g1", impulses=IMPULSES, phases=PHASES, directions=tuple(DIRECTIONS),
                overlays: Sequence[str] = OVERLAYS, speed: float = SPEED, push_s: float = PUSH_S,
-               sweep: SweepOptions | None = None, progress=None) -> dict:
+               sweep: SweepOptions | None = None, progress=None, engine: str = "drake") -> dict:
     """The push table (module docstring): per cell the largest impulse survived, and per direction
-    the smallest of those over the phases. The result names the overlays and echoes the planner
-    and controller settings they gave."""
-    scenario = walking_scenario(robot, overlays, speed)
+    the smallest of those over the phases; the robot simulated on ``engine``. The result names the
+    overlays and echoes the planner and controller settings they gave."""
+    scenario = with_engine(walking_scenario(robot, overlays, speed), engine)
     start, step = step_clock(scenario)
     cells = {(d, ph): {"direction": d, "phase": ph, "push_time_s": round(start + ph * step, 4),
                        "survived": 0.0, "fell_at": None, "fall_time_s": None}
@@ -99,7 +101,7 @@ def bench_push(robot: str = "g1", impulses=IMPULSES, phases=PHASES, directions=t
         if not alive:
             break
     per_direction = {d: min(cells[(d, ph)]["survived"] for ph in phases) for d in directions}
-    return {"robot": robot, "overlays": list(scenario.overlays),
+    return {"robot": robot, "engine": engine, "overlays": list(scenario.overlays),
             "planner": dataclasses.asdict(scenario.planner),
             "controller": dataclasses.asdict(scenario.controller),
             "speed_mps": speed, "push_s": push_s,
@@ -121,6 +123,7 @@ def register(bench) -> None:
     p.add_argument("--no-overlay", action="store_true", help="the shipped <robot>_walk settings as they are")
     p.add_argument("--speed", type=float, default=0.4, help="forward walking speed (m/s)")
     p.add_argument("--push-duration", type=float, default=0.1, help="how long each push lasts (s)")
+    add_engine_arg(p)
     p.add_argument("--json", action="store_true", help="print one JSON object (last line)")
     add_sweep_args(p)
     p.set_defaults(func=_cmd_bench_push)
@@ -139,7 +142,8 @@ def _cmd_bench_push(args) -> int:
         raise RomocoError("--speed must be in [0, 2] m/s and --push-duration in [0.01, 1] s")
     overlays = () if args.no_overlay else (args.overlay or OVERLAYS)
     result = bench_push(args.robot, impulses, phases, directions, overlays, speed=args.speed,
-                        push_s=args.push_duration, sweep=sweep_options(args), progress=stderr_progress)
+                        push_s=args.push_duration, sweep=sweep_options(args), progress=stderr_progress,
+                        engine=args.engine or "drake")
     if args.json:
         print(json.dumps(result))
     else:

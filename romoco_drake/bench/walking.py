@@ -14,12 +14,13 @@ from romoco_drake.commands import names, print_rows
 from romoco_drake.control.gravity import contact_gravity_compensation
 from romoco_drake.control.registry import CONTROLLERS, traits
 from romoco_drake.errors import RomocoError
+from romoco_drake.interfaces.engines import with_engine
 from romoco_drake.interfaces.station import make_station
 from romoco_drake.planners.registry import PLANNERS
 from romoco_drake.planners.vimpc import VimpcPlanner
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.rom.types import WalkCommand, side_from_sign
-from romoco_drake.runner import add_overlay_arg, run_scenario, scenario_from_args
+from romoco_drake.runner import add_engine_arg, add_overlay_arg, run_scenario, scenario_from_args
 from romoco_drake.scenario import Scenario, load_scenario, scenario_names, with_overrides
 from romoco_drake.simulation import frozen_heap, stderr_progress
 from romoco_drake.wiring import build_diagram, initial_positions
@@ -55,11 +56,12 @@ def matrix_job(scenario: Scenario, duration: float | None) -> dict:
 
 
 def bench_matrix(robots, planners, controllers, duration: float | None, sweep: SweepOptions | None = None,
-                 progress=None, estimator: str | None = None) -> list[dict]:
+                 progress=None, estimator: str | None = None, engine: str | None = None) -> list[dict]:
     """One closed-loop run per robot × planner × controller on the robot's default profile, on
-    ``estimator`` if given (a filter's rows add its errors against the truth)."""
-    variants = [Variant(with_overrides(walk_scenario(robot), planner=planner, controller=controller,
-                                       estimator=estimator),
+    ``estimator`` if given (a filter's rows add its errors against the truth), on ``engine`` if
+    given."""
+    variants = [Variant(with_engine(with_overrides(walk_scenario(robot), planner=planner,
+                                                   controller=controller, estimator=estimator), engine),
                         {"robot": robot, "planner": planner, "controller": controller}, matrix_job,
                         {"duration": duration})
                 for robot in robots for planner in planners for controller in controllers]
@@ -206,6 +208,7 @@ def register(bench) -> None:
     p.add_argument("--estimator", help="run every scenario on this estimator (default: each scenario's own)")
     p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
     add_sweep_args(p)
+    add_engine_arg(p)
     p.set_defaults(func=_cmd_bench_matrix)
 
 
@@ -228,7 +231,7 @@ def _cmd_bench_matrix(args) -> int:
     planners = names(args.planners, ("hlip", "mlip", "dcm"), "planner", PLANNERS)
     controllers = names(args.controllers, ("tscqp",), "walking controller", walking_controllers)
     rows = bench_matrix(robots, planners, controllers, args.duration, sweep_options(args),
-                        progress=stderr_progress, estimator=args.estimator)
+                        progress=stderr_progress, estimator=args.estimator, engine=args.engine)
 
     def line(r: dict) -> str:
         fell = f"{r['fall_time_s']:.1f} s" if r["fell"] else "no"

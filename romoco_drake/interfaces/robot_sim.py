@@ -26,6 +26,7 @@ from pydrake.systems.primitives import ConstantVectorSource
 
 from romoco_drake.interfaces.disturbance import Disturbance
 from romoco_drake.interfaces.dropout import Dropout
+from romoco_drake.interfaces.engines import make_engine_station
 from romoco_drake.interfaces.lcm_codec import (
     BASE_STATE_CHANNEL,
     ESTOP_CHANNEL,
@@ -48,7 +49,6 @@ from romoco_drake.interfaces.link import (
     subscribe,
 )
 from romoco_drake.interfaces.sensors import SensorConfig
-from romoco_drake.interfaces.station import make_station
 from romoco_drake.modes import LinkStage, RobotLinkCounters
 from romoco_drake.robots.model import RobotModel
 
@@ -207,7 +207,7 @@ def make_robot_sim(robot: RobotModel, lcm: DrakeLcmInterface, time_step: float =
                    config: LinkConfig | None = None, publish_period: float = 0.001,
                    wait_for_commands_s: float = 0.0, motor_pd: bool = True,
                    disturbances: list[Disturbance] | None = None,
-                   dropouts: list[Dropout] | None = None) -> Diagram:
+                   dropouts: list[Dropout] | None = None, engine: str = "drake") -> Diagram:
     """The simulated robot behind LCM (module docstring); no exported ports.
 
     Measurements are published every ``publish_period`` s (the robot's own rate). With
@@ -222,12 +222,13 @@ def make_robot_sim(robot: RobotModel, lcm: DrakeLcmInterface, time_step: float =
     and G1 walked 8 % fast and kept stepping after the stop over LCM).
     ``disturbances`` push the simulated robot (:func:`~romoco_drake.interfaces.station.make_station`);
     ``dropouts`` lose the measurements it sends (:mod:`~romoco_drake.interfaces.dropout`).
+    ``engine`` simulates the robot (:mod:`~romoco_drake.interfaces.engines`).
     """
     config = config or LinkConfig()
     builder = DiagramBuilder()
     builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
-    station = builder.AddNamedSystem("station", make_station(
-        robot, time_step, meshcat, motor_pd, sensors, disturbances=disturbances))
+    station = builder.AddNamedSystem("station", make_engine_station(
+        engine, robot, time_step, meshcat, motor_pd, sensors, disturbances=disturbances))
     receiver = builder.AddNamedSystem("receiver", CommandReceiver(robot, config, time_step))
     sender = builder.AddNamedSystem("sender", MeasurementSender(robot))
     subscribe(builder, lcm, MOTOR_COMMAND_CHANNEL, receiver.GetInputPort("command"), wait_for_commands_s)

@@ -9,6 +9,10 @@ truth: it is the on-board estimate such units output, level from gravity but wit
 integrated from the gyro, which drifts with the gyro's bias and noise about the vertical (or,
 with ``orientation_output: false``, NaN: rates only). The contact switches threshold a noisy
 foot force and are debounced.
+
+The sensors read engine-neutral inputs (the state, the base's acceleration and each foot's normal
+force), so every physics engine's station measures its robot with the same code;
+:class:`PlantContactReadout` gives those inputs from a Drake plant.
 """
 
 from __future__ import annotations
@@ -136,9 +140,9 @@ class SimulatedSensors(LeafSystem):
 
     | port                       | dir | size       | meaning                                       |
     |----------------------------|-----|------------|-----------------------------------------------|
-    | plant_state                | in  | nx         | the plant's state [q; v]                      |
-    | body_spatial_accelerations | in  | abstract   | the plant's A_WB of every body                |
-    | contact_results            | in  | abstract   | the plant's ContactResults (point contact)    |
+    | plant_state                | in  | nx         | the plant's state [q; v] (Drake's layout)     |
+    | base_acceleration          | in  | 3          | a_WBo_W of the base origin (m/s²), last step  |
+    | foot_normal_forces         | in  | 2          | [left, right] normal force (N), last step     |
     | joint_state                | out | 2·nj       | [q_j (rad); v_j (rad/s)], joint_names order   |
     | imu                        | out | 10         | on-board q_WB (w x y z); ω̃_B (rad/s); f̃_B (m/s²) |
     | foot_contact               | out | 2          | [left, right] debounced switches, 1.0 loaded  |
@@ -146,10 +150,10 @@ class SimulatedSensors(LeafSystem):
     | base_velocity              | out | 6          | exact [ω_WB; v_WB] in world (motion capture)  |
 
     The IMU sits at the base frame origin Bo with its axes along B: ω_B = R_WBᵀ ω_WB and
-    f_B = R_WBᵀ (a_WBo − g_W) with the plant's gravity g_W. A foot's switch reads its normal force
-    plus noise against ``contact_threshold_fraction`` of the robot's weight, debounced. The discrete
-    (SAP) plant reports the accelerations (Δv/h) and contact results of its most recent step
-    (zero and none before the first).
+    f_B = R_WBᵀ (a_WBo − g_W) with the robot's gravity g_W. A foot's switch reads its normal force
+    plus noise against ``contact_threshold_fraction`` of the robot's weight, debounced. A discrete
+    plant reports the acceleration (Δv/h) and foot forces of its most recent step (zero before the
+    first).
 
     Outputs are computed from the plant's current (discrete) state, without a hold of their
     own: a held sample is one plant step older than the state the controller would otherwise
@@ -167,24 +171,18 @@ class SimulatedSensors(LeafSystem):
     debounce timers. Read it with :meth:`imu_biases` and :meth:`orientation_yaw_error`.
     """
 
-    def __init__(self, robot: RobotModel, plant: MultibodyPlant, config: SensorConfig | None = None):
+    def __init__(self, robot: RobotModel, config: SensorConfig | None = None):
         super().__init__()
         config = config or SensorConfig()
-        if plant.get_contact_model() != ContactModel.kPoint:
-            raise RomocoError("simulated foot contact sensors need the point contact model, got "
-                              f"{plant.get_contact_model()}")
-        instance = robot.model_instance
+        plant, instance = robot.plant, robot.model_instance
         nq = plant.num_positions()
         joints = [plant.GetJointByName(name, instance) for name in robot.joint_names]
         nj = len(joints)
         self._joint_index = np.array([j.position_start() for j in joints]
                                      + [nq + j.velocity_start() for j in joints], dtype=int)
         base = plant.GetBodyByName(robot.config.base_body, instance)
-        self._base = base.index()
         self._base_q = base.floating_positions_start()
         self._base_v = nq + base.floating_velocities_start_in_v()
-        self._feet = [plant.GetBodyByName(robot.feet[s].body_name, instance).index()
-                      for s in ("left", "right")]
         self._g_W = plant.gravity_field().gravity_vector()
         self._contact_threshold = (
             config.contact_threshold_fraction * robot.total_mass * np.linalg.norm(self._g_W))
@@ -212,16 +210,14 @@ class SimulatedSensors(LeafSystem):
 
     def _declare_ports(self, plant: MultibodyPlant, nj: int) -> None:
         self.plant_state_input = self.DeclareVectorInputPort("plant_state", plant.num_multibody_states())
-        self.accelerations_input = self.DeclareAbstractInputPort(
-            "body_spatial_accelerations", plant.get_body_spatial_accelerations_output_port().Allocate())
-        self.contact_results_input = self.DeclareAbstractInputPort(
-            "contact_results", plant.get_contact_results_output_port().Allocate())
+        self.base_acceleration_input = self.DeclareVectorInputPort("base_acceleration", 3)
+        self.foot_forces_input = self.DeclareVectorInputPort("foot_normal_forces", 2)
         state, time = self.input_port_ticket(self.plant_state_input.get_index()), self.time_ticket()
         self.joint_state_output = self.DeclareVectorOutputPort(
             "joint_state", 2 * nj, self._joint_state, prerequisites_of_calc={state, time})
         self.imu_output = self.DeclareVectorOutputPort(
             "imu", 10, self._imu, prerequisites_of_calc={
-                state, time, self.xd_ticket(), self.input_port_ticket(self.accelerations_input.get_index())})
+                state, time, self.xd_ticket(), self.base_acceleration_input.ticket()})
         self.foot_contact_output = self.DeclareVectorOutputPort(
             "foot_contact", 2, lambda c, out: out.SetFromVector(self._sensor_state(c)[7:9]),
             prerequisites_of_calc={self.xd_ticket()})
@@ -278,7 +274,7 @@ class SimulatedSensors(LeafSystem):
             R_WB = RotationMatrix(Quaternion(wxyz=q_WB)).matrix()
             s[6] += self._dt * float(R_WB[2] @ (s[0:3] + gyro_noise))
         s[0:6] += self._noise(context, 3, self._walk_std)
-        forces = foot_normal_forces(self.contact_results_input.Eval(context), self._feet)
+        forces = self.foot_forces_input.Eval(context)
         raw = (forces + self._noise(context, 4, self._force_std) > self._contact_threshold).astype(float)
         switch, timer = s[7:9], s[9:11]
         timer[:] = np.where(raw != switch, timer + self._dt, 0.0)
@@ -295,7 +291,7 @@ class SimulatedSensors(LeafSystem):
             return
         R_WB = RotationMatrix(Quaternion(wxyz=q_WB)).matrix()
         w_WB_W = x[self._base_v:self._base_v + 3]
-        a_WBo_W = self.accelerations_input.Eval(context)[self._base].translational()
+        a_WBo_W = self.base_acceleration_input.Eval(context)
         s = self._sensor_state(context)
         if self._orientation_output:
             yaw = s[6]
@@ -318,12 +314,48 @@ class SimulatedSensors(LeafSystem):
         out.SetFromVector(pose)
 
 
+class PlantContactReadout(LeafSystem):
+    """A Drake plant's last step as the sensors' engine-neutral inputs.
+
+    | port                       | dir | size     | meaning                                        |
+    |----------------------------|-----|----------|------------------------------------------------|
+    | body_spatial_accelerations | in  | abstract | the plant's A_WB of every body                 |
+    | contact_results            | in  | abstract | the plant's ContactResults (point contact)     |
+    | base_acceleration          | out | 3        | a_WBo_W of the base origin (m/s²)              |
+    | foot_normal_forces         | out | 2        | [left, right] normal force (N)                 |
+    """
+
+    def __init__(self, robot: RobotModel, plant: MultibodyPlant):
+        super().__init__()
+        if plant.get_contact_model() != ContactModel.kPoint:
+            raise RomocoError("simulated foot contact sensors need the point contact model, got "
+                              f"{plant.get_contact_model()}")
+        instance = robot.model_instance
+        self._base = plant.GetBodyByName(robot.config.base_body, instance).index()
+        self._feet = [plant.GetBodyByName(robot.feet[side].body_name, instance).index()
+                      for side in ("left", "right")]
+        self.accelerations_input = self.DeclareAbstractInputPort(
+            "body_spatial_accelerations", plant.get_body_spatial_accelerations_output_port().Allocate())
+        self.contact_results_input = self.DeclareAbstractInputPort(
+            "contact_results", plant.get_contact_results_output_port().Allocate())
+        self.base_acceleration_output = self.DeclareVectorOutputPort(
+            "base_acceleration", 3, lambda c, out: out.SetFromVector(
+                self.accelerations_input.Eval(c)[self._base].translational()))
+        self.foot_forces_output = self.DeclareVectorOutputPort(
+            "foot_normal_forces", 2, lambda c, out: out.SetFromVector(
+                foot_normal_forces(self.contact_results_input.Eval(c), self._feet)))
+
+
 def add_sensors(
     builder: DiagramBuilder, plant: MultibodyPlant, robot: RobotModel, config: SensorConfig | None = None
 ) -> SimulatedSensors:
-    """Adds :class:`SimulatedSensors` named "sensors" to ``builder`` and connects it to ``plant``."""
-    sensors = builder.AddNamedSystem("sensors", SimulatedSensors(robot, plant, config))
+    """Adds :class:`SimulatedSensors` named "sensors" to ``builder``, fed by ``plant`` through a
+    :class:`PlantContactReadout` named "contact_readout"."""
+    readout = builder.AddNamedSystem("contact_readout", PlantContactReadout(robot, plant))
+    builder.Connect(plant.get_body_spatial_accelerations_output_port(), readout.accelerations_input)
+    builder.Connect(plant.get_contact_results_output_port(), readout.contact_results_input)
+    sensors = builder.AddNamedSystem("sensors", SimulatedSensors(robot, config))
     builder.Connect(plant.get_state_output_port(), sensors.plant_state_input)
-    builder.Connect(plant.get_body_spatial_accelerations_output_port(), sensors.accelerations_input)
-    builder.Connect(plant.get_contact_results_output_port(), sensors.contact_results_input)
+    builder.Connect(readout.base_acceleration_output, sensors.base_acceleration_input)
+    builder.Connect(readout.foot_forces_output, sensors.foot_forces_input)
     return sensors

@@ -115,6 +115,11 @@ class RobotModel:
         self._read_structure()
 
     # ----------------------------------------------------------------- building
+    def add_model(self, plant: MultibodyPlant) -> None:
+        """Parses the robot's model (no actuators, contact or constraints) into ``plant``: e.g. a
+        geometry-only plant that draws another engine's state."""
+        self._add_model(plant)
+
     def _add_model(self, plant: MultibodyPlant) -> None:
         parser = Parser(plant)
         for pkg, path in package_paths(self.config.model).items():
