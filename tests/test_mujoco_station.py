@@ -22,8 +22,9 @@ from romoco_drake.interfaces.mujoco_plant import DIVERGED_MESSAGE, MujocoPlant  
 from romoco_drake.robots.kinematics import RobotKinematics  # noqa: E402
 from romoco_drake.robots.model import load_robot  # noqa: E402
 from romoco_drake.robots.mujoco_model import mujoco_model  # noqa: E402
-from romoco_drake.runner import divergence, run_scenario  # noqa: E402
+from romoco_drake.runner import run_scenario  # noqa: E402
 from romoco_drake.scenario import Scenario, load_scenario  # noqa: E402
+from romoco_drake.simulation import divergence  # noqa: E402
 
 
 def _ports(station) -> dict:
