@@ -26,10 +26,6 @@ class Entry:
     facts: dict[str, Any] = field(default_factory=dict)
     config: type | None = None
 
-    def default_config(self) -> Any:
-        """The entry's settings with every default (``name`` set to the entry's)."""
-        return self.config(name=self.name)
-
 
 class Registry(Mapping[str, Entry]):
     """The components of one kind, by name (a read-only mapping once built)."""

@@ -52,7 +52,8 @@ def _scenario_data(name: str) -> dict:
         data.setdefault(key, dataclasses.asdict(config))
     for key, registry, default in (("controller", CONTROLLERS, "standing"), ("planner", PLANNERS, "hlip")):
         section = data.get(key, {})
-        data[key] = dataclasses.asdict(registry[section.get("name", default)].default_config()) | section
+        name = section.get("name", default)
+        data[key] = dataclasses.asdict(registry[name].config(name=name)) | section
     data.setdefault("initial_height_offset", 0.0)
     data.setdefault("estimator", {}).setdefault("rate_hz", 500.0)
     if "command" in data:  # walk from the start: a short run reaches the planner's solves

@@ -11,7 +11,7 @@ from pydrake.systems.analysis import Simulator
 from romoco_drake.bench.rom import profile_segments, run_template, segment_metrics, stride_velocities
 from romoco_drake.errors import RomocoError
 from romoco_drake.planners.command import CommandSegment, CommandSource
-from romoco_drake.planners.foot_placement import make_foot_placement_planner
+from romoco_drake.planners.foot_placement import FootPlacementPlanner
 from romoco_drake.planners.template import GaitState, HybridLipTemplate
 from romoco_drake.rom.hlip import hlip_s2s
 from romoco_drake.rom.lip import ss_flow
@@ -39,7 +39,7 @@ def _assert_same_plan(a: PlannerOutput, b: PlannerOutput) -> None:
 @pytest.mark.parametrize("name", foot_placement_laws())
 def test_planner_system_output_is_the_law(name):
     params = PlannerParams(mass=MASS, t_ds=T_DS)
-    system = make_foot_placement_planner(name, params)
+    system = FootPlacementPlanner(make_planner(name, params))
     law = make_planner(name, params)
     context = system.CreateDefaultContext()
     cmd = WalkCommand(vx=0.35, vy=-0.1, wz=0.2, com_height=0.7, step_time=0.35)
@@ -123,7 +123,7 @@ def test_template_takes_z0_from_the_command_at_the_support_switch():
 @pytest.fixture(scope="module", params=foot_placement_laws())
 def walk(request):
     """(name, segments, run, stride times, stride velocities) of a planner walking PROFILE."""
-    planner = make_foot_placement_planner(request.param, PlannerParams(mass=MASS, t_ds=T_DS))
+    planner = FootPlacementPlanner(make_planner(request.param, PlannerParams(mass=MASS, t_ds=T_DS)))
     segments = profile_segments(BASE, PROFILE)
     run = run_template(planner, MASS, segments, DURATION)
     return request.param, segments, run, *stride_velocities(run)

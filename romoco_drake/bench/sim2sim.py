@@ -5,27 +5,20 @@ controller on every engine, and sets the runs side by side: falls, velocity rms 
 and relaxed ticks, and per cell the ratio of each rms error on an engine to Drake's.
 
 ``engines`` times one station step per engine in the same process, on the same robot and plant
-step (the scenario's station alone holding the nominal pose's gravity compensation, as
-:func:`~romoco_drake.bench.walking.passive_plant_steps` does for Drake), so the two are measured
-on the same machine under the same load.
+step (:func:`~romoco_drake.bench.walking.passive_plant_steps` on each engine: the scenario's
+station alone holding the nominal pose's gravity compensation), so the two are measured on the
+same machine under the same load.
 """
 
 from __future__ import annotations
 
-import time
-
-from pydrake.systems.analysis import Simulator
-
 from romoco_drake.bench.rom import percentiles
 from romoco_drake.bench.sweep import SweepOptions, Variant, run_sweep
-from romoco_drake.bench.walking import walk_scenario
-from romoco_drake.control.gravity import contact_gravity_compensation
-from romoco_drake.interfaces.engines import make_engine_station, with_engine
-from romoco_drake.robots.kinematics import RobotKinematics
+from romoco_drake.bench.walking import passive_plant_steps, walk_scenario
+from romoco_drake.interfaces.engines import with_engine
 from romoco_drake.robots.model import load_robot
 from romoco_drake.runner import run_scenario
 from romoco_drake.scenario import Scenario, with_overrides
-from romoco_drake.simulation import frozen_heap
 
 SIM2SIM_KEYS = ("fell", "fall_time_s", "fall_reason", "velocity_rms_error", "qp_failures", "relaxed_ticks",
                 "steps", "realtime_factor")
@@ -70,38 +63,18 @@ def rms_ratio(errors: list | None, reference: list | None) -> list | None:
     return [round(e / r, 2) if e is not None and r else None for e, r in zip(errors, reference, strict=True)]
 
 
-def station_steps(engine: str, scenario: Scenario, steps: int) -> list[int]:
-    """Wall time (ns) of each of ``steps`` steps of ``scenario``'s station on ``engine`` alone (plant,
-    contact, sensors, monitor), holding the nominal pose's gravity compensation from standing."""
-    robot = load_robot(scenario.robot)
-    station = make_engine_station(engine, robot, scenario.time_step, sensors=scenario.sensors)
-    simulator = Simulator(station)
-    context = simulator.get_mutable_context()
-    plant = station.GetSubsystemByName("plant")
-    plant.SetPositions(plant.GetMyMutableContextFromRoot(context), robot.nominal.q)
-    torque = contact_gravity_compensation(robot, RobotKinematics(robot))
-    station.GetInputPort("actuation").FixValue(context, torque)
-    simulator.Initialize()
-    out = []
-    with frozen_heap():
-        for k in range(1, steps + 1):
-            t0 = time.perf_counter_ns()
-            simulator.AdvanceTo(k * scenario.time_step)
-            out.append(time.perf_counter_ns() - t0)
-    return out
-
-
 def bench_engines(robots, engines: list[str], steps: int = 500) -> list[dict]:
     """Per robot, each engine's station step (µs: median, p99) measured in this run, interleaved
     (engine by engine, twice) so a change of machine load hits both, and the ratio of the medians
     engine/Drake."""
     rows = []
     for robot in robots:
-        scenario = walk_scenario(robot)
+        scenario, robot_model = walk_scenario(robot), load_robot(robot)
         times: dict[str, list[int]] = {engine: [] for engine in engines}
         for _ in range(2):
             for engine in engines:
-                times[engine] += station_steps(engine, scenario, steps // 2)
+                scenario_on = with_engine(scenario, engine)
+                times[engine] += passive_plant_steps(robot_model, scenario_on, steps // 2)
         row = {"robot": robot, "time_step": scenario.time_step}
         for engine in engines:
             row[engine] = percentiles(times[engine])  # µs

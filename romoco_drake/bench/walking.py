@@ -14,8 +14,7 @@ from romoco_drake.commands import names, print_rows
 from romoco_drake.control.gravity import contact_gravity_compensation
 from romoco_drake.control.registry import CONTROLLERS, traits
 from romoco_drake.errors import RomocoError
-from romoco_drake.interfaces.engines import with_engine
-from romoco_drake.interfaces.station import make_station
+from romoco_drake.interfaces.engines import make_engine_station, with_engine
 from romoco_drake.planners.registry import PLANNERS
 from romoco_drake.planners.vimpc import VimpcPlanner
 from romoco_drake.robots.kinematics import RobotKinematics
@@ -176,11 +175,12 @@ def _timed_tick(systems: dict, ctx: dict, loop, t: float, times: dict[str, list[
 def passive_plant_steps(robot, scenario: Scenario, steps: int) -> list[int]:
     """Wall time (ns) of each of ``steps`` simulated plant steps with no controller.
 
-    The scenario's simulated station alone (plant, contact, sensors) holding the nominal pose's
-    gravity-compensation torque, started at the nominal pose on the ground: what one step of
-    the simulation costs by itself.
+    The scenario's simulated station alone (plant, contact, sensors) on its engine
+    (``station.engine``), holding the nominal pose's gravity-compensation torque, started at the
+    nominal pose on the ground: what one step of the simulation costs by itself.
     """
-    station = make_station(robot, scenario.time_step, sensors=scenario.sensors)
+    station = make_engine_station(scenario.station.engine, robot, scenario.time_step,
+                                  sensors=scenario.sensors)
     simulator = Simulator(station)
     context = simulator.get_mutable_context()
     plant = station.GetSubsystemByName("plant")

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
-from romoco_drake.rom.planners import FootPlacementLaw, PlannerParams, make_planner
+from romoco_drake.rom.planners import FootPlacementLaw
 from romoco_drake.rom.step_adapt import StepAdapter
 from romoco_drake.rom.types import (
     COMMAND_SIZE,
@@ -68,8 +68,3 @@ class FootPlacementPlanner(LeafSystem):
             swing = self.swing_foot_port.Eval(context) if self.swing_foot_port.HasValue(context) else None
             plan = self.adapter.adapt(plan, rom_state, t_in_step, swing)
         value.set_value(plan)
-
-
-def make_foot_placement_planner(name: str, params: PlannerParams) -> FootPlacementPlanner:
-    """The planner system for the law called ``name`` (alip, hlip, mlip, dcm, alip_general)."""
-    return FootPlacementPlanner(make_planner(name, params))
