@@ -225,6 +225,7 @@ def validate_scenario(scenario: Scenario, source: str | Path | None = None) -> N
             raise ConfigError(where, key, f"{registry.kind} '{config.name}' takes {schema.__name__} "
                               f"settings, got {type(config).__name__}")
     _check_planner(scenario, where)
+    _check_controller(scenario, where)
     solver = getattr(scenario.controller, "solver", "daqp")
     if solver not in QP_SOLVERS:
         raise ConfigError(where, "controller.solver", f"'{solver}' is not one of: {', '.join(QP_SOLVERS)}")
@@ -242,6 +243,15 @@ def validate_scenario(scenario: Scenario, source: str | Path | None = None) -> N
                               f"'{dropout.stream}' is not one of: {', '.join(STREAM_CHANNELS)}")
 
 
+def _check_controller(scenario: Scenario, where: str | Path) -> None:
+    """A controller term the robot cannot use is an error, not a silent no-op: a point foot carries
+    a force only, so there is no centre of pressure for the ankle strategy to move."""
+    ankle = getattr(scenario.controller, "ankle", None)
+    if ankle is not None and ankle.gain > 0.0 and load_robot(scenario.robot).is_point_foot:
+        raise ConfigError(where, "controller.ankle.gain", f"robot '{scenario.robot}' has point feet: they "
+                          "carry no moment, so the ankle strategy cannot act (set the gain to 0)")
+
+
 def _check_planner(scenario: Scenario, where: str | Path) -> None:
     """The law's gain is one it supports; step adaptation needs the robot's reach; the VI-MPC's
     inertia mode exists (a scenario built in Python skips the typed load's Literal check)."""
@@ -253,7 +263,9 @@ def _check_planner(scenario: Scenario, where: str | Path) -> None:
                               f"{', '.join(gains)}, not '{config.gain}'")
         if config.step_adaptation.enabled and load_robot(scenario.robot).config.walking.step_reach is None:
             raise ConfigError(where, "planner.step_adaptation.enabled", f"robot '{scenario.robot}' has no "
-                              "walking.step_reach: its steps cannot be adapted (set it in the robot's YAML)")
+                              "walking.step_reach, so its steps cannot be adapted: set it in the robot's "
+                              "YAML (romoco new-robot derives it from the leg), or planner.step_adaptation: "
+                              "{enabled: false}")
     if isinstance(config, VimpcConfig) and config.inertia not in INERTIA_MODES:
         raise ConfigError(where, "planner.inertia",
                           f"'{config.inertia}' is not one of: {', '.join(INERTIA_MODES)}")

@@ -28,6 +28,26 @@ def _scenario(**overrides):
     return data
 
 
+def test_step_adaptation_without_a_reach_is_a_load_error(tmp_path, monkeypatch):
+    """Step adaptation is on by default: a robot YAML without ``walking.step_reach`` cannot do it,
+    and says so at load time instead of walking unadapted."""
+    robots = tmp_path / "robots"
+    robots.mkdir()
+    data = yaml.safe_load((ROBOTS_DIR / "g1.yaml").read_text())
+    del data["walking"]["step_reach"]
+    data["name"] = "g1_noreach"
+    (robots / "g1_noreach.yaml").write_text(yaml.safe_dump(data))
+    monkeypatch.setenv("ROMOCO_ROBOT_PATH", str(robots))
+    path = _write(tmp_path, "bad", _scenario(robot="g1_noreach", planner={"name": "hlip"}))
+    with pytest.raises(ConfigError, match=r"planner.step_adaptation.enabled: robot 'g1_noreach' has no "
+                                          r"walking.step_reach") as info:
+        load_scenario(str(path))
+    assert "\n" not in str(info.value)
+    off = _write(tmp_path, "off", _scenario(robot="g1_noreach",
+                                            planner={"name": "hlip", "step_adaptation": {"enabled": False}}))
+    assert not load_scenario(str(off)).planner.step_adaptation.enabled
+
+
 @pytest.mark.parametrize(
     "data, key, words",
     [
@@ -45,9 +65,9 @@ def _scenario(**overrides):
         (_scenario(planner={"name": "vimpc", "gain": "lqr"}), "planner.gain",
          "planner 'vimpc' has no setting"),
         (_scenario(planner={"name": "vimpc", "knots": 100}), "planner.knots", "must be in [1, 30]"),
-        (_scenario(planner={"name": "hlip", "step_adaptation": {"enabled": True}}, robot="draco"),
-         "planner.step_adaptation.enabled", "robot 'draco' has no walking.step_reach"),
         (_scenario(vimpc={"inertia": "network"}), "vimpc", "unknown key"),
+        (_scenario(robot="bolt", controller={"name": "tscqp", "ankle": {"gain": 0.1}}),
+         "controller.ankle.gain", "robot 'bolt' has point feet"),
         (_scenario(controller={"name": "mpc"}), "controller.name", "unknown controller 'mpc'"),
         (_scenario(planner={"name": "lipm"}), "planner.name", "unknown planner 'lipm' (known: alip, hlip"),
         (_scenario(planner={"name": "alip_general", "gain": "lqr"}), "planner.gain", "supports gains"),

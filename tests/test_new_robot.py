@@ -65,6 +65,12 @@ def test_regenerated_yaml_matches_the_hand_written_structure(name, exact_sole, t
     knee = gen.nominal.joint_guess[next(j for j in gen.nominal.joint_guess if "knee" in j)]
     hand_knee = hand.nominal.joint_guess[next(j for j in hand.nominal.joint_guess if "knee" in j)]
     assert knee * hand_knee > 0 and abs(knee) > 0.3  # crouched on knees bent the robot's way
+    # The step reach inferred from the leg, against the one measured on the robot (G1: forward
+    # 0.40 hand, 0.37 from its geometry; iCub 0.25 and 0.25).
+    gen_reach, hand_reach = gen.walking.step_reach, hand.walking.step_reach
+    assert gen_reach.forward == pytest.approx(hand_reach.forward, rel=0.25)
+    assert gen_reach.backward == pytest.approx(hand_reach.backward, rel=0.25)
+    assert gen_reach.lateral_max == pytest.approx(hand_reach.lateral_max, rel=0.25)
 
 
 def test_sole_outline_keeps_corners_and_cuts_back_a_rounded_toe():

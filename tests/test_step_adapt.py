@@ -1,5 +1,6 @@
-"""Step adaptation (rom/step_adapt.py): the QP's solution against brute force, reach bounds, no
-crossing step, earlier touchdown under a push, and the law's own plan when nothing binds."""
+"""Step adaptation (rom/step_adapt.py): the two-step QP's solution against scipy and a dense
+search, reach bounds, no crossing step, earlier touchdown under a push, and the law's own plan
+when nothing binds."""
 
 import dataclasses
 import itertools
@@ -10,7 +11,14 @@ import pytest
 
 from romoco_drake.errors import RomocoError
 from romoco_drake.rom.planners import PlannerParams, foot_placement_laws, make_planner
-from romoco_drake.rom.step_adapt import StepAdapter, StepAdaptWeights, StepBounds, solve_step_qp
+from romoco_drake.rom.step_adapt import (
+    NextStep,
+    StepAdapter,
+    StepAdaptWeights,
+    StepBounds,
+    _two_step_axis,
+    solve_step_qp,
+)
 from romoco_drake.rom.types import WalkCommand
 
 MASS, Z0 = 33.0, 0.65
@@ -96,30 +104,64 @@ def test_step_time_never_ends_before_the_step_is_committed():
     assert adapted.t_ss >= 0.2 / 0.85 - 1e-12
 
 
-def test_qp_solution_matches_brute_force():
-    """The interval-wise exact solution against a dense grid over σ (u minimised per σ)."""
+def test_two_step_axis_is_the_exact_box_qp_minimum():
+    """Each axis' (u₁, u₂) box QP against scipy's bounded least squares (BVLS, exact)."""
+    from scipy.optimize import lsq_linear
+
+    rng = np.random.default_rng(5)
+    w_u, w_b = 1.0, 10.0
+    for _ in range(40):
+        a, g, e, c = rng.uniform(-0.6, 0.6, 4)
+        s2 = rng.uniform(1.5, 6.0)
+        lo1, lo2 = rng.uniform(-0.4, 0.0, 2)
+        hi1, hi2 = lo1 + rng.uniform(0.05, 0.5), lo2 + rng.uniform(0.05, 0.5)
+        cost, u1 = _two_step_axis(a, g, e, np.array([[c]]), np.array([[s2]]), np.array([[lo1]]),
+                                  np.array([[hi1]]), lo2, hi2, w_u, w_b)
+        # ‖A u − y‖² is the cost: rows √w_u (u₁ − a), √w_u (u₂ − g), √w_b (s₂ c − e − s₂ u₁ − u₂).
+        A = np.array([[math.sqrt(w_u), 0.0], [0.0, math.sqrt(w_u)], [-math.sqrt(w_b) * s2, -math.sqrt(w_b)]])
+        y = np.array([math.sqrt(w_u) * a, math.sqrt(w_u) * g, -math.sqrt(w_b) * (s2 * c - e)])
+        ref = lsq_linear(A, y, bounds=([lo1, lo2], [hi1, hi2]), method="bvls", tol=1e-14)
+        assert lo1 - 1e-12 <= u1[0, 0] <= hi1 + 1e-12
+        assert cost[0, 0] == pytest.approx(2.0 * ref.cost, abs=1e-9)
+        assert u1[0, 0] == pytest.approx(ref.x[0], abs=1e-6)
+
+
+def test_qp_solution_matches_a_dense_search():
+    """The refined σ₁ search against a dense σ₁ grid (the same exact inner minimum per σ₁, σ₂)."""
     rng = np.random.default_rng(3)
     w = StepAdaptWeights()
     box = ((-0.25, 0.3), (-0.45, -0.12))
+    sigma_n, sigma_box = 3.2, (2.17, 5.7)
+    nxt = NextStep(((-0.25, 0.3), (0.12, 0.45)), (0.12, 0.2), (0.05, -0.04), np.linspace(2.17, 5.7, 9),
+                   sigma_n)
     for _ in range(30):
         u_n = tuple(rng.uniform(-0.6, 0.6, 2))
         dcm0 = tuple(rng.uniform(-0.2, 0.2, 2))
-        offset_n = tuple(rng.uniform(-0.2, 0.2, 2))
-        sigma_n, sigma_box = 3.2, (2.17, 5.7)
-        sigma, u = solve_step_qp(u_n, sigma_n, offset_n, dcm0, box, sigma_box, w)
+        sigma, u = solve_step_qp(u_n, sigma_n, dcm0, box, sigma_box, w, nxt)
 
-        def cost(s, u, u_n=u_n, dcm0=dcm0, offset_n=offset_n):
-            step = sum((a - b) ** 2 for a, b in zip(u, u_n, strict=True))
-            offset = sum((d * s - o - a) ** 2 for d, o, a in zip(dcm0, offset_n, u, strict=True))
-            return w.step * step + w.timing * (s - 3.2) ** 2 + w.offset * offset
+        def total(s1, u_n=u_n, dcm0=dcm0):
+            s1 = np.atleast_1d(s1)[:, None]
+            s2 = nxt.sigmas[None, :]
+            out = w.timing * (s1 - sigma_n) ** 2 + w.timing * (s2 - sigma_n) ** 2
+            for i in (0, 1):
+                lo, hi = np.full_like(s1, box[i][0]), np.full_like(s1, box[i][1])
+                out = out + _two_step_axis(u_n[i], nxt.u_n[i], nxt.offset[i], dcm0[i] * s1, s2, lo, hi,
+                                           *nxt.box[i], w.step, w.offset)[0]
+            return out.min(axis=1)
 
-        best = math.inf
-        for s in np.linspace(*sigma_box, 2001):
-            us = [min(max((w.step * u_n[i] + w.offset * (dcm0[i] * s - offset_n[i])) / (w.step + w.offset),
-                          box[i][0]), box[i][1]) for i in (0, 1)]
-            best = min(best, cost(s, us))
         assert sigma_box[0] - 1e-12 <= sigma <= sigma_box[1] + 1e-12
-        assert cost(sigma, u) <= best + 1e-9
+        for axis in (0, 1):
+            assert box[axis][0] - 1e-12 <= u[axis] <= box[axis][1] + 1e-12
+        assert total(sigma)[0] <= total(np.linspace(*sigma_box, 4001)).min() + 1e-9
+
+
+def test_a_forward_push_beyond_one_step_shortens_the_step():
+    """Pushed forward so hard that one step at the forward bound cannot catch the DCM: the step
+    goes to the bound and ends early, so the next step starts braking sooner (two-step lookahead)."""
+    plan, adapted = _plan_and_adapt("hlip", rom_state((0.05, -0.1), (1.4, -0.1)), "left", 0.05)
+    assert plan.swing_target[0] > BOUNDS.forward
+    assert adapted.swing_target[0] == pytest.approx(BOUNDS.forward)
+    assert adapted.t_ss < plan.t_ss - 0.05
 
 
 def test_bad_bounds_and_weights_are_one_line_errors():

@@ -5,7 +5,10 @@ walking scenario runs over an in-process LCM link (``--via-lcm``) with a forward
 ``SPEED`` and one dropout of the chosen stream. Each run reports whether the robot fell, the
 link's stage counters (ride-through, stand, damping; the robot side's holds), and how it ended:
 its mean forward speed over the last ``TAIL_S`` seconds, which is the command's when it walks on
-and about 0 when it stopped standing.
+and about 0 when it stopped standing. ``estimator`` and ``controller`` replace the scenario's:
+under the invariant EKF (no motion capture) the ride-through predicts from an estimate that is
+itself blind while no encoder or IMU sample arrives; the IK controllers (velik, posik) hold
+joint targets through it.
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ from romoco_drake.interfaces.dropout import STREAM_CHANNELS, Dropout
 from romoco_drake.planners.heading import heading_velocity
 from romoco_drake.robots.model import load_robot
 from romoco_drake.runner import log_samples, run_scenario
-from romoco_drake.scenario import CommandPoint, Scenario, load_scenario
+from romoco_drake.scenario import CommandPoint, Scenario, load_scenario, with_overrides
 from romoco_drake.simulation import stderr_progress
 
 SPEED = 0.4  # m/s, the walking speed the dropout hits
@@ -30,9 +33,11 @@ AFTER_S = 3.0  # simulated after the dropout ends
 TAIL_S = 1.0  # the end speed is averaged over the run's last second
 
 
-def dropout_scenario(robot: str, t: float, duration: float, stream: str) -> Scenario:
-    """``{robot}_walk`` ramped to SPEED forward (0.2 m/s from 1 s, SPEED from 2 s), with one dropout."""
-    scenario = load_scenario(f"{robot}_walk")
+def dropout_scenario(robot: str, t: float, duration: float, stream: str, estimator: str | None = None,
+                     controller: str | None = None) -> Scenario:
+    """``{robot}_walk`` ramped to SPEED forward (0.2 m/s from 1 s, SPEED from 2 s), with one dropout;
+    ``estimator``/``controller`` instead of the scenario's own."""
+    scenario = with_overrides(load_scenario(f"{robot}_walk"), estimator=estimator, controller=controller)
     return dataclasses.replace(
         scenario, duration_s=t + duration + AFTER_S,
         command=[CommandPoint(1.0, 0.5 * SPEED), CommandPoint(2.0, SPEED)],
@@ -57,13 +62,16 @@ def dropout_job(scenario: Scenario) -> dict:
 
 
 def bench_dropout(robot: str = "g1", durations=(0.1, 0.3), phases: int = 4, stream: str = "proprioception",
-                  sweep: SweepOptions | None = None, progress=None) -> list[dict]:
+                  sweep: SweepOptions | None = None, progress=None, estimator: str | None = None,
+                  controller: str | None = None) -> list[dict]:
     """One row per (dropout length, start time); see the module docstring."""
     walking = load_robot(robot).config.walking
     step = walking.t_ss + walking.t_ds
     starts = [(duration, k, START_S + k * step / phases) for duration in durations for k in range(phases)]
-    variants = [Variant(dropout_scenario(robot, t, duration, stream),
-                        {"robot": robot, "stream": stream, "duration_s": duration, "t": round(t, 4),
+    base = dropout_scenario(robot, START_S, durations[0], stream, estimator, controller)
+    names = {"estimator": base.estimator.name, "controller": base.controller.name}
+    variants = [Variant(dropout_scenario(robot, t, duration, stream, estimator, controller),
+                        {"robot": robot, "stream": stream, **names, "duration_s": duration, "t": round(t, 4),
                          "phase": round(k / phases, 3)}, dropout_job)
                 for duration, k, t in starts]
     return run_sweep(variants, sweep, progress)
@@ -77,6 +85,8 @@ def register(bench) -> None:
     p.add_argument("--durations", default="0.1,0.3", help="comma-separated dropout lengths (s)")
     p.add_argument("--phases", type=int, default=4, help="start times spread over one step")
     p.add_argument("--stream", default="proprioception", help="proprioception, commands or all")
+    p.add_argument("--estimator", help="instead of the scenario's: ground_truth, kalman, invariant_ekf")
+    p.add_argument("--controller", help="instead of the scenario's (e.g. velik, posik)")
     p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
     add_sweep_args(p)
     p.set_defaults(func=_cmd_bench_dropout)
@@ -93,7 +103,9 @@ def _cmd_bench_dropout(args) -> int:
     if not all(0.0 < d <= 10.0 for d in durations) or not 1 <= args.phases <= 20:
         raise RomocoError("--durations must be in (0, 10] s and --phases in [1, 20]")
     rows = bench_dropout(args.robot, durations, args.phases, args.stream, sweep_options(args),
-                         progress=stderr_progress)
+                         progress=stderr_progress, estimator=args.estimator, controller=args.controller)
+    if rows and not args.json:
+        print(f"{args.robot}: {rows[0]['controller']} controller, {rows[0]['estimator']} estimator")
     return print_rows(args.json, rows,
                       "dropout  start   phase  fell  ride-through  stand  damping  robot holds  "
                       "end vx (m/s)",

@@ -1,9 +1,11 @@
 """``romoco bench push``: the largest push a walking robot survives, per direction and gait phase.
 
-The robot stands for ``START_S``, then walks forward at ``speed`` (default ``SPEED``; the
-scenario's ``<robot>_walk`` setup with ``overlays`` merged on, default ``OVERLAYS``: the
-settings of ``diagrams/overlays/push_recovery.yaml``, which ``romoco run <robot>_walk --overlay
-push_recovery`` runs too; command replaced). Once it has walked ``WALK_S`` the base
+The robot stands for ``START_S``, then walks forward at ``speed`` (default ``SPEED``) on the
+scenario ``<robot>_walk`` as shipped (its push recovery is on by default: step adaptation in
+every foot-placement scenario, each robot's own controller terms in its YAML), command replaced.
+A variant is named, never hidden: ``overlays`` merged on (``diagrams/overlays/``), another
+``estimator``, another ``engine``; the result echoes all three and the settings they gave.
+Once it has walked ``WALK_S`` the base
 gets a ``push_s`` (default ``PUSH_S``) push of impulse J (N·s; force J / ``push_s``) in the
 heading frame, forward, backward, left or right, starting at a fraction of a step (the gait
 phase: 0 is the support switch). The step clock comes from one unpushed run: steps are periodic
@@ -28,7 +30,7 @@ from romoco_drake.interfaces.disturbance import Disturbance
 from romoco_drake.interfaces.engines import with_engine
 from romoco_drake.robots.model import robot_names
 from romoco_drake.runner import add_engine_arg
-from romoco_drake.scenario import CommandPoint, Scenario, load_scenario
+from romoco_drake.scenario import CommandPoint, Scenario, load_scenario, with_overrides
 from romoco_drake.simulation import stderr_progress
 from romoco_drake.wiring import build_diagram, initial_positions
 
@@ -40,14 +42,14 @@ START_S = 0.5  # standing before the walking command
 WALK_S = 3.0  # walking before the step the push falls in
 PUSH_S = 0.1  # push duration
 HOLD_S = 3.0  # survival window after the push start
-OVERLAYS = ("push_recovery",)  # diagrams/overlays/: the bench's settings, runnable by anyone
 CRITERION = f"no fall within {HOLD_S:g} s of the push start (base tilt, base height or body contact)"
 
 
-def walking_scenario(robot: str, overlays: Sequence[str] = OVERLAYS, speed: float = SPEED) -> Scenario:
-    """``diagrams/<robot>_walk.yaml`` with ``overlays`` merged on, walking forward at ``speed`` from
-    START_S."""
-    base = load_scenario(f"{robot}_walk", overlays)
+def walking_scenario(robot: str, overlays: Sequence[str] = (), speed: float = SPEED,
+                     estimator: str | None = None) -> Scenario:
+    """``diagrams/<robot>_walk.yaml`` with ``overlays`` merged on (and ``estimator`` instead of its
+    own), walking forward at ``speed`` from START_S."""
+    base = with_overrides(load_scenario(f"{robot}_walk", overlays), estimator=estimator)
     return dataclasses.replace(base, name=f"{robot}_push", disturbances=[],
                                command=[CommandPoint(0.0), CommandPoint(START_S, speed)])
 
@@ -76,12 +78,13 @@ def pushed(scenario: Scenario, t: float, impulse: float, direction: str, push_s:
 
 
 def bench_push(robot: str = "g1", impulses=IMPULSES, phases=PHASES, directions=tuple(DIRECTIONS),
-               overlays: Sequence[str] = OVERLAYS, speed: float = SPEED, push_s: float = PUSH_S,
-               sweep: SweepOptions | None = None, progress=None, engine: str = "drake") -> dict:
+               overlays: Sequence[str] = (), speed: float = SPEED, push_s: float = PUSH_S,
+               sweep: SweepOptions | None = None, progress=None, engine: str = "drake",
+               estimator: str | None = None) -> dict:
     """The push table (module docstring): per cell the largest impulse survived, and per direction
     the smallest of those over the phases; the robot simulated on ``engine``. The result names the
-    overlays and echoes the planner and controller settings they gave."""
-    scenario = with_engine(walking_scenario(robot, overlays, speed), engine)
+    overlays, estimator and engine, and echoes the planner and controller settings."""
+    scenario = with_engine(walking_scenario(robot, overlays, speed, estimator), engine)
     start, step = step_clock(scenario)
     cells = {(d, ph): {"direction": d, "phase": ph, "push_time_s": round(start + ph * step, 4),
                        "survived": 0.0, "fell_at": None, "fall_time_s": None}
@@ -101,7 +104,8 @@ def bench_push(robot: str = "g1", impulses=IMPULSES, phases=PHASES, directions=t
         if not alive:
             break
     per_direction = {d: min(cells[(d, ph)]["survived"] for ph in phases) for d in directions}
-    return {"robot": robot, "engine": engine, "overlays": list(scenario.overlays),
+    return {"robot": robot, "engine": engine, "estimator": scenario.estimator.name,
+            "overlays": list(scenario.overlays),
             "planner": dataclasses.asdict(scenario.planner),
             "controller": dataclasses.asdict(scenario.controller),
             "speed_mps": speed, "push_s": push_s,
@@ -117,10 +121,11 @@ def register(bench) -> None:
                    help="N·s, comma-separated, tried in increasing order")
     p.add_argument("--phases", default="0,0.25,0.5,0.75", help="push start as fractions of the step")
     p.add_argument("--directions", help="comma-separated (default: forward,backward,left,right)")
-    p.add_argument("--overlay", action="append", metavar="NAME",
-                   help="settings merged onto <robot>_walk (diagrams/overlays/NAME.yaml or a path); "
-                        "repeatable (default: push_recovery)")
-    p.add_argument("--no-overlay", action="store_true", help="the shipped <robot>_walk settings as they are")
+    p.add_argument("--overlay", action="append", metavar="NAME", default=[],
+                   help="a variant: settings merged onto <robot>_walk (diagrams/overlays/NAME.yaml or a "
+                        "path); repeatable (default: none, the scenario as shipped)")
+    p.add_argument("--estimator", help="a variant: this estimator instead of the scenario's "
+                                       "(ground_truth, kalman, invariant_ekf)")
     p.add_argument("--speed", type=float, default=0.4, help="forward walking speed (m/s)")
     p.add_argument("--push-duration", type=float, default=0.1, help="how long each push lasts (s)")
     add_engine_arg(p)
@@ -140,10 +145,9 @@ def _cmd_bench_push(args) -> int:
         raise RomocoError(f"--phases must be in [0, 1), got {args.phases}")
     if not (0.0 <= args.speed <= 2.0 and 0.01 <= args.push_duration <= 1.0):
         raise RomocoError("--speed must be in [0, 2] m/s and --push-duration in [0.01, 1] s")
-    overlays = () if args.no_overlay else (args.overlay or OVERLAYS)
-    result = bench_push(args.robot, impulses, phases, directions, overlays, speed=args.speed,
+    result = bench_push(args.robot, impulses, phases, directions, args.overlay, speed=args.speed,
                         push_s=args.push_duration, sweep=sweep_options(args), progress=stderr_progress,
-                        engine=args.engine or "drake")
+                        engine=args.engine or "drake", estimator=args.estimator)
     if args.json:
         print(json.dumps(result))
     else:
@@ -153,7 +157,8 @@ def _cmd_bench_push(args) -> int:
 
 def _print_push(result: dict, phases, directions) -> None:
     print(f"{result['robot']}: largest impulse survived (N·s), walking {result['speed_mps']} m/s, "
-          f"{result['push_s']} s pushes on the base, overlays: {', '.join(result['overlays']) or 'none'}")
+          f"{result['push_s']} s pushes on the base; {result['engine']}, {result['estimator']}, "
+          f"overlays: {', '.join(result['overlays']) or 'none (as shipped)'}")
     print(f"survival: {result['criterion']}; phase: fraction of the {result['step_s']} s step")
     print("direction  " + "".join(f"phase {ph:<5g}" for ph in phases) + "  min")
     for d in directions:

@@ -23,12 +23,13 @@ class PlannerSettings:
 
 @dataclass
 class StepAdaptationConfig:
-    """Step location and timing adaptation over the planner's steps (rom/step_adapt.py), for a
-    foot-placement law when the robot has ``walking.step_reach``. The weights are the QP's on
-    the foothold, on σ = e^{λT} and on the DCM offset; only their ratios matter, and only when a
-    step would leave the reach."""
+    """Step location and timing adaptation over the planner's steps (rom/step_adapt.py): push
+    recovery, on by default for every foot-placement law; it needs the robot's
+    ``walking.step_reach`` (a load-time error without it). The weights are the QP's on the
+    foothold, on σ = e^{λT} and on the DCM offset; only their ratios matter, and only when a step
+    would leave the reach."""
 
-    enabled: bool = False
+    enabled: bool = True
     step_weight: float = 1.0
     timing_weight: float = 0.01
     offset_weight: float = 10.0

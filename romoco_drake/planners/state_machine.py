@@ -41,6 +41,8 @@ class GaitSchedule(SharedValue):
     fall_reason: str
     air_since: float = math.nan  # since when neither foot switch has reported contact (s)
     blind: bool = False  # the link is past its ride-through: slow down to a stop, nothing starts
+    lifted: bool = False  # the swing foot's switch has read no contact in this step
+    touchdowns: tuple[int, int] = (0, 0)  # steps ended by the swing foot's contact (early, late)
 
 
 def is_zero(cmd: WalkCommand) -> bool:
@@ -63,6 +65,18 @@ class GaitStateMachine(LeafSystem):
       then the stance switches. A plan whose timing was adapted (``planner_output``, optional)
       sets this step's T_SS each tick until the step is committed (``SWING_COMMIT_FRACTION`` of
       it passed): a pushed robot may put its foot down early, or late.
+    - touchdown is also contact-triggered (Hubicki et al., "Walking and running with passive
+      compliance", IEEE RAM 2018, and Cassie's controllers since: the impact, not the clock,
+      ends the swing). Between ``early_touchdown`` of T_SS and the commit point, a swing foot whose
+      switch turns on after reading off in this step has landed early (ground higher than
+      planned, a foot driven down): single support ends there (the step switches at once, or
+      after ``t_ds``). A committed step ends on its clock: in the last part of the descent the
+      foot is within millimetres of the ground and its switch may fire early (G1 touches at
+      94 % of T_SS on every step; switching there cost its walk 4× the vx rms error). At the
+      timed switch, a swing foot whose switch is still off and whose sole is more than
+      ``touchdown_height`` above the stance sole's lowest point is still in the air: the switch
+      waits for its contact up to ``touchdown_timeout``. A foot that landed flat but unloaded
+      (level with the stance sole) does not hold the step.
     - walking → standing after ``stop_steps`` steps in a row under a zero command, at a support
       switch where both soles are flat on the ground (each sole's points within
       ``touchdown_height`` of its lowest one, and the feet level with each other or both switches
@@ -96,11 +110,12 @@ class GaitStateMachine(LeafSystem):
     def __init__(self, robot: RobotModel, period: float, t_ds: float, balance_speed: float = 0.1,
                  stop_steps: int = 2, fall_height: float = 0.5, fall_tilt: float = math.pi / 4,
                  touchdown_height: float = 0.01, settle_time: float = 0.2, lift_time: float = 0.01,
-                 offset: float = 0.0):
+                 early_touchdown: float = 0.6, touchdown_timeout: float = 0.1, offset: float = 0.0):
         super().__init__()
         self.robot, self.t_ds, self.period = robot, t_ds, period
         self.balance_speed, self.stop_steps = balance_speed, stop_steps
         self.touchdown_height, self.settle_time, self.lift_time = touchdown_height, settle_time, lift_time
+        self.early_touchdown, self.touchdown_timeout = early_touchdown, touchdown_timeout
         self._min_base_z = fall_height * robot.nominal.base_height
         self._cos_tilt = math.cos(fall_tilt)
         self.steps_in_place = robot.is_point_foot
@@ -132,9 +147,11 @@ class GaitStateMachine(LeafSystem):
         return context.get_abstract_state(self._schedule).get_value()
 
     def summary(self, context) -> dict:
-        """The run summary's gait keys: steps taken and safe-mode entries."""
+        """The run summary's gait keys: steps taken, safe-mode entries, and the steps whose swing
+        ended on the foot's contact before (early) or after (late) the step clock."""
         s = self.schedule(context)
-        return {"steps": s.steps, "safe_mode_entries": s.safe_mode_entries}
+        return {"steps": s.steps, "safe_mode_entries": s.safe_mode_entries,
+                "touchdowns_early": s.touchdowns[0], "touchdowns_late": s.touchdowns[1]}
 
     def _calc_phase(self, context, out) -> None:
         s = self.schedule(context)
@@ -173,7 +190,10 @@ class GaitStateMachine(LeafSystem):
             s = replace(s, mode=Mode.WALKING, side=side, step_start=t, t_ss=cmd.step_time, idle_steps=0)
         elif s.mode == Mode.WALKING and self._retime(s, t, plan):
             s = replace(s, t_ss=plan.t_ss)
-        if s.mode == Mode.WALKING and t - s.step_start >= s.t_ss + self.t_ds - 1e-9:
+        if s.mode == Mode.WALKING:
+            s = self._touchdown(s, t, kin, on)
+        if (s.mode == Mode.WALKING and t - s.step_start >= s.t_ss + self.t_ds - 1e-9
+                and not self._in_air(s, t, kin, on)):
             idle = s.idle_steps + 1 if is_zero(cmd) else 0
             stopping = idle >= self.stop_steps and not self.steps_in_place
             # A stop holds the step in double support for up to settle_time while a sole rolls flat.
@@ -181,9 +201,35 @@ class GaitStateMachine(LeafSystem):
             if stopping and self._feet_down(kin, on):
                 s = replace(s, mode=Mode.STANDING, idle_steps=0, steps=s.steps + 1)
             elif not settling:
+                # The switch waited for the swing foot, and it landed (not a stop's settling).
+                late = (t - s.step_start > s.t_ss + self.t_ds + 0.5 * self.period and not stopping
+                        and s.lifted and on[1 if s.side == "left" else 0])
+                touchdowns = (s.touchdowns[0], s.touchdowns[1] + 1) if late else s.touchdowns
                 s = replace(s, side=other_side(s.side), step_start=t, t_ss=cmd.step_time, steps=s.steps + 1,
-                            idle_steps=idle)
+                            idle_steps=idle, lifted=False, touchdowns=touchdowns)
         return s
+
+    def _touchdown(self, s: GaitSchedule, t: float, kin: RobotKinematics, on: np.ndarray) -> GaitSchedule:
+        """Tracks the swing foot's lift-off and ends single support when it lands early (class
+        docstring)."""
+        tau, swing = t - s.step_start, 1 if s.side == "left" else 0
+        if not on[swing]:
+            return s if s.lifted else replace(s, lifted=True)
+        if s.lifted and self.early_touchdown * s.t_ss <= tau < SWING_COMMIT_FRACTION * s.t_ss:
+            return replace(s, t_ss=tau, touchdowns=(s.touchdowns[0] + 1, s.touchdowns[1]))
+        return s
+
+    def _in_air(self, s: GaitSchedule, t: float, kin: RobotKinematics, on: np.ndarray) -> bool:
+        """Whether the timed switch waits for a swing foot still in the air (class docstring)."""
+        swing, stance = ("right", "left") if s.side == "left" else ("left", "right")
+        if on[0 if swing == "left" else 1]:
+            return False
+        overdue = t - s.step_start - (s.t_ss + self.t_ds)
+        if overdue >= self.touchdown_timeout - 1e-9 or not s.lifted:
+            return False
+        z_swing = self.robot.sole_points_in_world(kin.context, swing)[2].min()
+        z_stance = self.robot.sole_points_in_world(kin.context, stance)[2].min()
+        return bool(z_swing - z_stance > self.touchdown_height)
 
     @staticmethod
     def _retime(s: GaitSchedule, t: float, plan: PlannerOutput | None) -> bool:

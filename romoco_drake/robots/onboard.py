@@ -17,12 +17,14 @@ What is read from the model (parsed by Drake at its zero configuration, the legs
 - the nominal pose: the existing standing IK at 92 % of the straight-leg CoM height, whose
   leg angles become ``joint_guess``.
 What is guessed, and said so in the YAML: gains (kp = 2 N·m/rad per N·m of effort limit),
-LIP walking parameters (t_ss from the LIP time constant), command limits. What cannot be
+LIP walking parameters (t_ss from the LIP time constant), command limits, and the step reach of
+push recovery (from the leg's length and crouch: :mod:`romoco_drake.robots.reach`). What cannot be
 inferred is listed (closed kinematic loops, passive joints, missing effort limits).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import xml.etree.ElementTree as ET
@@ -34,6 +36,7 @@ import numpy as np
 from romoco_drake.errors import RomocoError
 from romoco_drake.robots.model_geometry import link_geometry, sole_outline
 from romoco_drake.robots.model_tree import BodyTree, foot_candidates, knee_seeds, split_legs
+from romoco_drake.robots.reach import step_reach
 from romoco_drake.spatial import GRAVITY
 
 LOWEST_BAND = 5e-4  # m: geometry this close to a foot's lowest point is sole (a 15 mm ball's
@@ -248,6 +251,14 @@ def _limit(value: float) -> str:
     return f"{value:.3f}" if math.isfinite(value) else "none"
 
 
+def _reach(inf: Inferred, com_height: float, t_ss: float) -> str:
+    """``walking.step_reach`` as YAML flow text: the straight leg is the hip's height over the
+    ground in the model's zero pose, crouched in proportion to the CoM when standing."""
+    b = step_reach(inf.leg_length, inf.leg_length * com_height / inf.com_height_straight,
+                   inf.foot_separation, t_ss)
+    return "{" + ", ".join(f"{f.name}: {getattr(b, f.name):g}" for f in dataclasses.fields(b)) + "}"
+
+
 def robot_yaml(inf: Inferred, com_height: float, joint_guess: dict[str, float]) -> str:
     """The robot YAML text: inferred fields plain, guessed ones marked ``# guess``."""
     t_ss = max(0.15, round(1.15 * math.sqrt(com_height / GRAVITY), 2))
@@ -282,10 +293,12 @@ def robot_yaml(inf: Inferred, com_height: float, joint_guess: dict[str, float]) 
         kp = round(KP_PER_EFFORT * (effort if effort is not None else 50.0), 1)
         lines.append(f"  - {{joints: {name}, kp: {kp:g}, kd: {round(kp * KD_PER_KP, 2):g}}}")
     lines += [
-        "# guess: LIP walking at the nominal CoM height; t_ss = 1.15 sqrt(z0/g), swing 12 % of the leg.",
+        "# guess: LIP walking at the nominal CoM height; t_ss = 1.15 sqrt(z0/g), swing 12 % of the leg;",
+        "# step_reach (push recovery) from the leg's length and crouch (romoco_drake/robots/reach.py).",
         "walking:",
         f"  {{t_ss: {t_ss:g}, t_ds: 0.0, z0: {com_height:.3f}, step_width: {inf.foot_separation:.3f}, "
-        f"swing_height: {swing:g}}}",
+        f"swing_height: {swing:g},",
+        f"   step_reach: {_reach(inf, com_height, t_ss)}}}",
         "# Joints (from the model): lower, upper [rad], effort [N·m], velocity [rad/s]",
         *(f"#   {j['name']}: {_limit(j['lower'])}, {_limit(j['upper'])}, {j['effort']}, {j['velocity']}"
           for j in inf.joints),

@@ -4,20 +4,26 @@ Method: the DCM step adjustment of Khadiv, Herzog, Moosavian and Righetti, "Walk
 Based on Step Timing Adaptation", IEEE T-RO 36(3), 2020 (first as "Step timing adjustment: a step
 toward generating robust gaits", Humanoids 2016). In single support over a point foot the
 divergent component of motion ξ = p + ṗ/λ (relative to the stance pivot) runs away as
-ξ(T) = ξ(t) e^{λ(T − t)}, which is linear in σ = e^{λT}. Choosing the touchdown point u, σ and the
-DCM offset b = ξ(T) − u together is then a small convex QP:
+ξ(T) = ξ(t) e^{λ(T − t)}, which is linear in σ = e^{λT}. The paper chooses the touchdown point u,
+σ and the DCM offset b = ξ(T) − u of one step; a push that needs more than one step's reach then
+has nowhere to go. This adapter looks two steps ahead, in the spirit of N-step capturability
+(Koolen et al., IJRR 31(9), 2012) and of the paper's own two-step variant: the current step
+(u₁, σ₁) and the next (u₂, σ₂) are chosen together so that the DCM is back on the law's orbit
+after the second step,
 
-    min  w_u ‖u − u_n‖² + w_t (σ − σ_n)² + w_b ‖ξ(t) e^{−λt} σ − u − b_n‖²
-    s.t. u in the reachable box of the swing foot, σ in [e^{λ T_lo}, e^{λ T_hi}]
+    b₂ = σ₂ (ξ(t) e^{−λt} σ₁ − u₁) − u₂   (the DCM relative to the second foothold at its touchdown)
+    min  w_u ‖u₁ − u_n‖² + w_u ‖u₂ − u₂*‖² + w_t (σ₁ − σ_n)² + w_t (σ₂ − σ_n)² + w_b ‖b₂ − b₂*‖²
+    s.t. u₁, u₂ in the reachable boxes of their swing feet, σ₁, σ₂ in [e^{λ T_lo}, e^{λ T_hi}]
 
-(b eliminated through its equality). Unlike the paper, the nominal values come from the law
-being adapted, not from a fixed gait: u_n is the law's foothold, σ_n its single-support time
-T_n, and b_n = ξ(T_n) − u_n the DCM offset that foothold implies, clipped to offsets the next
-steps can catch (:meth:`StepAdapter.viable_offset`). Whenever the law's step is reachable and
-its offset viable, the unique minimum is its own plan (cost zero), so adaptation changes
-nothing in normal walking; when a push asks for a step beyond reach, the foothold stops at the
-bound and the step time moves so that the DCM reaches the offset wanted: earlier when the DCM
-runs away from the bound, later when it comes back.
+where u_n is the law's foothold, σ_n its single-support time, and u₂*, b₂* the orbit's next step
+and DCM offset (:meth:`StepAdapter.next_step`). The first step is what the robot takes; the next
+is planned again at its own start from where the robot then is, so the second step only has to
+exist: the first may leave an offset the next step can still catch, and a step shortened now
+buys that time. Whenever the law's step is reachable and its offset viable
+(:meth:`StepAdapter.viable_offset`), the law's own plan is returned, so adaptation changes
+nothing in normal walking; when a push asks for more, the footholds stop at their bounds and
+the step times move so that the DCM reaches the orbit over two steps: earlier when it runs away
+from the bound, later when it comes back.
 
 The reachable box is in the stance yaw frame: forward/backward, and a lateral band on the swing
 foot's own side of the stance foot (at least ``lateral_min`` away), so a crossing step is never
@@ -25,8 +31,8 @@ asked for. A step must also be one the swing leg can still make: given the swing
 position s (when the planner is given it), the touchdown point lies within ``swing_speed``·(T − t)
 of s on each axis, so a step shortened late in the swing is not asked to land far away (the
 swing would land fast and slide, or late). That window depends on σ through T = ln σ / λ, so
-the QP is solved over σ on a grid refined around its best point, with u minimised exactly for
-each σ (a clipped scalar minimiser per axis).
+the QP is solved over σ₁ on a grid refined around its best point and over σ₂ on a grid, with
+(u₁, u₂) minimised exactly for each pair (:func:`solve_step_qp`).
 """
 
 from __future__ import annotations
@@ -38,7 +44,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from romoco_drake.errors import RomocoError
-from romoco_drake.rom.types import SWING_COMMIT_FRACTION, PlannerOutput
+from romoco_drake.rom.types import SWING_COMMIT_FRACTION, PlannerOutput, other_side
 from romoco_drake.spatial import GRAVITY
 
 
@@ -133,15 +139,37 @@ class StepAdapter:
                 and (window is None or window.contains(u_n, plan.t_ss))):
             # The law's own step is reachable and viable: the QP's minimum (zero), at any phase.
             return replace(plan, timing_adapted=True)
+        nxt = self.next_step(plan, lam, sigma_n)
+        if nxt is None:
+            return plan
         # The step may not end before it is committed (SWING_COMMIT_FRACTION of it passed).
         t_lo = max(b.t_ss_min, t_in_step / SWING_COMMIT_FRACTION)
         t_hi = max(b.t_ss_max, t_lo)
-        sigma, u = solve_step_qp(u_n, sigma_n, offset_n, dcm0, box,
-                                 (math.exp(lam * t_lo), math.exp(lam * t_hi)), self.weights, window)
+        sigma, u = solve_step_qp(u_n, sigma_n, dcm0, box, (math.exp(lam * t_lo), math.exp(lam * t_hi)),
+                                 self.weights, nxt, window)
         t_ss = math.log(sigma) / lam
         target = np.array([u[0], u[1], float(plan.swing_target[2])])
         return replace(plan, swing_target=target, t_ss=t_ss, time_to_touchdown=max(t_ss - t_in_step, 0.0),
                        timing_adapted=True)
+
+    def next_step(self, plan: PlannerOutput, lam: float, sigma_n: float) -> NextStep | None:
+        """The lookahead's second step from the law's orbit (None: the orbit is not finite).
+
+        The orbit's DCM offset after this step is b* = ξ*(T) − u*, ξ* = p* + (L/m)*/(z0 λ) of its
+        pre-impact state and u* its step. The next step mirrors this one laterally (the period-2
+        orbit of a symmetric gait; a lateral command makes the two steps differ by 2 vy T, which
+        the next step's own adaptation absorbs): u₂* = (u*_x, −u*_y), b₂* = (b*_x, −b*_y).
+        """
+        b = self.bounds
+        k = plan.com_height * lam
+        xi = plan.orbit_pre_impact[:, 0] + plan.orbit_pre_impact[:, 1] / k
+        offset = xi - plan.nominal_step
+        if not np.all(np.isfinite(offset)):
+            return None
+        times = np.linspace(b.t_ss_min, b.t_ss_max, _NEXT)
+        return NextStep(b.box(other_side(plan.stance_side)),
+                        (float(plan.nominal_step[0]), -float(plan.nominal_step[1])),
+                        (float(offset[0]), -float(offset[1])), np.exp(lam * times), sigma_n)
 
     def viable_offset(self, offset: tuple[float, float], stance_side: str, sigma_n: float
                       ) -> tuple[float, float]:
@@ -181,42 +209,91 @@ class SwingWindow:
         return all(abs(a - c) <= r for a, c in zip(u, self.s, strict=True))
 
 
-# The σ grid: points over the whole range, then rounds of points around the best one so far.
-_GRID, _REFINE, _ROUNDS = 121, 41, 3
+# The σ grid: points over the whole range, then rounds of points around the best one so far;
+# the second step's σ₂ takes _NEXT values over its range.
+_GRID, _REFINE, _ROUNDS, _NEXT = 121, 41, 3, 9
 
 
-def solve_step_qp(u_n: tuple[float, float], sigma_n: float, offset_n: tuple[float, float],
-                  dcm0: tuple[float, float], box, sigma_box: tuple[float, float],
-                  w: StepAdaptWeights, window: SwingWindow | None = None
-                  ) -> tuple[float, tuple[float, float]]:
-    """(σ, (u_x, u_y)) minimising the module docstring's QP.
+@dataclass(frozen=True)
+class NextStep:
+    """The lookahead's second step (module docstring), per axis (x, y): where it may land relative
+    to the first foothold (``box``: the other stance side's), its nominal foothold ``u_n``, the
+    orbit's DCM offset ``offset`` at its end, and the σ₂ = e^{λT₂} values it may take around the
+    nominal ``sigma_n``."""
 
-    For fixed σ each axis' best u is the minimiser of w_u (u − u_n)² + w_b (c − u)², c = dcm0 σ − b_n,
-    clipped to the reach box intersected with the swing ``window``; where the two do not meet,
-    u is the window's point nearest the box (the swing cannot reach it: it lands as close as it
-    can). The cost left over σ is continuous but not convex once the window binds, so σ is
-    searched on a grid and refined around the best point (to about 1e-6 of the σ range).
+    box: tuple[tuple[float, float], tuple[float, float]]
+    u_n: tuple[float, float]
+    offset: tuple[float, float]
+    sigmas: np.ndarray
+    sigma_n: float
+
+
+def _two_step_axis(a: float, g: float, e: float, c: np.ndarray, s2: np.ndarray, lo1, hi1,
+                   lo2: float, hi2: float, w_u: float, w_b: float) -> tuple[np.ndarray, np.ndarray]:
+    """(cost, u₁) minimising w_u (u₁ − a)² + w_u (u₂ − g)² + w_b (σ₂ (c − u₁) − u₂ − e)² over the box
+    u₁ ∈ [lo1, hi1], u₂ ∈ [lo2, hi2], elementwise over the (σ₁, σ₂) grid (c = ξ₀ σ₁).
+
+    Convex in (u₁, u₂), so its minimum over the box is the stationary point when that is inside,
+    else the best of the four edges' minima (each a clipped scalar minimiser): exact, no iteration.
+    """
+    h0 = s2 * c - e  # the offset residual is h0 − σ₂ u₁ − u₂
+    rho = w_b / w_u
+    r = (h0 - s2 * a - g) / (1.0 + rho * (1.0 + s2 * s2))
+    candidates = [(a + rho * s2 * r, g + rho * r)]
+    for u1 in (lo1, hi1):
+        candidates.append((u1 + 0.0 * h0, np.clip((w_u * g + w_b * (h0 - s2 * u1)) / (w_u + w_b), lo2, hi2)))
+    for u2 in (lo2, hi2):
+        candidates.append((np.clip((w_u * a + w_b * s2 * (h0 - u2)) / (w_u + w_b * s2 * s2), lo1, hi1),
+                           u2 + 0.0 * h0))
+    best_cost, best_u1 = None, None
+    for k, (u1, u2) in enumerate(candidates):
+        cost = w_u * (u1 - a) ** 2 + w_u * (u2 - g) ** 2 + w_b * (h0 - s2 * u1 - u2) ** 2
+        if k == 0:  # the stationary point counts only inside the box
+            inside = (u1 >= lo1 - 1e-12) & (u1 <= hi1 + 1e-12) & (u2 >= lo2 - 1e-12) & (u2 <= hi2 + 1e-12)
+            cost = np.where(inside, cost, np.inf)
+            best_cost, best_u1 = cost, u1
+            continue
+        better = cost < best_cost
+        best_cost, best_u1 = np.where(better, cost, best_cost), np.where(better, u1, best_u1)
+    return best_cost, best_u1
+
+
+def solve_step_qp(u_n: tuple[float, float], sigma_n: float, dcm0: tuple[float, float], box,
+                  sigma_box: tuple[float, float], w: StepAdaptWeights, nxt: NextStep,
+                  window: SwingWindow | None = None) -> tuple[float, tuple[float, float]]:
+    """(σ₁, (u_x, u_y)) of the current step minimising the module docstring's two-step QP.
+
+    For fixed (σ₁, σ₂) each axis is a box-constrained convex QP in (u₁, u₂), solved exactly
+    (:func:`_two_step_axis`); u₁'s box is the reach intersected with the swing ``window``; where
+    the two do not meet, u₁ is the window's point nearest the box (the swing cannot reach it: it
+    lands as close as it can). σ₂ is minimised over its grid; the cost left over σ₁ is continuous
+    but not convex once the window binds, so σ₁ is searched on a grid and refined around the best
+    point (to about 1e-6 of its range).
     """
     w_u, w_t, w_b = w.step, w.timing, w.offset
+    s2 = np.asarray(nxt.sigmas, dtype=float)[None, :]
 
     def evaluate(sigma: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
-        total = w_t * (sigma - sigma_n) ** 2
+        s1 = sigma[:, None]
+        total = w_t * (s1 - sigma_n) ** 2 + w_t * (s2 - nxt.sigma_n) ** 2
         us = []
         for axis in (0, 1):
-            c = dcm0[axis] * sigma - offset_n[axis]
             lo, hi = box[axis]
-            lo, hi = np.full_like(sigma, lo), np.full_like(sigma, hi)
+            lo, hi = np.full_like(s1, lo), np.full_like(s1, hi)
             if window is not None:
-                r = window.radius(np.log(sigma) / window.lam)
+                r = window.radius(np.log(s1) / window.lam)
                 w_lo, w_hi = window.s[axis] - r, window.s[axis] + r
                 apart = (w_lo > hi) | (w_hi < lo)
                 nearest = np.clip(np.clip(window.s[axis], lo, hi), w_lo, w_hi)
                 lo = np.where(apart, nearest, np.maximum(lo, w_lo))
                 hi = np.where(apart, nearest, np.minimum(hi, w_hi))
-            u = np.clip((w_u * u_n[axis] + w_b * c) / (w_u + w_b), lo, hi)
-            total += w_u * (u - u_n[axis]) ** 2 + w_b * (c - u) ** 2
-            us.append(u)
-        return total, us
+            cost, u1 = _two_step_axis(u_n[axis], nxt.u_n[axis], nxt.offset[axis], dcm0[axis] * s1, s2,
+                                      lo, hi, *nxt.box[axis], w_u, w_b)
+            total = total + cost
+            us.append(u1)
+        k = np.argmin(total, axis=1)
+        rows = np.arange(len(sigma))
+        return total[rows, k], [u[rows, k] for u in us]
 
     lo_s, hi_s = sigma_box
     sigma = np.linspace(lo_s, hi_s, _GRID)
