@@ -3,12 +3,13 @@ an adapted step time until the step is committed; G1 survives a push it falls fr
 adaptation; reach bounds that contradict themselves are one-line config errors."""
 
 import dataclasses
+import functools
 
 import numpy as np
 import pytest
 import yaml
 
-from romoco_drake.bench.push import pushed, walking_scenario
+from romoco_drake.bench.push import pushed, step_clock, walking_scenario
 from romoco_drake.embedding.bezier import plan_swing
 from romoco_drake.errors import ConfigError
 from romoco_drake.modes import Mode
@@ -20,9 +21,9 @@ from romoco_drake.rom.types import PlannerOutput, WalkCommand
 from romoco_drake.runner import run_scenario
 
 
-def _bench_setup(adapt: bool = True, momentum: bool = True):
-    """G1 walking as ``romoco bench push`` runs it (the push_recovery overlay), step adaptation or
-    the angular-momentum task turned off."""
+def _g1_setup(adapt: bool = True, momentum: bool = True):
+    """G1 walking as ``romoco bench push`` runs it (g1_walk as shipped), step adaptation or the
+    hip strategy (the angular-momentum task) turned off."""
     scenario = walking_scenario("g1")
     planner, controller = scenario.planner, scenario.controller
     steps = dataclasses.replace(planner.step_adaptation, enabled=adapt)
@@ -30,6 +31,14 @@ def _bench_setup(adapt: bool = True, momentum: bool = True):
     am = dataclasses.replace(controller.angular_momentum, weight=weight)
     return dataclasses.replace(scenario, planner=dataclasses.replace(planner, step_adaptation=steps),
                                controller=dataclasses.replace(controller, angular_momentum=am))
+
+
+@functools.cache
+def _g1_push_time(phase: float) -> float:
+    """When the bench's cell at ``phase`` pushes: from the shipped scenario's own step clock (an
+    unpushed run), so a change in gait timing moves the push with it."""
+    start, step = step_clock(walking_scenario("g1"))
+    return start + phase * step
 
 
 def _walking_tick(machine, robot, schedule, t, plan):
@@ -56,6 +65,46 @@ def test_state_machine_follows_an_adapted_step_time_until_committed():
     for plan in (dataclasses.replace(early, timing_adapted=False),
                  dataclasses.replace(early, stance_side="right")):
         assert _walking_tick(machine, robot, s, 1.1, plan).t_ss == pytest.approx(0.3)
+
+
+def _lifted_right_foot(robot) -> RobotKinematics:
+    """G1 on its left foot with the right one drawn up (hip and knee bent): the swing sole is
+    centimetres above the stance sole."""
+    q = robot.nominal.q.copy()
+    for joint, angle in (("right_hip_pitch_joint", -0.8), ("right_knee_joint", 1.4)):
+        q[robot.plant.GetJointByName(joint).position_start()] = angle
+    return RobotKinematics(robot, np.concatenate([q, np.zeros(robot.nv)]))
+
+
+def test_touchdown_is_contact_triggered_early_and_waited_for_late():
+    """Left stance, T_SS 0.3 s from t = 1: the right foot's switch reads off (lifted), then on."""
+    robot = load_robot("g1")
+    machine = GaitStateMachine(robot, period=0.002, t_ds=0.0)
+    flat = RobotKinematics(robot, np.concatenate([robot.nominal.q, np.zeros(robot.nv)]))
+    lifted = _lifted_right_foot(robot)
+    stance_only, both = np.array([1.0, 0.0]), np.ones(2)
+    start = GaitSchedule(Mode.WALKING, "left", 1.0, 0.3, 5, 0, 0, "")
+
+    def tick(s, t, kin, contact):
+        return machine.next_schedule(s, t, kin, WalkCommand(vx=0.3), contact)
+
+    s = tick(start, 1.05, lifted, stance_only)
+    assert s.lifted and s.side == "left"
+    # A touch before early_touchdown (0.6) of T_SS is a scuff: the step goes on.
+    assert tick(s, 1.1, lifted, both).side == "left"
+    # Landing at 0.2 s (before the commit point, 0.85 × 0.3): the step ends there.
+    early = tick(s, 1.2, flat, both)
+    assert early.side == "right" and early.step_start == pytest.approx(1.2) and early.touchdowns == (1, 0)
+    # After the commit point the clock ends the step (a foot about to land touches early).
+    assert tick(s, 1.27, flat, both).side == "left"
+    # At the timed switch a foot still in the air holds the step, up to touchdown_timeout...
+    held = tick(s, 1.3, lifted, stance_only)
+    assert held.side == "left"
+    landed = tick(held, 1.34, flat, both)
+    assert landed.side == "right" and landed.touchdowns == (0, 1)
+    assert tick(held, 1.4, lifted, stance_only).side == "right"  # ...then the clock wins
+    # A foot that landed flat but unloaded (switch off, level with the stance sole) does not hold it.
+    assert tick(s, 1.3, flat, stance_only).side == "right"
 
 
 def test_swing_retimed_mid_step_is_continuous_and_lands_on_time():
@@ -86,19 +135,20 @@ def test_contradictory_step_reach_is_a_one_line_error(tmp_path, key, value, mess
 @pytest.mark.parametrize("adapt", [True, False])
 def test_g1_survives_a_lateral_push_only_with_step_adaptation(adapt):
     """G1 at 0.4 m/s, 20 N·s to its right half-way through a right stance (the bench's cell
-    right/0.5), the momentum task off: with step adaptation it is still up 2 s later; with the
+    right/0.5), the hip strategy off: with step adaptation it is still up 2 s later; with the
     planner's own steps it falls."""
-    scenario = _bench_setup(adapt=adapt, momentum=False)
-    scenario = pushed(scenario, 3.6521, 20.0, "right")
-    summary = run_scenario(dataclasses.replace(scenario, duration_s=6.0), stop_after_fall=0.1)
+    scenario = pushed(_g1_setup(adapt=adapt, momentum=False), _g1_push_time(0.5), 20.0, "right")
+    summary = run_scenario(dataclasses.replace(scenario, duration_s=_g1_push_time(0.5) + 2.0),
+                           stop_after_fall=0.1)
     assert summary["fell"] is not adapt
 
 
 @pytest.mark.parametrize("momentum", [True, False])
-def test_g1_survives_a_lateral_push_at_the_switch_only_with_the_momentum_task(momentum):
+def test_g1_survives_a_lateral_push_at_the_switch_only_with_the_hip_strategy(momentum):
     """The bench's cell left/0 (20 N·s to the left as the left foot takes the weight, which the
-    swing foot cannot step under: it may not cross): with the bench's angular-momentum task G1
-    is still up 2 s later; without it, it falls."""
-    scenario = pushed(_bench_setup(momentum=momentum), 3.5021, 20.0, "left")
-    summary = run_scenario(dataclasses.replace(scenario, duration_s=5.5), stop_after_fall=0.1)
+    swing foot cannot step under: it may not cross): with the shipped hip strategy (angular-momentum
+    damping while the step is bounded) G1 is still up 2 s later; without it, it falls."""
+    scenario = pushed(_g1_setup(momentum=momentum), _g1_push_time(0.0), 20.0, "left")
+    summary = run_scenario(dataclasses.replace(scenario, duration_s=_g1_push_time(0.0) + 2.0),
+                           stop_after_fall=0.1)
     assert summary["fell"] is not momentum

@@ -1,5 +1,7 @@
 """Robot models: structure against the fact sheet, nominal pose, internal constraints."""
 
+import math
+
 import numpy as np
 import pytest
 from conftest import ROBOT_FACTS
@@ -7,6 +9,7 @@ from pydrake.geometry import Role
 from pydrake.systems.framework import DiagramBuilder
 
 from romoco_drake.robots.model import load_robot
+from romoco_drake.robots.reach import leg_geometry, step_reach
 
 
 def test_structure_matches_fact_sheet(robot_name):
@@ -60,6 +63,20 @@ def test_nominal_pose_feet_flat_and_com_over_support(robot_name):
     assert np.linalg.norm(com[:2] - middle) < 0.01
     lower, upper = robot.q_lower, robot.q_upper
     assert np.all(nominal.q >= lower - 1e-6) and np.all(nominal.q <= upper + 1e-6)
+
+
+def test_step_reach_is_within_what_the_leg_reaches(robot_name):
+    """Every robot has a step reach (push recovery is on by default), and its sagittal bounds are
+    steps the leg can make: u/2 within √(L² − h²) of the point under the hip (robots/reach.py)."""
+    robot = load_robot(robot_name)
+    reach = robot.config.walking.step_reach
+    assert reach is not None
+    straight, hip = leg_geometry(robot)
+    assert 0.5 < hip / straight < 1.0  # standing crouched, legs not folded
+    full = 2.0 * math.sqrt(straight ** 2 - hip ** 2)
+    assert 0.0 < reach.backward < reach.forward <= full
+    derived = step_reach(straight, hip, robot.config.walking.step_width, robot.config.walking.t_ss)
+    assert reach.forward == pytest.approx(derived.forward, rel=0.15)
 
 
 def test_internal_constraints_hold_at_nominal(robot_name):

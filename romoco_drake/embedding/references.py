@@ -84,6 +84,8 @@ class TaskReferences(SharedValue):
     com_flow: tuple | None = None
     # A wrench MPC's reference for this tick (walking under the VI-MPC planner), else None.
     mpc: MpcReference | None = None
+    # The plan's step was bounded by the step adapter: the robot is recovering from a push.
+    recovering: bool = False
 
     @functools.cached_property
     def com_plan(self) -> np.ndarray | None:
@@ -251,7 +253,8 @@ class EmbeddingCore:
         flow = None
         if single and swing.com_start is not None:
             flow = (swing.com_start, tau, plan.com_height, self.robot.total_mass)
-        return self._pack(Mode.WALKING, domain, stance, out, y_d, yd_d, ydd_d, active, kin, flow, plan.mpc)
+        return self._pack(Mode.WALKING, domain, stance, out, y_d, yd_d, ydd_d, active, kin, flow, plan.mpc,
+                          plan.step_bounded)
 
     def _standing(self, kin: RobotKinematics, stand: StandState | None, t: float) -> TaskReferences:
         out = self.standing.evaluate(kin)
@@ -283,7 +286,7 @@ class EmbeddingCore:
 
     def _pack(self, mode: Mode, domain: Domain, stance: str, out: Output, y_d, yd_d, ydd_d, active,
               kin: RobotKinematics, com_flow: tuple | None = None,
-              mpc: MpcReference | None = None) -> TaskReferences:
+              mpc: MpcReference | None = None, recovering: bool = False) -> TaskReferences:
         holonomic = self.contact.constraints(kin, domain)
         blocks = [self.contact.friction_constraints(kin, side) for side in domain.feet]
         if len(blocks) == 1:
@@ -297,7 +300,7 @@ class EmbeddingCore:
             b_f = np.concatenate([b for _, b in blocks]) if blocks else np.zeros(0)
         n_f = A_f.shape[1]
         return TaskReferences(mode, domain, stance, out.names, out.y, out.J, out.Jdot_v, y_d, yd_d, ydd_d,
-                              active, holonomic, n_f, A_f, b_f, com_flow, mpc)
+                              active, holonomic, n_f, A_f, b_f, com_flow, mpc, recovering)
 
 
 def alip_com_flow(start: tuple[float, ...], tau: float, height: float, mass: float) -> np.ndarray:

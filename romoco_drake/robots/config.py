@@ -161,9 +161,8 @@ declare_ranges(CommandLimits, vx=positive(5.0, "m/s"), vy=positive(5.0, "m/s"), 
                ax=positive(20.0, "m/s²"), ay=positive(20.0, "m/s²"), wz_rate=positive(50.0, "rad/s²"))
 
 
-# Step adaptation's reach (rom/step_adapt.py StepBounds) comes from the leg: a step of length u
-# puts each foot u/2 from a hip over the midpoint, which a leg of straight length L at hip height
-# h reaches while u/2 < √(L² − h²). A step is within 2 m of the stance foot (no biped's leg is
+# Step adaptation's reach (rom/step_adapt.py StepBounds) comes from the leg
+# (romoco_drake/robots/reach.py). A step is within 2 m of the stance foot (no biped's leg is
 # longer); the feet keep at least 0 m apart; a swing under 0.1 s cannot lift and land a foot;
 # no swing foot moves faster than 20 m/s (0: the swing's reach is not bounded).
 declare_ranges(StepBounds, forward=Range(-2.0, 2.0, "m"), backward=Range(-2.0, 2.0, "m"),

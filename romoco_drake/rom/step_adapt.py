@@ -134,9 +134,13 @@ class StepAdapter:
         implied = tuple(d * sigma_n - u for d, u in zip(dcm0, u_n, strict=True))
         offset_n = self.viable_offset(implied, plan.stance_side, sigma_n)
         box = b.box(plan.stance_side)
-        if (offset_n == implied and all(lo <= u <= hi for u, (lo, hi) in zip(u_n, box, strict=True))
-                and b.t_ss_min <= plan.t_ss <= b.t_ss_max
-                and (window is None or window.contains(u_n, plan.t_ss))):
+        if t_in_step >= SWING_COMMIT_FRACTION * plan.t_ss:
+            # Committed: the state machine and the swing no longer follow the plan's time or target.
+            return replace(plan, timing_adapted=True)
+        # A push: the law's step is out of reach or leaves an offset the next steps cannot catch.
+        pushed = not (offset_n == implied and b.t_ss_min <= plan.t_ss <= b.t_ss_max
+                      and all(lo <= u <= hi for u, (lo, hi) in zip(u_n, box, strict=True)))
+        if not pushed and (window is None or window.contains(u_n, plan.t_ss)):
             # The law's own step is reachable and viable: the QP's minimum (zero), at any phase.
             return replace(plan, timing_adapted=True)
         nxt = self.next_step(plan, lam, sigma_n)
@@ -150,7 +154,7 @@ class StepAdapter:
         t_ss = math.log(sigma) / lam
         target = np.array([u[0], u[1], float(plan.swing_target[2])])
         return replace(plan, swing_target=target, t_ss=t_ss, time_to_touchdown=max(t_ss - t_in_step, 0.0),
-                       timing_adapted=True)
+                       timing_adapted=True, step_bounded=pushed)
 
     def next_step(self, plan: PlannerOutput, lam: float, sigma_n: float) -> NextStep | None:
         """The lookahead's second step from the law's orbit (None: the orbit is not finite).

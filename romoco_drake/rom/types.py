@@ -114,6 +114,10 @@ class PlannerOutput(SharedValue):
     # t_ss is this step's own (adapted) single-support time, which the state machine and the
     # output embedding follow until the step is committed (rom/step_adapt.py); else the command's.
     timing_adapted: bool = False
+    # The step adapter bounded the law's step: a push asked for a step out of reach, or for a DCM
+    # offset the next steps cannot catch (not merely a swing foot lagging its path), which is when
+    # the controller's hip strategy may help (``angular_momentum.when: recovering``).
+    step_bounded: bool = False
 
     @classmethod
     def placeholder(cls) -> PlannerOutput:
