@@ -132,6 +132,26 @@ class ControllerStats(Counters):
 
 
 @dataclass(frozen=True)
+class StateStats(Counters):
+    """The shared kinematics' unusable state estimates (non-finite or diverged): entries into
+    one and the current run of ticks in one."""
+
+    nonfinite_state_events: int = 0
+    nonfinite_streak: int = 0
+
+
+@dataclass(frozen=True)
+class DeadlineStats(Counters):
+    """The control loop's ticks over their period: all of them, the longest and the current run
+    of them, and the runs that reached ``link.max_consecutive_misses`` (late events)."""
+
+    deadline_misses: int = 0
+    longest_miss_streak: int = 0
+    miss_streak: int = 0
+    late_events: int = 0
+
+
+@dataclass(frozen=True)
 class LinkCounters(Counters):
     """The controller side's link safety counts: the measurement receiver counts stages entered
     and rejected messages, the command sender rejected (non-finite) and clamped commands and

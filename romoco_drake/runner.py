@@ -1,6 +1,7 @@
 """Run a scenario: simulate, optionally show or record it in Meshcat, summarise.
 
-The run summary is collected from the systems that measured it: the fall monitor, the
+The run summary is collected from the systems that measured it: the fall monitor, the shared
+kinematics (unusable estimates), the deadline monitor (ticks over their period), the
 estimator, the LCM link's two sides, and for walking the gait state machine, the command
 limiter, the whole-body controller, a VI-MPC planner and the momentum log (each one's
 ``summary``), with velocity tracking from the state log (:mod:`~romoco_drake.metrics`).
@@ -157,6 +158,8 @@ def _run_summary(built, context, scenario: Scenario, link: str, end: RunEnd, dur
     # What a run measured is scored up to a fall: after it the state (diverged, in the worst
     # case) says nothing about tracking.
     until = summary["fall_time_s"]
+    summary |= (built.kinematics.summary(built.kinematics.GetMyContextFromRoot(context))
+                | built.deadline.summary(built.deadline.GetMyContextFromRoot(context)))
     summary |= estimator_summary(built, context, until)
     if link != "sim":
         summary |= link_summary(built.station, context)
@@ -346,6 +349,9 @@ def _print_run(summary: dict, record: Path | None) -> None:
     print(f"{summary['scenario']} ({summary['robot']}): {summary['duration_s']} s simulated in "
           f"{summary['wall_s']} s ({summary['realtime_factor']}x real time); {fall_text(summary)}; "
           f"base height drift {summary['base_height_drift_m'] * 1000:.1f} mm")
+    print(f"  unusable state estimates {summary['nonfinite_state_events']}, ticks over their period "
+          f"{summary['deadline_misses']} (longest run {summary['longest_miss_streak']}, "
+          f"late events {summary['late_events']})")
     if "velocity_rms_error" in summary:
         print(f"  {summary['planner']} + {summary['controller']}: {summary['steps']} steps, "
               f"velocity rms error (vx, vy, wz) {summary['velocity_rms_error']}, "

@@ -15,15 +15,13 @@ from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.errors import RomocoError
+from romoco_drake.robots.posture import DIVERGED
 
 CHUNK_S = 0.1  # simulated time per AdvanceTo: progress, stop checks and Ctrl-C act between chunks
 PROGRESS_WALL_S = 2.0  # print progress lines at most this often
 # Drake's SAP contact solver (v1.51, multibody/plant/sap_driver.cc; the plants here use SAP)
 # reports a diverged state with one of these.
 SAP_DIVERGED = ("The SAP solver failed to converge", "The Hessian of the momentum cost")
-# No robot's |q| or |v| (m, rad, m/s, rad/s) gets here; a blown-up simulation does within a
-# few steps, often without a solver noticing (then a controller trips on it).
-BLOWN_UP = 1e6
 
 
 @contextlib.contextmanager
@@ -103,11 +101,12 @@ def divergence(error: Exception, plant_state: np.ndarray | None) -> str | None:
     """What to report if ``error``, raised while advancing the simulation, means it diverged; else None.
 
     Diverged: Drake's SAP solver said so, or the plant state ``[q; v]`` (None without a plant)
-    is non-finite or blown up past ``BLOWN_UP``, whatever then raised (e.g. a controller's
+    is non-finite or blown up past ``DIVERGED`` (a blown-up simulation gets there within a few
+    steps, often without a solver noticing), whatever then raised (e.g. a controller's
     "QuaternionToRotationMatrix(): All the elements in a quaternion are zero").
     """
     text = str(error).strip()
-    blown_up = plant_state is not None and not np.all(np.abs(plant_state) < BLOWN_UP)  # NaN included
+    blown_up = plant_state is not None and not np.all(np.abs(plant_state) < DIVERGED)  # NaN included
     if not blown_up and not any(marker in text for marker in SAP_DIVERGED):
         return None
     return text.splitlines()[0].split(". ")[0].rstrip(".") if text else type(error).__name__

@@ -30,6 +30,7 @@ from romoco_drake.estimation.ground_truth import GroundTruthEstimator
 from romoco_drake.estimation.kalman_estimator import KalmanEstimator
 from romoco_drake.estimation.registry import ESTIMATORS
 from romoco_drake.estimation.rom_state import RomStateFromRobot
+from romoco_drake.interfaces.deadline import DeadlineMonitor
 from romoco_drake.interfaces.engines import make_engine_station
 from romoco_drake.interfaces.hardware import (
     PUBLISH_DELAY,
@@ -75,6 +76,8 @@ class BuiltDiagram:
     monitor: FallMonitor
     state_log: VectorLogSink
     estimate_log: VectorLogSink
+    kinematics: RobotKinematicsSystem  # counts unusable estimates
+    deadline: DeadlineMonitor  # times the loop's ticks
     command: CommandSource | MeshcatRadio | None = None
     walking: WalkingLoop | None = None
     plant_station: Diagram | None = None  # the simulated station holding the plant, if any
@@ -124,14 +127,24 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
     and its E-stop latches the controller's damping (on LCM links it is also published as
     ROMOCO_ESTOP). With ``meshcat``, a walking loop shows what it does on the page.
     The estimate feeds one :class:`~romoco_drake.robots.kinematics.RobotKinematicsSystem`
-    (``kinematics``), the controller-plant evaluation every controller system of the tick shares.
+    (``kinematics``), the controller-plant evaluation every controller system of the tick shares
+    and the loop's guard against an unusable estimate. A
+    :class:`~romoco_drake.interfaces.deadline.DeadlineMonitor` (``deadline``) times every tick;
+    only ``"hardware"`` runs at real time, so only there do missed deadlines act (the station's
+    ``loop_stage``).
     """
     _check_link(scenario, meshcat, link, lcm, teleop)
     robot = load_robot(scenario.robot)
+    period = 1.0 / scenario.controller.rate_hz
     builder = DiagramBuilder()
+    # First, so that its tick starts before the others' (DeadlineMonitor).
+    timing = (scenario.link if link == "hardware"
+              else dataclasses.replace(scenario.link, max_consecutive_misses=0))
+    deadline = builder.AddNamedSystem("deadline", DeadlineMonitor(period, LINK_TICK_OFFSET, timing))
     station, plant_station, robot_sim = _add_station(builder, scenario, robot, meshcat, link, lcm)
+    builder.Connect(deadline.link_stage_port, station.GetInputPort("loop_stage"))
     estimator = _add_estimator(builder, scenario, robot, station, link != "hardware")
-    kinematics = builder.AddNamedSystem("kinematics", RobotKinematicsSystem(robot))
+    kinematics = builder.AddNamedSystem("kinematics", RobotKinematicsSystem(robot, period, LINK_TICK_OFFSET))
     builder.Connect(estimator.state_output, kinematics.state_port)
     walking = command = command_log = None
     if not traits(scenario.controller.name).walking:
@@ -146,7 +159,7 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
         if meshcat is not None:
             _add_page_display(builder, meshcat, robot, walking, estimator.state_output, kinematics)
         if link != "sim":
-            _add_status(builder, robot, lcm, estimator.state_output, command, walking)
+            _add_status(builder, robot, lcm, estimator.state_output, command, walking, kinematics, deadline)
     estimate_log = LogVectorOutput(estimator.state_output, builder, STATE_LOG_PERIOD)
     if plant_station is not None:
         monitor = plant_station.GetSubsystemByName("monitor")
@@ -157,8 +170,8 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
         state_log = estimate_log
     diagram = builder.Build()
     diagram.set_name(scenario.name or scenario.robot)
-    return BuiltDiagram(diagram, robot, station, monitor, state_log, estimate_log, command, walking,
-                        plant_station, robot_sim, estimator, command_log)
+    return BuiltDiagram(diagram, robot, station, monitor, state_log, estimate_log, kinematics, deadline,
+                        command, walking, plant_station, robot_sim, estimator, command_log)
 
 
 def _check_link(scenario: Scenario, meshcat: Meshcat | None, link: str, lcm: DrakeLcmInterface | None,
@@ -216,11 +229,13 @@ def _add_command(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel,
 
 
 def _add_status(builder: DiagramBuilder, robot: RobotModel, lcm: DrakeLcmInterface, state, command,
-                walking: WalkingLoop) -> None:
+                walking: WalkingLoop, kinematics: RobotKinematicsSystem, deadline: DeadlineMonitor) -> None:
     """The controller's status messages on an LCM link (for logs)."""
     status = builder.AddNamedSystem("status", StatusSender(
         robot, command.command_port.size(), walking.embedding.tracking_error_port.size()))
     builder.Connect(state, status.state_port)
+    builder.Connect(kinematics.stats_port, status.state_stats_port)
+    builder.Connect(deadline.stats_port, status.deadline_port)
     builder.Connect(walking.state_machine.mode_port, status.mode_port)
     builder.Connect(command.command_port, status.command_port)
     builder.Connect(walking.embedding.tracking_error_port, status.tracking_error_port)

@@ -9,6 +9,7 @@ from romoco_drake.interfaces import lcm_codec as codec
 from romoco_drake.interfaces.hardware import link_summary, make_hardware_station
 from romoco_drake.interfaces.link import LinkConfig
 from romoco_drake.interfaces.receiver import nominal_measurements
+from romoco_drake.modes import LinkStage
 
 TICK = 0.001  # s: the robot's publish period and the link's default receive period
 NO_FAULTS = {"stale_events": 0, "ride_through_events": 0, "stand_events": 0, "damping_events": 0,
@@ -76,6 +77,7 @@ class ControllerSide:
         self.simulator = Simulator(self.station)
         self.context = self.simulator.get_mutable_context()
         self.station.GetInputPort("actuation").FixValue(self.context, actuation)
+        self.station.GetInputPort("loop_stage").FixValue(self.context, [float(LinkStage.FRESH)])
         self.sent = Listener(self.lcm, codec.MOTOR_COMMAND_CHANNEL)
         self.simulator.Initialize()
 

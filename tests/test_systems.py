@@ -15,7 +15,7 @@ from romoco_drake.embedding.outputs import sole_frame
 from romoco_drake.estimation.rom_state import RomStateFromRobot
 from romoco_drake.interfaces.hardware import StatusSender
 from romoco_drake.interfaces.lcm_codec import decode_controller_status
-from romoco_drake.modes import Mode
+from romoco_drake.modes import DeadlineStats, Mode, StateStats
 from romoco_drake.planners.heading import HeadingHold, base_yaw
 from romoco_drake.robots import kinematics as kinematics_module
 from romoco_drake.robots.kinematics import RobotKinematics, RobotKinematicsSystem
@@ -43,7 +43,7 @@ def _random_state(robot, seed=0, yaw=0.7):
 @pytest.mark.parametrize("name", ["g1", "cassie"])
 def test_kinematics_system_matches_drake(name):
     robot = load_robot(name)
-    system = RobotKinematicsSystem(robot)
+    system = RobotKinematicsSystem(robot, 0.002)
     context = system.CreateDefaultContext()
     x, plant_context = _random_state(robot)
     plant = robot.plant
@@ -197,6 +197,8 @@ def test_status_sender_encodes_what_a_log_needs():
     system.mode_port.FixValue(context, Mode.WALKING)
     system.command_port.FixValue(context, command)
     system.tracking_error_port.FixValue(context, errors)
+    system.state_stats_port.FixValue(context, StateStats(nonfinite_state_events=2))
+    system.deadline_port.FixValue(context, DeadlineStats(deadline_misses=7, longest_miss_streak=3))
     context.SetTime(1.25)
     status = decode_controller_status(system.message_port.Eval(context))
     assert status.utime == 1_250_000 and status.robot == "g1" and status.mode == Mode.WALKING.index
@@ -204,6 +206,7 @@ def test_status_sender_encodes_what_a_log_needs():
     np.testing.assert_allclose(status.command, command[:3])
     np.testing.assert_allclose(status.state, x)
     np.testing.assert_allclose(status.tracking_error, errors)
+    assert (status.nonfinite_state_events, status.deadline_misses, status.longest_miss_streak) == (2, 7, 3)
 
 
 @pytest.mark.parametrize("bad", [-1, 4, 1.5, float("nan")])

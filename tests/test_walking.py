@@ -282,7 +282,7 @@ def test_motor_command_station_runs_the_motor_pd_loop(g1):
     robot = g1[0]
     station = make_station(robot, 0.002, None, motor_pd=True)
     assert {station.get_input_port(i).get_name() for i in range(station.num_input_ports())} == {
-        "actuation", "motor_command"}
+        "actuation", "motor_command", "loop_stage"}
     simulator = Simulator(station)
     context = simulator.get_mutable_context()
     plant = station.GetSubsystemByName("plant")

@@ -6,6 +6,7 @@ import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from romoco_drake.robots.model import RobotModel
+from romoco_drake.robots.posture import diverged_to_nan
 
 
 class GroundTruthEstimator(LeafSystem):
@@ -18,7 +19,8 @@ class GroundTruthEstimator(LeafSystem):
     | base_velocity | in  | 6        | [ω_WB; v_WB] in world                     |
     | state         | out | nq + nv  | controller-plant state                    |
 
-    Direct feedthrough, no state: the simulated measurements are exact.
+    Direct feedthrough, no state: the simulated measurements are exact. Entries that are not
+    finite or beyond ``DIVERGED`` are NaN (:func:`plant_state`).
     """
 
     def __init__(self, robot: RobotModel):
@@ -49,4 +51,4 @@ def plant_state(robot: RobotModel, joint_state: np.ndarray, base_pose: np.ndarra
     x[r.nq + r.joint_v_index] = joint_state[nj:]
     x[r.base_q_start:r.base_q_start + 7] = base_pose
     x[r.nq + r.base_v_start:r.nq + r.base_v_start + 6] = base_velocity
-    return x
+    return diverged_to_nan(x)

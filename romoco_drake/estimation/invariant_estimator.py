@@ -12,6 +12,7 @@ from romoco_drake.estimation.ground_truth import plant_state
 from romoco_drake.estimation.invariant_ekf import InekfState, InvariantEkf, InvariantEkfParams
 from romoco_drake.robots.kinematics import declare_kinematics_cache
 from romoco_drake.robots.model import RobotModel
+from romoco_drake.robots.posture import DIVERGED
 
 
 class InvariantEkfEstimator(ContactEstimator):
@@ -38,8 +39,8 @@ class InvariantEkfEstimator(ContactEstimator):
     Start: the first update with valid inputs starts the filter at rest in the nominal pose (base
     at ``initial_base_position`` if given); roll and pitch then converge from gravity. (The first
     accelerometer readings of a simulation are no gravity reference: the plant reports no
-    acceleration before its first step, then the contact settling.) Malformed inputs (NaN/Inf):
-    the update is skipped and counted (:meth:`rejected_updates`).
+    acceleration before its first step, then the contact settling.) Malformed inputs (NaN/Inf, or
+    beyond ``DIVERGED``): the update is skipped and counted (:meth:`rejected_updates`).
     """
 
     def __init__(self, robot: RobotModel, period: float = 0.002, params: InvariantEkfParams | None = None,
@@ -73,7 +74,7 @@ class InvariantEkfEstimator(ContactEstimator):
         js = self.joint_state_input.Eval(context)
         imu = self.imu_input.Eval(context)
         contact = self.foot_contact_input.Eval(context)
-        if not all(np.all(np.isfinite(u)) for u in (js, imu[4:], contact)):
+        if not all(np.all(np.abs(u) < DIVERGED) for u in (js, imu[4:], contact)):
             return None
         return imu[4:7], imu[7:10], contact > 0.5
 

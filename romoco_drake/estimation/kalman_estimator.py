@@ -19,6 +19,7 @@ from romoco_drake.estimation.kalman import (
 )
 from romoco_drake.robots.kinematics import RobotKinematics, declare_kinematics_cache
 from romoco_drake.robots.model import RobotModel
+from romoco_drake.robots.posture import DIVERGED
 
 # An IMU quaternion further than this from unit norm is malformed (e.g. an all-zero message).
 QUATERNION_NORM_TOLERANCE = 0.1
@@ -53,9 +54,9 @@ class KalmanEstimator(ContactEstimator):
     flat-ground measurement assumes). Later updates predict and correct. Until the first
     update, the state is that start for the nominal pose ``robot.nominal``.
 
-    Malformed inputs (NaN/Inf anywhere, or a quaternion far from unit norm, e.g. an all-zero
-    message): the update is skipped, the estimate kept, and the skip counted
-    (:meth:`rejected_updates`).
+    Malformed inputs (NaN/Inf or a value beyond ``DIVERGED`` anywhere, or a quaternion far from
+    unit norm, e.g. an all-zero message): the update is skipped, the estimate kept, and the skip
+    counted (:meth:`rejected_updates`).
     """
 
     def __init__(self, robot: RobotModel, period: float = 0.002, params: KalmanParams | None = None,
@@ -110,7 +111,7 @@ class KalmanEstimator(ContactEstimator):
         imu = self.imu_input.Eval(context)
         contact = self.foot_contact_input.Eval(context)
         R = _rotation(imu[:4])
-        if R is None or not all(np.all(np.isfinite(u)) for u in (js, imu, contact)):
+        if R is None or not all(np.all(np.abs(u) < DIVERGED) for u in (js, imu, contact)):
             return None
         return js, imu, contact > 0.5, R
 

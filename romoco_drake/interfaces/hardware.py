@@ -8,12 +8,13 @@ change when a robot replaces the simulator:
 |---------------|-----|------|----------------------------------------------------------------|
 | actuation     | in  | nu   | joint torques, sent as τ_ff of the motor command (K_p = K_d = 0) |
 | motor_command | in  | 5·nu | (``motor_pd`` only) q_d, v_d, τ_ff, K_p, K_d; actuation adds to τ_ff |
+| loop_stage    | in  | 1    | :class:`~romoco_drake.modes.LinkStage` the loop's missed deadlines ask for |
 | joint_state   | out | 2·nj | ROMOCO_PROPRIOCEPTION q, v                                      |
 | imu           | out | 10   | ROMOCO_PROPRIOCEPTION quaternion, gyro, accelerometer           |
 | foot_contact  | out | 2    | ROMOCO_PROPRIOCEPTION contact flags                             |
 | base_pose     | out | 7    | ROMOCO_BASE_STATE (motion capture) quaternion, position          |
 | base_velocity | out | 6    | ROMOCO_BASE_STATE angular, linear velocity (world)              |
-| link_stage    | out | 1    | :class:`~romoco_drake.modes.LinkStage` of the measurements (sim: FRESH) |
+| link_stage    | out | 1    | LinkStage of the measurements, or ``loop_stage`` when later  |
 
 Safety at the interface (each counted, see :func:`link_summary`):
 
@@ -32,13 +33,19 @@ Safety at the interface (each counted, see :func:`link_summary`):
   sent damping (not counted: nothing was lost yet).
 - **rejected messages**: bytes that do not decode, the wrong joint count, NaN/Inf, non-unit
   quaternions, times that go backwards (:mod:`~romoco_drake.interfaces.lcm_codec`) are dropped
-  and the last good values kept; a non-finite command from the controller is not sent
-  (damping instead). Each is one ``rejected_messages``.
+  and the last good values kept; a non-finite or diverged (beyond ``DIVERGED``) command is not
+  sent (damping instead). Each is one ``rejected_messages``. Finite but diverged measurements
+  (a fallen simulation's 1e200) pass the link: the estimate marks them NaN and the loop damps
+  (:class:`~romoco_drake.robots.kinematics.RobotKinematicsSystem`).
 - **clamping**: q_d to the joint limits, τ_ff to the effort limits, v_d to ``max_joint_speed``,
   K_p and K_d to [0, ``max_gain_factor`` × the YAML gains]; ``clamped_commands`` counts the
   commands that needed it.
 - **E-stop**: an engaged (or undecodable: fail safe) ROMOCO_ESTOP message latches damping for
   the rest of the run from the tick it arrives; ``estop`` counts engagements.
+- **missed deadlines**: the loop's :class:`~romoco_drake.interfaces.deadline.DeadlineMonitor`
+  times each tick against its period; on ``--hardware`` ``max_consecutive_misses`` in a row
+  (``late_events``) ask, on ``loop_stage``, for the stages of a lost stream above, until a tick
+  is on time again.
 
 Before their first message the measurement ports hold the robot's nominal standing pose at
 rest, so the controller starts from a sane state while the robot is still sent damping.
@@ -73,8 +80,9 @@ from romoco_drake.interfaces.link import (
     subscribe,
 )
 from romoco_drake.interfaces.receiver import MeasurementReceiver
-from romoco_drake.modes import LinkCounters, LinkStage, Mode
+from romoco_drake.modes import DeadlineStats, LinkCounters, LinkStage, Mode, StateStats
 from romoco_drake.robots.model import RobotModel
+from romoco_drake.robots.posture import DIVERGED
 
 
 class CommandSender(LeafSystem):
@@ -134,7 +142,7 @@ class CommandSender(LeafSystem):
         q, v = joints[self._joint_of_actuator], joints[nj + self._joint_of_actuator]
         stage = LinkStage.decode(self.link_port.Eval(context)[0])
         if stage not in (LinkStage.FRESH, LinkStage.RIDE_THROUGH, LinkStage.STAND) or latched:
-            return damping_command(self.robot, q), False, False
+            return self._damping(q), False, False
         if self.motor_pd:
             wanted = self.motor_command_port.Eval(context).copy()
         else:
@@ -146,10 +154,16 @@ class CommandSender(LeafSystem):
             torque = (kp == 0.0) & (kd == 0.0)
             q_d[torque], v_d[torque] = q[torque], v[torque]
             kp[torque], kd[torque] = self.robot.kp[torque], self.robot.kd[torque]
-        if not np.all(np.isfinite(wanted)):
-            return damping_command(self.robot, q), True, False
+        if not np.all(np.abs(wanted) < DIVERGED):  # non-finite or diverged (NaN included)
+            return self._damping(q), True, False
         command = np.clip(wanted, self._lower, self._upper)
         return command, False, bool(np.any(command != wanted))
+
+    def _damping(self, q: np.ndarray) -> np.ndarray:
+        """The damping command about the measured ``q``, within the joint limits (K_p = 0: q_d only
+        has to be valid, also when the measurement diverged)."""
+        nu = self.robot.nu
+        return damping_command(self.robot, np.clip(q, self._lower[:nu], self._upper[:nu]))
 
     def _command(self, context, out) -> None:
         out.SetFromVector(self._checked(context, self.estop.engaged(context))[0])
@@ -192,6 +206,7 @@ def make_hardware_station(robot: RobotModel, lcm: DrakeLcmInterface, period: flo
     if motor_pd:
         builder.ExportInput(sender.motor_command_port, "motor_command")
     builder.ExportInput(sender.actuation_port, "actuation")
+    builder.ExportInput(receiver.loop_stage_port, "loop_stage")
     for name in ("joint_state", "imu", "foot_contact", "base_pose", "base_velocity"):
         builder.ExportOutput(receiver.GetOutputPort(name), name)
     builder.ExportOutput(receiver.link_port, "link_stage")
@@ -218,9 +233,12 @@ class StatusSender(LeafSystem):
     | mode           | in  | abstract | :class:`~romoco_drake.modes.Mode`              |
     | command        | in  | ≥ 3      | walking command (vx, vy, wz first)             |
     | tracking_error | in  | k        | per-group output tracking errors               |
+    | state_stats    | in  | abstract | :class:`~romoco_drake.modes.StateStats` (the shared kinematics') |
+    | deadline       | in  | abstract | :class:`~romoco_drake.modes.DeadlineStats`     |
     | message        | out | abstract | encoded controller_status_t (utime = sim time) |
 
-    What a log needs to be plotted and scored without the simulator (``romoco plot``).
+    What a log needs to be plotted and scored without the simulator (``romoco plot``), and the
+    loop's safety counts so far.
     """
 
     def __init__(self, robot: RobotModel, command_size: int, num_errors: int):
@@ -230,11 +248,16 @@ class StatusSender(LeafSystem):
         self.mode_port = self.DeclareAbstractInputPort("mode", AbstractValue.Make(Mode.STANDING))
         self.command_port = self.DeclareVectorInputPort("command", command_size)
         self.tracking_error_port = self.DeclareVectorInputPort("tracking_error", num_errors)
+        self.state_stats_port = self.DeclareAbstractInputPort("state_stats", AbstractValue.Make(StateStats()))
+        self.deadline_port = self.DeclareAbstractInputPort("deadline", AbstractValue.Make(DeadlineStats()))
         self.message_port = self.DeclareAbstractOutputPort("message", lambda: AbstractValue.Make(b""),
                                                            self._message)
 
     def _message(self, context, out) -> None:
+        deadline: DeadlineStats = self.deadline_port.Eval(context)
+        nonfinite = self.state_stats_port.Eval(context).nonfinite_state_events
         out.set_value(encode_controller_status(ControllerStatus(
             int(round(context.get_time() * 1e6)), self.robot.name, Mode(self.mode_port.Eval(context)).index,
             self.command_port.Eval(context)[:3], self.state_port.Eval(context),
-            self.tracking_error_port.Eval(context))))
+            self.tracking_error_port.Eval(context), nonfinite, deadline.deadline_misses,
+            deadline.longest_miss_streak)))

@@ -46,6 +46,9 @@ STATUS_CHANNEL = "ROMOCO_STATUS"
 
 # A received quaternion is renormalised if its norm is within this of 1, rejected otherwise.
 QUATERNION_NORM_TOLERANCE = 1e-3
+# The fingerprint of controller_status_t before its safety counts (the same fields without the last
+# three): such a status, from an older log, decodes with the counts 0.
+STATUS_WITHOUT_COUNTS = bytes.fromhex("8e26e8962fdbada0")
 
 
 class MessageRejected(RomocoError):
@@ -139,7 +142,8 @@ class Estop(SharedValue):
 
 @dataclass(frozen=True, eq=False)
 class ControllerStatus(SharedValue):
-    """What the controller is doing: mode, command, state estimate, output tracking errors."""
+    """What the controller is doing: mode, command, state estimate, output tracking errors, and
+    its safety counts so far (unusable estimates, missed deadlines, their longest run)."""
 
     utime: int
     robot: str
@@ -147,6 +151,9 @@ class ControllerStatus(SharedValue):
     command: np.ndarray
     state: np.ndarray
     tracking_error: np.ndarray
+    nonfinite_state_events: int = 0
+    deadline_misses: int = 0
+    longest_miss_streak: int = 0
 
     def __post_init__(self):
         object.__setattr__(self, "command", _frozen_vector("command", self.command, 3))
@@ -199,6 +206,8 @@ def encode_controller_status(msg: ControllerStatus) -> bytes:
     lcm.command = msg.command.tolist()
     lcm.num_states, lcm.state = msg.state.size, msg.state.tolist()
     lcm.num_errors, lcm.tracking_error = msg.tracking_error.size, msg.tracking_error.tolist()
+    lcm.nonfinite_state_events = int(msg.nonfinite_state_events)
+    lcm.deadline_misses, lcm.longest_miss_streak = int(msg.deadline_misses), int(msg.longest_miss_streak)
     return lcm.encode()
 
 
@@ -316,13 +325,18 @@ def decode_estop(data: bytes) -> Estop:
 
 
 def decode_controller_status(data: bytes) -> ControllerStatus:
-    """The checked status in ``data`` (NaN state entries are allowed: a diverged estimate is news)."""
+    """The checked status in ``data`` (NaN state entries are allowed: a diverged estimate is news;
+    an older status without the safety counts has them 0)."""
     name = "controller_status_t"
+    if data[:8] == STATUS_WITHOUT_COUNTS:
+        data = controller_status_t._get_packed_fingerprint() + data[8:] + bytes(12)
     lcm = _unpack(controller_status_t, data)
     return ControllerStatus(
         utime=_check_utime(name, lcm.utime), robot=lcm.robot, mode=_check_mode(name, lcm.mode),
         command=_finite(name, "command", lcm.command), state=np.array(lcm.state, dtype=float),
-        tracking_error=np.array(lcm.tracking_error, dtype=float))
+        tracking_error=np.array(lcm.tracking_error, dtype=float),
+        nonfinite_state_events=lcm.nonfinite_state_events, deadline_misses=lcm.deadline_misses,
+        longest_miss_streak=lcm.longest_miss_streak)
 
 
 class RawBytesSerializer(SerializerInterface):

@@ -39,17 +39,21 @@ class LinkConfig:
     stand_s: float = 2.0
     # Robot side, commands lost: the last posture is held by joint PD this long, then damping.
     hold_s: float = 0.5
+    # Controller side at real time (--hardware): this many ticks in a row over the controller's
+    # period take the stages above, as a stale stream does (DeadlineMonitor); 0: never.
+    max_consecutive_misses: int = 5
 
 
 # A stream stale for a second has long lost the robot; the receive rate is a clock like the
 # controller's; 100 rad/s is beyond any joint motor; a gain factor of 10 lets a sender ask for
 # 10× the YAML gains, more is no longer the same robot. Walking on a prediction for more than a
 # second (a whole gait cycle) outruns any model; standing on one beyond a minute is a robot left
-# alone, which damping should take over.
+# alone, which damping should take over. Waiting for more than 1000 late ticks in a row (a
+# second at 1 kHz) before acting is not keeping a deadline.
 declare_ranges(LinkConfig, timeout_s=positive(1.0, "s"), receive_rate_hz=Range(1.0, 10000.0, "Hz"),
                max_joint_speed=positive(100.0, "rad/s"), max_gain_factor=positive(10.0),
                ride_through_s=Range(0.0, 1.0, "s"), stand_s=Range(0.0, 60.0, "s"),
-               hold_s=Range(0.0, 60.0, "s"))
+               hold_s=Range(0.0, 60.0, "s"), max_consecutive_misses=Range(0, 1000, "ticks"))
 
 
 def link_stage(age: float, config: LinkConfig) -> LinkStage:

@@ -1,11 +1,12 @@
 """The MuJoCo station: the robot simulated by MuJoCo behind the simulated station's ports.
 
 ``make_mujoco_station`` returns a diagram with exactly the ports of
-:func:`~romoco_drake.interfaces.station.make_station` (``actuation``; with ``motor_pd``
-``motor_command``; ``joint_state``, ``imu``, ``foot_contact``, ``base_pose``, ``base_velocity``,
-``link_stage``; see that module's table) and the same subsystems the runner and benches read:
-``plant`` (a :class:`~romoco_drake.interfaces.mujoco_plant.MujocoPlant`, whose ``SetPositions``
-and ``GetPositionsAndVelocities`` stand in for the MultibodyPlant's), ``truth_log``, ``monitor``
+:func:`~romoco_drake.interfaces.station.make_station` (``actuation``, ``loop_stage``; with
+``motor_pd`` ``motor_command``; ``joint_state``, ``imu``, ``foot_contact``, ``base_pose``,
+``base_velocity``, ``link_stage``; see that module's table) and the same subsystems the runner
+and benches read: ``plant`` (a :class:`~romoco_drake.interfaces.mujoco_plant.MujocoPlant`, whose
+``SetPositions`` and ``GetPositionsAndVelocities`` stand in for the MultibodyPlant's),
+``truth_log``, ``monitor``
 (:class:`~romoco_drake.interfaces.monitor.FallMonitor` on the true state) and, with pushes,
 ``disturbances``.
 
@@ -22,7 +23,7 @@ from __future__ import annotations
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role, SceneGraph
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
+from pydrake.systems.primitives import LogVectorOutput, PassThrough
 from pydrake.systems.rendering import MultibodyPositionToGeometryPose
 
 from romoco_drake.interfaces.disturbance import Disturbance, DisturbanceSource
@@ -52,8 +53,9 @@ def make_mujoco_station(
     builder.Connect(plant.foot_forces_output, sensor_system.foot_forces_input)
     for name in SENSOR_PORTS:
         builder.ExportOutput(sensor_system.GetOutputPort(name), name)
-    fresh = builder.AddNamedSystem("link_stage", ConstantVectorSource([0.0]))
-    builder.ExportOutput(fresh.get_output_port(), "link_stage")
+    stage = builder.AddNamedSystem("link_stage", PassThrough(1))
+    builder.ExportInput(stage.get_input_port(), "loop_stage")
+    builder.ExportOutput(stage.get_output_port(), "link_stage")
     truth = LogVectorOutput(plant.state_output, builder, truth_log_period)
     truth.set_name("truth_log")
     monitor = builder.AddNamedSystem("monitor", FallMonitor(robot))

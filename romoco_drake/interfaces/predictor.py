@@ -28,6 +28,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from romoco_drake.robots.model import RobotModel
+from romoco_drake.robots.posture import DIVERGED
 
 SIDES = ("left", "right")
 BAUMGARTE = 0.2  # share of a contact point's drift removed per step
@@ -36,6 +37,11 @@ BAUMGARTE = 0.2  # share of a contact point's drift removed per step
 # roll) takes bounded impulses (rigid, the open-loop prediction blew up at such touchdowns).
 COMPLIANCE = 1e-2
 RELEASE_IMPULSE = 0.0  # N·s: a foot whose summed normal impulse is below this leaves contact
+
+
+class DivergedPrediction(RuntimeError):
+    """The state to predict from, or a step's result, is no robot state (non-finite, or beyond
+    ``DIVERGED``): raised before Drake sees it (Drake exits on a non-finite state)."""
 
 
 @dataclass(frozen=True)
@@ -58,9 +64,16 @@ class ContactPredictor:
         self.context = robot.plant.CreateDefaultContext()
         self._kp, self._kd = np.zeros(robot.nv), np.zeros(robot.nv)
 
-    def start(self, x: np.ndarray, contact) -> PredictedState:
-        """The prediction from state ``x`` with the feet ``contact`` (left, right) on the ground."""
+    def _set(self, x: np.ndarray) -> None:
+        """Sets the plant context to ``x``; DivergedPrediction if it is no robot state."""
+        if not np.all(np.abs(x) < DIVERGED):  # NaN included
+            raise DivergedPrediction("the predicted state diverged")
         self.robot.plant.SetPositionsAndVelocities(self.context, x)
+
+    def start(self, x: np.ndarray, contact) -> PredictedState:
+        """The prediction from state ``x`` with the feet ``contact`` (left, right) on the ground;
+        DivergedPrediction if ``x`` is no robot state."""
+        self._set(x)
         soles = [self.robot.sole_points_in_world(self.context, side) for side in SIDES]
         on = tuple(bool(c) for c in contact)
         heights = [s[2].min() for s, c in zip(soles, on, strict=True) if c]
@@ -71,7 +84,7 @@ class ContactPredictor:
         """The base's linear velocity that keeps the feet ``contact`` still, the rest of ``x``
         as it is (leg odometry: for a start without a measured base velocity)."""
         r = self.robot
-        r.plant.SetPositionsAndVelocities(self.context, x)
+        self._set(x)
         sides = [s for s, c in zip(SIDES, contact, strict=True) if c]
         if not sides:
             return x[r.nq + r.base_v_start + 3:r.nq + r.base_v_start + 6].copy()
@@ -82,11 +95,12 @@ class ContactPredictor:
         return np.linalg.lstsq(J[:, lin], -J @ v, rcond=None)[0]
 
     def step(self, p: PredictedState, command: np.ndarray, h: float) -> PredictedState:
-        """``p`` one step of ``h`` s later under the motor ``command`` (module docstring)."""
+        """``p`` one step of ``h`` s later under the motor ``command`` (module docstring);
+        DivergedPrediction if the step blows up."""
         r = self.robot
         plant, ctx = r.plant, self.context
         q, v = p.x[:r.nq], p.x[r.nq:]
-        plant.SetPositionsAndVelocities(ctx, p.x)
+        self._set(p.x)
         q_d, v_d, tau_ff, kp, kd = command.reshape(5, r.nu)
         qa, va = q[r.actuated_q_index], v[r.actuated_v_index]
         tau = kp * (q_d - qa - h * va) + kd * (v_d - va) + tau_ff
@@ -145,7 +159,7 @@ class ContactPredictor:
     def _touchdown(self, p: PredictedState) -> PredictedState:
         """A foot out of contact whose sole reached the ground is held there from now on."""
         r = self.robot
-        r.plant.SetPositionsAndVelocities(self.context, p.x)
+        self._set(p.x)
         contact, anchors = list(p.contact), list(p.anchors)
         for i, side in enumerate(SIDES):
             sole = r.sole_points_in_world(self.context, side)

@@ -15,15 +15,19 @@ from pydrake.systems.framework import LeafSystem
 from romoco_drake.estimation.ground_truth import plant_state
 from romoco_drake.interfaces.lcm_codec import decode_base_state, decode_proprioception
 from romoco_drake.interfaces.link import Inbox, LinkConfig, counters_port, link_stage
-from romoco_drake.interfaces.predictor import ContactPredictor, PredictedState
+from romoco_drake.interfaces.predictor import ContactPredictor, DivergedPrediction, PredictedState
 from romoco_drake.modes import LinkCounters, LinkStage
 from romoco_drake.robots.model import RobotModel
+from romoco_drake.robots.posture import DIVERGED
 from romoco_drake.spatial import GRAVITY, quaternion_exp
 
 
 def predict_base_state(values: np.ndarray, dt: float) -> np.ndarray:
-    """[quaternion; position; ω_W; v_W] (motion capture) ``dt`` s later at constant velocity."""
+    """[quaternion; position; ω_W; v_W] (motion capture) ``dt`` s later at constant velocity;
+    diverged values are not extrapolated (the estimate marks them, the loop damps)."""
     out = values.copy()
+    if not np.all(np.abs(values) < DIVERGED):
+        return out
     out[:4] = _turned(values[:4], values[7:10] * dt, body=False)
     out[4:7] += dt * values[10:13]
     return out
@@ -162,13 +166,17 @@ class BlindPredictor:
         pending = (*missed, update)
         if missed:
             abstract(int(self._missed)).set_value(())
-        blind = blind or self._start(state, pending[0].base)
+        if blind is None:
+            try:
+                blind = self._start(state, pending[0].base)
+            except DivergedPrediction:  # the last message is no state to predict from: it is held
+                return
         p = self._caught_up(blind.state, pending, h)
         abstract(int(self._blind)).set_value(dataclasses.replace(blind, state=p))
 
     def _caught_up(self, p: PredictedState, pending: tuple[MissedUpdate, ...], h: float) -> PredictedState:
         """``p`` stepped ``h`` under each pending update's command, its base reset to fresh motion
-        capture; held where it was when a step fails or blows up."""
+        capture; held where it was when a step fails or blows up (DivergedPrediction)."""
         for u in pending:
             reset = p
             if u.base_fresh:
@@ -176,12 +184,9 @@ class BlindPredictor:
                 x[self._base_rows()] = u.base
                 reset = dataclasses.replace(p, x=x)
             try:
-                stepped = self.predictor.step(reset, u.command, h)
+                p = self.predictor.step(reset, u.command, h)
             except (RuntimeError, np.linalg.LinAlgError):  # a degenerate state, e.g. of a fallen robot
                 break
-            if not np.all(np.isfinite(stepped.x)):  # a prediction that blows up is held where it last was
-                break
-            p = stepped
         return p
 
 
@@ -193,8 +198,9 @@ class MeasurementReceiver(LeafSystem):
     | proprioception  | in  | abstract | raw bytes of ROMOCO_PROPRIOCEPTION                    |
     | base_state      | in  | abstract | raw bytes of ROMOCO_BASE_STATE                        |
     | command         | in  | 5·nu     | the motor command being sent (drives the prediction)  |
+    | loop_stage      | in  | 1        | the stage the loop's missed deadlines ask for          |
     | joint_state, imu, …, base_velocity | out | as the station | newest good values, or predicted |
-    | link            | out | 1        | the :class:`~romoco_drake.modes.LinkStage` of the needed streams |
+    | link            | out | 1        | the :class:`~romoco_drake.modes.LinkStage` (below)     |
     | stats           | out | abstract | ``LinkCounters``: rejected, stale events, stages entered |
 
     When proprioception goes stale (``timeout_s``) the receiver predicts the robot
@@ -208,8 +214,14 @@ class MeasurementReceiver(LeafSystem):
     starts and catches up on them. The outputs carry the prediction (joints, contacts, the IMU
     turned, its gyro and accelerometer from the predicted base motion) through ride-through and
     STAND; in DAMPING it stops where it was. A new message ends it. A stale base stream with
-    fresh proprioception is predicted at constant velocity (:func:`predict_base_state`). The
-    command input has no feedthrough: the outputs are the state of the last update.
+    fresh proprioception is predicted at constant velocity (:func:`predict_base_state`). A last
+    message that is no robot state (diverged, :class:`~.predictor.DivergedPrediction`) is held,
+    not predicted from. The command input has no feedthrough: the outputs are the state of the
+    last update.
+
+    ``loop_stage`` (the :class:`~romoco_drake.interfaces.deadline.DeadlineMonitor`'s) takes the
+    link to a later stage than the streams' when the loop misses its deadlines; each stage
+    entered counts either way, ``stale_events`` only the streams going stale.
     """
 
     def __init__(self, robot: RobotModel, config: LinkConfig, require_base_state: bool = False):
@@ -233,8 +245,10 @@ class MeasurementReceiver(LeafSystem):
         self.base_state = Inbox(self, "base_state", base_state,
                                 np.concatenate([start["base_pose"], start["base_velocity"]]))
         self.command_port = self.DeclareVectorInputPort("command", 5 * robot.nu)
+        self.loop_stage_port = self.DeclareVectorInputPort("loop_stage", 1)
         self.predictor = BlindPredictor(self, robot, config, self.proprioception, self.base_state)
         self._link = self.DeclareDiscreteState([float(LinkStage.DAMPING)])
+        self._stream = self.DeclareDiscreteState([float(LinkStage.DAMPING)])  # the streams' own stage
         self._stats = self.DeclareDiscreteState(LinkCounters.size())
         layout = {"joint_state": (self.proprioception, 0, 2 * nj),
                   "imu": (self.proprioception, 2 * nj, 2 * nj + 10),
@@ -255,8 +269,10 @@ class MeasurementReceiver(LeafSystem):
         if age <= self.config.timeout_s or not np.isfinite(age):
             return inbox.latest.Eval(context)
         blind = self.predictor.current(context)
-        if blind is None:  # only the base stream is stale
+        if blind is None:  # only the base stream is stale, or the last message could not be predicted from
             stored = context.get_discrete_state(inbox.values).value()
+            if inbox is self.proprioception:
+                return stored.copy()
             return predict_base_state(stored, min(age, self.config.timeout_s + self.config.ride_through_s))
         if inbox is self.proprioception:
             return self.predictor.measurements(blind)
@@ -268,12 +284,16 @@ class MeasurementReceiver(LeafSystem):
         age = self.proprioception.age(context, state)
         if self.require_base_state:
             age = max(age, self.base_state.age(context, state))
-        stage = link_stage(age, self.config)
+        stream = link_stage(age, self.config)
+        stage = max(stream, LinkStage.decode(self.loop_stage_port.Eval(context)[0]))
         was = LinkStage.decode(context.get_discrete_state(self._link).GetAtIndex(0))
-        counts += LinkCounters(stale_events=was == LinkStage.FRESH and stage != LinkStage.FRESH,
+        was_stream = LinkStage.decode(context.get_discrete_state(self._stream).GetAtIndex(0))
+        counts += LinkCounters(stale_events=was_stream == LinkStage.FRESH and stream != LinkStage.FRESH,
                                rejected_messages=rejected)
         if np.isfinite(age) and stage > was:  # each stage entered counts (not before the first message,
             counts = counts.entered(stage)  # nothing was lost yet); skipped ones (ride_through_s 0) do not
-        self.predictor.advance(context, state, self.command_port.Eval(context), stage)
-        state.get_mutable_discrete_state().get_mutable_vector(int(self._link)).SetFromVector([float(stage)])
-        state.get_mutable_discrete_state().get_mutable_vector(int(self._stats)).SetFromVector(counts.vector())
+        self.predictor.advance(context, state, self.command_port.Eval(context), stream)
+        discrete = state.get_mutable_discrete_state()
+        discrete.get_mutable_vector(int(self._link)).SetFromVector([float(stage)])
+        discrete.get_mutable_vector(int(self._stream)).SetFromVector([float(stream)])
+        discrete.get_mutable_vector(int(self._stats)).SetFromVector(counts.vector())

@@ -11,7 +11,8 @@ same names and sizes):
 | foot_contact    | out | 2      | [left, right] contact switches, 1.0 when loaded               |
 | base_pose       | out | 7      | [qw qx qy qz x y z] of the floating base (motion capture)     |
 | base_velocity   | out | 6      | [ω_WB; v_WB] expressed in world (motion capture)              |
-| link_stage      | out | 1      | always 0: the plant's measurements are never lost (LinkStage)  |
+| loop_stage      | in  | 1      | the LinkStage the loop's missed deadlines ask for (DeadlineMonitor) |
+| link_stage      | out | 1      | ``loop_stage``: the plant's measurements are never lost        |
 
 All are sampled together by :class:`~romoco_drake.interfaces.sensors.SimulatedSensors` (noise and
 rate from ``sensors``); the base pose and velocity are exact, as a motion-capture system (or the
@@ -39,7 +40,7 @@ from __future__ import annotations
 
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import Adder, ConstantVectorSource, LogVectorOutput
+from pydrake.systems.primitives import Adder, LogVectorOutput, PassThrough
 
 from romoco_drake.interfaces.disturbance import Disturbance, DisturbanceSource
 from romoco_drake.interfaces.monitor import FallMonitor
@@ -71,8 +72,9 @@ def make_station(
     sensor_system = add_sensors(builder, plant, robot, sensors)
     for name in ("joint_state", "imu", "foot_contact", "base_pose", "base_velocity"):
         builder.ExportOutput(sensor_system.GetOutputPort(name), name)
-    fresh = builder.AddNamedSystem("link_stage", ConstantVectorSource([0.0]))
-    builder.ExportOutput(fresh.get_output_port(), "link_stage")
+    stage = builder.AddNamedSystem("link_stage", PassThrough(1))
+    builder.ExportInput(stage.get_input_port(), "loop_stage")
+    builder.ExportOutput(stage.get_output_port(), "link_stage")
     truth = LogVectorOutput(plant.get_state_output_port(), builder, truth_log_period)
     truth.set_name("truth_log")
     monitor = builder.AddNamedSystem("monitor", FallMonitor(robot))

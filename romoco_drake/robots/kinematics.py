@@ -34,7 +34,9 @@ from pydrake.multibody.tree import Frame, JacobianWrtVariable
 from pydrake.systems.framework import CacheEntry, Context, LeafSystem, ValueProducer
 
 from romoco_drake.errors import RomocoError
+from romoco_drake.modes import StateStats
 from romoco_drake.robots.model import RobotModel
+from romoco_drake.robots.posture import diverged_to_nan
 
 _ORIGIN = np.zeros(3)
 
@@ -50,10 +52,11 @@ class RobotKinematics:
     """The controller plant at one state; dynamics terms evaluated once, on first use.
 
     ``context`` is the plant context (state set: query poses and Jacobians on it, never set
-    it); ``x``, ``q``, ``v`` the state; ``finite`` whether every entry of x is finite. Drake
-    refuses a non-finite state, so then the context keeps the last finite one and every derived
-    quantity here is NaN: consumers check ``finite`` before querying the context (controllers go
-    to their safe mode).
+    it); ``x``, ``q``, ``v`` the state, entries that are not finite or beyond ``DIVERGED`` made
+    NaN (:func:`~romoco_drake.robots.posture.diverged_to_nan`); ``finite`` whether every entry
+    of x is finite then. Drake refuses a non-finite state, so then the context keeps the last
+    finite one and every derived quantity here is NaN: consumers check ``finite`` before
+    querying the context (controllers go to their safe mode, the state machine to damping).
     The object is refilled in place by :meth:`update` when its owner's state changes: read it
     within one tick, do not keep it.
     """
@@ -73,7 +76,7 @@ class RobotKinematics:
     def update(self, x: np.ndarray) -> None:
         """Sets the state and forgets every quantity evaluated at the previous one."""
         r = self.robot
-        self.x = np.array(x, dtype=float)
+        self.x = diverged_to_nan(x)
         self.q, self.v = self.x[:r.nq], self.x[r.nq:]
         self.finite = bool(np.isfinite(self.x).all())
         self._M = self._bias = self._tau_g = self._C = self._p_com = self._p_base = self._h = None
@@ -242,12 +245,17 @@ class RobotKinematicsSystem(LeafSystem):
     |---|---|---|---|
     | ``state`` | in | nq+nv | robot state [q; v] (controller plant order) |
     | ``kinematics`` | out | abstract | :class:`RobotKinematics` at that state |
+    | ``stats`` | out | abstract | :class:`~romoco_drake.modes.StateStats` |
 
     Drake recomputes the output only when the state input changes; its value object (and plant
-    context) lives in the output port's cache entry, one per system context.
+    context) lives in the output port's cache entry, one per system context. The loop's guard
+    against an unusable estimate: a state with a non-finite or diverged entry gives kinematics
+    with ``finite`` False (the controllers damp, the state machine latches damping), and every
+    ``period`` s (at ``offset``, the loop's tick) an update keeps the current run of ticks in such
+    a state and counts each entry into one (``nonfinite_state_events``).
     """
 
-    def __init__(self, robot: RobotModel):
+    def __init__(self, robot: RobotModel, period: float, offset: float = 0.0):
         super().__init__()
         check_floating_base(robot)
         self.robot = robot
@@ -255,9 +263,28 @@ class RobotKinematicsSystem(LeafSystem):
         self.kinematics_port = self.DeclareAbstractOutputPort(
             "kinematics", lambda: AbstractValue.Make(RobotKinematics(robot)), self._calc,
             prerequisites_of_calc={self.state_port.ticket()})
+        self._stats = self.DeclareDiscreteState(StateStats.size())
+        self.stats_port = self.DeclareAbstractOutputPort(
+            "stats", lambda: AbstractValue.Make(StateStats()),
+            lambda c, v: v.set_value(StateStats.from_vector(c.get_discrete_state(self._stats).value())),
+            prerequisites_of_calc={self.discrete_state_ticket(self._stats)})
+        self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._count)
 
     def _calc(self, context, value) -> None:
         value.get_mutable_value().update(self.state_port.Eval(context))
+
+    def _count(self, context, discrete_state) -> None:
+        stats = StateStats.from_vector(context.get_discrete_state(self._stats).value())
+        if self.kinematics_port.Eval(context).finite:
+            stats = StateStats(stats.nonfinite_state_events, 0)
+        else:
+            stats = StateStats(stats.nonfinite_state_events + (stats.nonfinite_streak == 0),
+                               stats.nonfinite_streak + 1)
+        discrete_state.get_mutable_vector(self._stats).SetFromVector(stats.vector())
+
+    def summary(self, context) -> dict:
+        """The run summary's key: ``nonfinite_state_events``."""
+        return {"nonfinite_state_events": self.stats_port.Eval(context).nonfinite_state_events}
 
 
 def declare_kinematics_cache(system: LeafSystem, robot: RobotModel, state_of: Callable[[Context], np.ndarray],

@@ -15,11 +15,11 @@ class controller_status_t(object):
     so that a log of the traffic can be plotted and scored without the simulator.
     """
 
-    __slots__ = ["utime", "robot", "mode", "command", "num_states", "state", "num_errors", "tracking_error"]
+    __slots__ = ["utime", "robot", "mode", "command", "num_states", "state", "num_errors", "tracking_error", "nonfinite_state_events", "deadline_misses", "longest_miss_streak"]
 
-    __typenames__ = ["int64_t", "string", "int8_t", "double", "int32_t", "double", "int32_t", "double"]
+    __typenames__ = ["int64_t", "string", "int8_t", "double", "int32_t", "double", "int32_t", "double", "int32_t", "int32_t", "int32_t"]
 
-    __dimensions__ = [None, None, None, [3], None, ["num_states"], None, ["num_errors"]]
+    __dimensions__ = [None, None, None, [3], None, ["num_states"], None, ["num_errors"], None, None, None]
 
     def __init__(self):
         self.utime = 0
@@ -73,6 +73,18 @@ class controller_status_t(object):
         LCM Type: double[num_errors]
         """
 
+        self.nonfinite_state_events = 0
+        """
+        Safety counts so far, as the run summary's keys of the same names: state estimates the
+        loop could not use (non-finite or diverged), controller ticks over their period, and the
+        longest run of those.
+        LCM Type: int32_t
+        """
+
+        self.deadline_misses = 0
+        """ LCM Type: int32_t """
+        self.longest_miss_streak = 0
+        """ LCM Type: int32_t """
 
     def encode(self):
         buf = BytesIO()
@@ -92,6 +104,7 @@ class controller_status_t(object):
         buf.write(struct.pack('>%dd' % self.num_states, *self.state[:self.num_states]))
         buf.write(struct.pack(">i", self.num_errors))
         buf.write(struct.pack('>%dd' % self.num_errors, *self.tracking_error[:self.num_errors]))
+        buf.write(struct.pack(">iii", self.nonfinite_state_events, self.deadline_misses, self.longest_miss_streak))
 
     @staticmethod
     def decode(data: bytes):
@@ -115,12 +128,13 @@ class controller_status_t(object):
         self.state = struct.unpack('>%dd' % self.num_states, buf.read(self.num_states * 8))
         self.num_errors = struct.unpack(">i", buf.read(4))[0]
         self.tracking_error = struct.unpack('>%dd' % self.num_errors, buf.read(self.num_errors * 8))
+        self.nonfinite_state_events, self.deadline_misses, self.longest_miss_streak = struct.unpack(">iii", buf.read(12))
         return self
 
     @staticmethod
     def _get_hash_recursive(parents):
         if controller_status_t in parents: return 0
-        tmphash = (0x4713744b17edd6d0) & 0xffffffffffffffff
+        tmphash = (0x7839dde924a2fb6f) & 0xffffffffffffffff
         tmphash  = (((tmphash<<1)&0xffffffffffffffff) + (tmphash>>63)) & 0xffffffffffffffff
         return tmphash
     _packed_fingerprint = None
