@@ -43,7 +43,7 @@ from romoco_drake.planners.registry import PLANNERS
 from romoco_drake.planners.settings import FootPlacementConfig, PlannerSettings
 from romoco_drake.planners.vimpc import INERTIA_MODES, VimpcConfig
 from romoco_drake.registry import Registry
-from romoco_drake.robots.model import load_robot, robot_names
+from romoco_drake.robots.model import load_robot, load_robot_config, robot_names
 from romoco_drake.robots.source import DIAGRAMS_DIR
 
 MAX_DURATION_S = 3600.0  # one hour of simulated time: longer is a typo, not a study
@@ -247,7 +247,7 @@ def _check_controller(scenario: Scenario, where: str | Path) -> None:
     """A controller term the robot cannot use is an error, not a silent no-op: a point foot carries
     a force only, so there is no centre of pressure for the ankle strategy to move."""
     ankle = getattr(scenario.controller, "ankle", None)
-    if ankle is not None and ankle.gain > 0.0 and load_robot(scenario.robot).is_point_foot:
+    if ankle is not None and ankle.gain > 0.0 and load_robot_config(scenario.robot).feet.type == "point":
         raise ConfigError(where, "controller.ankle.gain", f"robot '{scenario.robot}' has point feet: they "
                           "carry no moment, so the ankle strategy cannot act (set the gain to 0)")
 
@@ -261,7 +261,7 @@ def _check_planner(scenario: Scenario, where: str | Path) -> None:
         if config.gain not in gains:
             raise ConfigError(where, "planner.gain", f"planner '{config.name}' supports gains "
                               f"{', '.join(gains)}, not '{config.gain}'")
-        if config.step_adaptation.enabled and load_robot(scenario.robot).config.walking.step_reach is None:
+        if config.step_adaptation.enabled and load_robot_config(scenario.robot).walking.step_reach is None:
             raise ConfigError(where, "planner.step_adaptation.enabled", f"robot '{scenario.robot}' has no "
                               "walking.step_reach, so its steps cannot be adapted: set it in the robot's "
                               "YAML (romoco new-robot derives it from the leg), or planner.step_adaptation: "

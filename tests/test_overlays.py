@@ -21,14 +21,19 @@ def test_merge_is_deep_for_mappings_and_replaces_the_rest():
 
 
 def test_push_recovery_overlay_is_a_named_variant_of_the_shipped_scenario():
-    plain, pushed = load_scenario("g1_walk"), load_scenario("g1_walk", ["push_recovery"])
+    plain, pushed = load_scenario("talos_walk"), load_scenario("talos_walk", ["push_recovery"])
     assert plain.overlays == [] and pushed.overlays == ["push_recovery"]
     assert plain.planner.step_adaptation.enabled and pushed.planner.step_adaptation.enabled
+    assert plain.controller.angular_momentum.weight == 0.0
     assert pushed.controller.angular_momentum.weight == 30.0
+    assert pushed.controller.angular_momentum.when == "recovering"
     assert pushed.controller.angular_momentum.axes == [1.0, 0.25, 1.0]
     assert pushed.controller.joint_limits.horizon == 0.05
     assert pushed.controller.rate_hz == plain.controller.rate_hz  # merged, not replaced
-    # The push bench measures the scenario as shipped unless told otherwise.
+    # G1 ships these terms; the push bench measures the scenario as shipped unless told otherwise.
+    shipped = load_scenario("g1_walk").controller
+    assert (shipped.angular_momentum, shipped.joint_limits) == (pushed.controller.angular_momentum,
+                                                                pushed.controller.joint_limits)
     assert walking_scenario("g1").overlays == [] and "push_recovery" in overlay_names()
 
 
