@@ -21,8 +21,8 @@ from romoco_drake.scenario import OVERLAYS_DIR, load_scenario, overlay_names, sc
 
 # Reads that only load, check or copy a config are not uses of it.
 LOADERS = {"romoco_drake.config", "dataclasses", "copy", "romoco_drake.robots.config"}
-CHECKERS = {"validate_scenario", "_check_planner", "_check_controller", "_check_disturbances", "load_component",
-            "_switch", "load_scenario"}
+CHECKERS = {"validate_scenario", "_check_planner", "_check_controller", "_check_disturbances",
+            "load_component", "_switch", "load_scenario"}
 # Keys read by people, not by code.
 DOCUMENTATION = {("Scenario", "description"), ("RobotConfig", "description")}
 # Which scenario each overlay is exercised on.
