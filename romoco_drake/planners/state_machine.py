@@ -65,9 +65,9 @@ class GaitStateMachine(LeafSystem):
       then the stance switches. A plan whose timing was adapted (``planner_output``, optional)
       sets this step's T_SS each tick until the step is committed (``SWING_COMMIT_FRACTION`` of
       it passed): a pushed robot may put its foot down early, or late.
-    - touchdown is also contact-triggered (Hubicki et al., "Walking and running with passive
-      compliance", IEEE RAM 2018, and Cassie's controllers since: the impact, not the clock,
-      ends the swing). Between ``early_touchdown`` of T_SS and the commit point, a swing foot whose
+    - touchdown is also contact-triggered: the impact, not the clock, ends the swing, as the
+      hybrid models of walking define a step (the guard of Westervelt et al., "Feedback Control
+      of Dynamic Bipedal Robot Locomotion", 2007, is the swing foot reaching the ground). Between ``early_touchdown`` of T_SS and the commit point, a swing foot whose
       switch turns on after reading off in this step has landed early (ground higher than
       planned, a foot driven down): single support ends there (the step switches at once, or
       after ``t_ds``). A committed step ends on its clock: in the last part of the descent the
