@@ -51,6 +51,7 @@ from romoco_drake.robots.model import RobotModel
 QP_SOLVERS = ("daqp", "clarabel")
 _DOMAIN_CODES = {d: float(i + 1) for i, d in enumerate(Domain)}  # warm start tag; 0: none yet
 _DAQP_INF = 1e30  # DAQP ignores bounds at or beyond this magnitude
+_DAQP_SING_TOL = 1e-12
 _DAQP_EQUALITY, _DAQP_ACTIVE_UPPER, _DAQP_ACTIVE_LOWER = 5, 1, 3  # its constraint-sense flags
 
 
@@ -149,6 +150,10 @@ class _DaqpWorkspace:
 
     def __init__(self, n_eq: int, n_in: int):
         self.model = daqp.Model()
+        # DAQP takes a factorisation pivot below sing_tol (3.7e-11 by default) for a dependent
+        # constraint. The forces' only curvature is ε_λ, so with task weights 10-100× the defaults
+        # feasible ticks of a light robot (Bolt) came out "infeasible" (and relaxed) at the default.
+        self.model.settings = {**self.model.settings, "sing_tol": _DAQP_SING_TOL}
         self.ready = False
         self.n_eq = n_eq
         self.sense = np.zeros(n_eq + n_in, dtype=np.int32)

@@ -19,6 +19,7 @@ message never raises inside LCM handling; the translator systems downstream call
 
 from __future__ import annotations
 
+import math
 import struct
 from dataclasses import dataclass
 from io import BytesIO
@@ -211,10 +212,22 @@ def encode_controller_status(msg: ControllerStatus) -> bytes:
     return lcm.encode()
 
 
+class _ExactReader(BytesIO):
+    """A buffer whose reads past its end raise: the generated decoders read a string's bytes
+    without checking that they were all there, so a message cut inside its last string field
+    (estop_t's source) decoded as a shorter string instead of failing."""
+
+    def read(self, size: int | None = -1) -> bytes:
+        chunk = super().read(size)
+        if size is not None and 0 <= size != len(chunk):
+            raise struct.error(f"unpack requires {size} bytes, {len(chunk)} left (truncated)")
+        return chunk
+
+
 def _unpack(lcm_type, data: bytes):
     """The generated message decoded from exactly ``data``, or MessageRejected."""
     name = lcm_type.__name__
-    buffer = BytesIO(data)
+    buffer = _ExactReader(data)
     try:
         message = lcm_type.decode(buffer)
     except (ValueError, struct.error) as error:
@@ -254,7 +267,7 @@ def _finite(name: str, field: str, values) -> np.ndarray:
 
 def _unit_quaternion(name: str, field: str, values) -> np.ndarray:
     quaternion = _finite(name, field, values)
-    norm = np.linalg.norm(quaternion)
+    norm = math.hypot(*quaternion)  # no overflow (and no RuntimeWarning) for entries beyond 1e154
     if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
         raise MessageRejected(name, f"{field} norm {norm:.6g} is not 1 (± {QUATERNION_NORM_TOLERANCE})")
     return quaternion / norm
