@@ -73,10 +73,11 @@ class GaitStateMachine(LeafSystem):
       driven down): single support ends there (the step switches at once, or after ``t_ds``).
       A committed step ends on its clock: in the last part of the descent the foot is within
       millimetres of the ground and its switch may fire early (G1 touches at 94 % of T_SS on
-      every step; switching there cost its walk 4× the vx rms error). At the timed switch, a swing foot whose switch is still off and whose sole is more than
-      ``touchdown_height`` above the stance sole's lowest point is still in the air: the switch
-      waits for its contact up to ``touchdown_timeout``. A foot that landed flat but unloaded
-      (level with the stance sole) does not hold the step.
+      every step; switching there cost its walk 4× the vx rms error). At the timed switch, a
+      swing foot whose switch is still off and whose sole is more than ``touchdown_height`` above
+      the stance sole's lowest point is still in the air: the switch waits for its contact up to
+      ``touchdown_timeout``. A foot that landed flat but unloaded (level with the stance sole)
+      does not hold the step.
     - walking → standing after ``stop_steps`` steps in a row under a zero command, at a support
       switch where both soles are flat on the ground (each sole's points within
       ``touchdown_height`` of its lowest one, and the feet level with each other or both switches
