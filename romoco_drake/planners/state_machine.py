@@ -77,7 +77,9 @@ class GaitStateMachine(LeafSystem):
       swing foot whose switch is still off and whose sole is more than ``touchdown_height`` above
       the stance sole's lowest point is still in the air: the switch waits for its contact up to
       ``touchdown_timeout``. A foot that landed flat but unloaded (level with the stance sole)
-      does not hold the step.
+      does not hold the step. Point feet end their steps on the clock only: a point foot's switch fires
+      on any graze of its short, low swing (Bolt's 5 cm swing in 0.2 s touched early on four
+      steps in a row and fell at 0.56 s).
     - walking → standing after ``stop_steps`` steps in a row under a zero command, at a support
       switch where both soles are flat on the ground (each sole's points within
       ``touchdown_height`` of its lowest one, and the feet level with each other or both switches
@@ -117,6 +119,7 @@ class GaitStateMachine(LeafSystem):
         self.balance_speed, self.stop_steps = balance_speed, stop_steps
         self.touchdown_height, self.settle_time, self.lift_time = touchdown_height, settle_time, lift_time
         self.early_touchdown, self.touchdown_timeout = early_touchdown, touchdown_timeout
+        self.contact_touchdown = not robot.is_point_foot
         self._min_base_z = fall_height * robot.nominal.base_height
         self._cos_tilt = math.cos(fall_tilt)
         self.steps_in_place = robot.is_point_foot
@@ -191,7 +194,7 @@ class GaitStateMachine(LeafSystem):
             s = replace(s, mode=Mode.WALKING, side=side, step_start=t, t_ss=cmd.step_time, idle_steps=0)
         elif s.mode == Mode.WALKING and self._retime(s, t, plan):
             s = replace(s, t_ss=plan.t_ss)
-        if s.mode == Mode.WALKING:
+        if s.mode == Mode.WALKING and self.contact_touchdown:
             s = self._touchdown(s, t, kin, on)
         if (s.mode == Mode.WALKING and t - s.step_start >= s.t_ss + self.t_ds - 1e-9
                 and not self._in_air(s, t, kin, on)):
