@@ -21,7 +21,7 @@ def test_merge_is_deep_for_mappings_and_replaces_the_rest():
 
 
 def test_push_recovery_overlay_is_a_named_variant_of_the_shipped_scenario():
-    plain, pushed = load_scenario("talos_walk"), load_scenario("talos_walk", ["push_recovery"])
+    plain, pushed = load_scenario("h1_walk"), load_scenario("h1_walk", ["push_recovery"])
     assert plain.overlays == [] and pushed.overlays == ["push_recovery"]
     assert plain.planner.step_adaptation.enabled and pushed.planner.step_adaptation.enabled
     assert plain.controller.angular_momentum.weight == 0.0

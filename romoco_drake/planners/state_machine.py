@@ -74,12 +74,15 @@ class GaitStateMachine(LeafSystem):
       A committed step ends on its clock: in the last part of the descent the foot is within
       millimetres of the ground and its switch may fire early (G1 touches at 94 % of T_SS on
       every step; switching there cost its walk 4× the vx rms error). At the timed switch, a
-      swing foot whose switch is still off and whose sole is more than ``touchdown_height`` above
-      the stance sole's lowest point is still in the air: the switch waits for its contact up to
-      ``touchdown_timeout``. A foot that landed flat but unloaded (level with the stance sole)
-      does not hold the step. Point feet end their steps on the clock only: a point foot's switch fires
-      on any graze of its short, low swing (Bolt's 5 cm swing in 0.2 s touched early on four
-      steps in a row and fell at 0.56 s).
+      swing foot whose switch is still off and whose sole is more than ``air_height`` above the
+      stance sole's lowest point is still in the air (ground lower than planned): the switch
+      waits for its contact up to ``touchdown_timeout``. A foot nearer the ground is a swing
+      lagging its path, which the clock ends (H1 under the momentum controller lags 1-3 cm; at
+      ``touchdown_height`` the waits cost its walk 0.05 m/s of vy rms), and a foot that landed
+      flat but unloaded (level with the stance sole) does not hold the step either. Point feet
+      end their steps on the clock only: a point foot's switch fires on any graze of its short,
+      low swing (Bolt's 5 cm swing in 0.2 s touched early on four steps in a row and fell at
+      0.56 s).
     - walking → standing after ``stop_steps`` steps in a row under a zero command, at a support
       switch where both soles are flat on the ground (each sole's points within
       ``touchdown_height`` of its lowest one, and the feet level with each other or both switches
@@ -113,12 +116,14 @@ class GaitStateMachine(LeafSystem):
     def __init__(self, robot: RobotModel, period: float, t_ds: float, balance_speed: float = 0.1,
                  stop_steps: int = 2, fall_height: float = 0.5, fall_tilt: float = math.pi / 4,
                  touchdown_height: float = 0.01, settle_time: float = 0.2, lift_time: float = 0.01,
-                 early_touchdown: float = 0.6, touchdown_timeout: float = 0.1, offset: float = 0.0):
+                 early_touchdown: float = 0.6, touchdown_timeout: float = 0.1, air_height: float = 0.03,
+                 offset: float = 0.0):
         super().__init__()
         self.robot, self.t_ds, self.period = robot, t_ds, period
         self.balance_speed, self.stop_steps = balance_speed, stop_steps
         self.touchdown_height, self.settle_time, self.lift_time = touchdown_height, settle_time, lift_time
         self.early_touchdown, self.touchdown_timeout = early_touchdown, touchdown_timeout
+        self.air_height = air_height
         self.contact_touchdown = not robot.is_point_foot
         self._min_base_z = fall_height * robot.nominal.base_height
         self._cos_tilt = math.cos(fall_tilt)
@@ -233,7 +238,7 @@ class GaitStateMachine(LeafSystem):
             return False
         z_swing = self.robot.sole_points_in_world(kin.context, swing)[2].min()
         z_stance = self.robot.sole_points_in_world(kin.context, stance)[2].min()
-        return bool(z_swing - z_stance > self.touchdown_height)
+        return bool(z_swing - z_stance > self.air_height)
 
     @staticmethod
     def _retime(s: GaitSchedule, t: float, plan: PlannerOutput | None) -> bool:
