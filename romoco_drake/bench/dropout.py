@@ -68,12 +68,13 @@ def bench_dropout(robot: str = "g1", durations=(0.1, 0.3), phases: int = 4, stre
     walking = load_robot(robot).config.walking
     step = walking.t_ss + walking.t_ds
     starts = [(duration, k, START_S + k * step / phases) for duration in durations for k in range(phases)]
-    base = dropout_scenario(robot, START_S, durations[0], stream, estimator, controller)
-    names = {"estimator": base.estimator.name, "controller": base.controller.name}
-    variants = [Variant(dropout_scenario(robot, t, duration, stream, estimator, controller),
-                        {"robot": robot, "stream": stream, **names, "duration_s": duration, "t": round(t, 4),
-                         "phase": round(k / phases, 3)}, dropout_job)
-                for duration, k, t in starts]
+    variants = []
+    for duration, k, t in starts:
+        scenario = dropout_scenario(robot, t, duration, stream, estimator, controller)
+        params = {"robot": robot, "stream": stream, "estimator": scenario.estimator.name,
+                  "controller": scenario.controller.name, "duration_s": duration, "t": round(t, 4),
+                  "phase": round(k / phases, 3)}
+        variants.append(Variant(scenario, params, dropout_job))
     return run_sweep(variants, sweep, progress)
 
 

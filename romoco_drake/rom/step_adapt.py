@@ -245,10 +245,11 @@ def _two_step_axis(a: float, g: float, e: float, c: np.ndarray, s2: np.ndarray, 
     r = (h0 - s2 * a - g) / (1.0 + rho * (1.0 + s2 * s2))
     candidates = [(a + rho * s2 * r, g + rho * r)]
     for u1 in (lo1, hi1):
-        candidates.append((u1 + 0.0 * h0, np.clip((w_u * g + w_b * (h0 - s2 * u1)) / (w_u + w_b), lo2, hi2)))
+        u2 = np.clip((w_u * g + w_b * (h0 - s2 * u1)) / (w_u + w_b), lo2, hi2)
+        candidates.append((np.broadcast_to(u1, h0.shape), u2))
     for u2 in (lo2, hi2):
         candidates.append((np.clip((w_u * a + w_b * s2 * (h0 - u2)) / (w_u + w_b * s2 * s2), lo1, hi1),
-                           u2 + 0.0 * h0))
+                           np.broadcast_to(u2, h0.shape)))
     best_cost, best_u1 = None, None
     for k, (u1, u2) in enumerate(candidates):
         cost = w_u * (u1 - a) ** 2 + w_u * (u2 - g) ** 2 + w_b * (h0 - s2 * u1 - u2) ** 2
