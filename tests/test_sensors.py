@@ -257,8 +257,8 @@ def test_contact_switch_debounces_a_noisy_force():
     """A foot's switch changes only after its thresholded, noisy force has disagreed with it for the
     debounce time: a load under the threshold by less than the noise flickers raw but not debounced."""
     config = SensorConfig(contact_debounce_s=0.003, contact_force_noise_std=0.0)
-    run = simulate(config, standing=False)
-    sensors, robot = run.sensors, run.robot
+    robot = load_robot("g1")
+    sensors = SimulatedSensors(robot, config)  # no plant step: an update per 1 ms sample
     context = sensors.CreateDefaultContext()
     sensors.plant_state_input.FixValue(context, np.concatenate([robot.nominal.q, np.zeros(robot.nv)]))
     sensors.base_acceleration_input.FixValue(context, np.zeros(3))
@@ -272,3 +272,31 @@ def test_contact_switch_debounces_a_noisy_force():
         context.SetDiscreteState(sensors.EvalUniquePeriodicDiscreteUpdate(context))
         switches.append(sensors.foot_contact_output.Eval(context).copy())
     np.testing.assert_array_equal(np.array(switches)[:, 0], [1, 1, 0, 0, 0, 0])  # off after 3 samples (3 ms)
+
+
+def test_an_update_per_plant_step_equals_an_update_per_sample():
+    """With a 2 ms discrete plant, the sensors take their two 1 kHz samples in one update per step;
+    their inputs hold over the step, so the state (biases, yaw error, switches, timers) matches
+    per-sample updates at every step, across a noise block's boundary and through switch flips."""
+    robot = load_robot("g1")
+    config = SensorConfig(contact_force_noise_std=3.0, gyro_bias_walk=1e-3, accel_bias_walk=1e-2)
+    batched, single = SimulatedSensors(robot, config, TIME_STEP), SimulatedSensors(robot, config)
+    contexts = [batched.CreateDefaultContext(), single.CreateDefaultContext()]
+    rng = np.random.default_rng(3)
+    threshold = config.contact_threshold_fraction * robot.total_mass * 9.81
+    q = robot.nominal.q.copy()
+    for step in range(600):  # 1.2 s: samples 0 … 1200 cross the 1024-sample block
+        q[robot.base_q_start:robot.base_q_start + 4] = RollPitchYaw(0.1 * rng.standard_normal(3)).ToQuaternion().wxyz()
+        forces = threshold + rng.choice([-5.0, 5.0], size=2)
+        for sensors, context in zip((batched, single), contexts, strict=True):
+            sensors.plant_state_input.FixValue(context, np.concatenate([q, np.zeros(robot.nv)]))
+            sensors.base_acceleration_input.FixValue(context, np.zeros(3))
+            sensors.foot_forces_input.FixValue(context, forces)
+        for k in (2 * step - 1, 2 * step):
+            if k >= 0:
+                contexts[1].SetTime(k * 1e-3)
+                contexts[1].SetDiscreteState(single.EvalUniquePeriodicDiscreteUpdate(contexts[1]))
+        contexts[0].SetTime(step * TIME_STEP)
+        contexts[0].SetDiscreteState(batched.EvalUniquePeriodicDiscreteUpdate(contexts[0]))
+        np.testing.assert_allclose(contexts[0].get_discrete_state(0).value(),
+                                   contexts[1].get_discrete_state(0).value(), rtol=0, atol=1e-12)

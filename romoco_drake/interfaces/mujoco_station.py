@@ -47,7 +47,7 @@ def make_mujoco_station(
     builder.ExportInput(plant.actuation_input, "actuation")
     if motor_pd:
         builder.ExportInput(plant.motor_command_input, "motor_command")
-    sensor_system = builder.AddNamedSystem("sensors", SimulatedSensors(robot, sensors))
+    sensor_system = builder.AddNamedSystem("sensors", SimulatedSensors(robot, sensors, time_step))
     builder.Connect(plant.state_output, sensor_system.plant_state_input)
     builder.Connect(plant.base_acceleration_output, sensor_system.base_acceleration_input)
     builder.Connect(plant.foot_forces_output, sensor_system.foot_forces_input)

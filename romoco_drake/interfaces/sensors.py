@@ -123,15 +123,15 @@ def foot_normal_forces(contacts: ContactResults, foot_bodies: Sequence[BodyIndex
     −f_Bc_W·n̂_BA_W is the pair's compressive normal force, the same for either body.
     """
     forces = [0.0] * len(foot_bodies)
-    feet = [int(body) for body in foot_bodies]
+    feet = {int(body): k for k, body in enumerate(foot_bodies)}
     for i in range(contacts.num_point_pair_contacts()):
         info = contacts.point_pair_contact_info(i)
-        pair = (int(info.bodyA_index()), int(info.bodyB_index()))
-        hits = [k for k, body in enumerate(feet) if body in pair]
-        if hits:
-            normal_force = -float(info.contact_force() @ info.point_pair().nhat_BA_W)
-            for k in hits:
-                forces[k] += normal_force
+        a, b = feet.get(int(info.bodyA_index())), feet.get(int(info.bodyB_index()))
+        if a is None and b is None:
+            continue
+        normal_force = -float(info.contact_force() @ info.point_pair().nhat_BA_W)
+        for k in {a, b} - {None}:
+            forces[k] += normal_force
     return np.array(forces)
 
 
@@ -171,7 +171,8 @@ class SimulatedSensors(LeafSystem):
     debounce timers. Read it with :meth:`imu_biases` and :meth:`orientation_yaw_error`.
     """
 
-    def __init__(self, robot: RobotModel, config: SensorConfig | None = None):
+    def __init__(self, robot: RobotModel, config: SensorConfig | None = None,
+                 plant_time_step: float = 0.0):
         super().__init__()
         config = config or SensorConfig()
         plant, instance = robot.plant, robot.model_instance
@@ -205,7 +206,8 @@ class SimulatedSensors(LeafSystem):
         # [b_g (3), b_a (3), yaw error (1), switches (2), debounce timers (2)]
         self._state_index = self.DeclareDiscreteState(
             np.concatenate([self.gyro_bias, self.accel_bias, np.zeros(5)]))
-        self.DeclarePeriodicDiscreteUpdateEvent(dt, 0.0, self._sample)
+        self._samples_per_update = _samples_per_step(config.rate_hz, plant_time_step)
+        self.DeclarePeriodicDiscreteUpdateEvent(self._samples_per_update * dt, 0.0, self._sample)
         self._declare_ports(plant, nj)
 
     def _declare_ports(self, plant: MultibodyPlant, nj: int) -> None:
@@ -237,9 +239,26 @@ class SimulatedSensors(LeafSystem):
     def _noise(self, context, port: int, std: np.ndarray) -> np.ndarray:
         """Sample ⌊t·rate⌋'s noise for ``port`` (0 encoders, 2 IMU, 3 bias walks, 4 contact force):
         a function of (seed, port, k)."""
-        k = math.floor(context.get_time() * self._rate + 1e-6)
-        block, row = divmod(k, _NOISE_BLOCK)
+        block, row = divmod(self._sample_index(context), _NOISE_BLOCK)
         return std * self._standard_normal(port, block, std.size)[row]
+
+    def _update_draws(self, first: int, last: int) -> np.ndarray:
+        """Rows first … last of an update's noise: [bias walks (6), gyro (3), switch force (2)]."""
+        (b0, r0), (b1, r1) = divmod(first, _NOISE_BLOCK), divmod(last, _NOISE_BLOCK)
+        if b0 == b1:
+            return self._update_block(b0)[r0:r1 + 1]
+        return np.vstack([self._update_block(b0)[r0:], self._update_block(b1)[:r1 + 1]])
+
+    @functools.lru_cache(maxsize=2)  # noqa: B019 (a memo of a pure function of the block)
+    def _update_block(self, block: int) -> np.ndarray:
+        """A block's scaled draws of ports 3 (walks), 2 (gyro columns) and 4 (switch force) side
+        by side, so that an update reads its samples' noise with one slice."""
+        return np.hstack([self._walk_std * self._standard_normal(3, block, 6),
+                          self._imu_std[3:6] * self._standard_normal(2, block, 9)[:, 3:6],
+                          self._force_std * self._standard_normal(4, block, 2)])
+
+    def _sample_index(self, context) -> int:
+        return math.floor(context.get_time() * self._rate + 1e-6)
 
     @functools.lru_cache(maxsize=8)  # noqa: B019 (a memo of a pure function; outputs are re-evaluated per state)
     def _standard_normal(self, port: int, block: int, size: int) -> np.ndarray:
@@ -265,21 +284,29 @@ class SimulatedSensors(LeafSystem):
         return float(self._sensor_state(context)[6])
 
     def _sample(self, context, discrete_state) -> None:
-        """One sample's walk of the biases and the yaw error, and the switches' debounce."""
+        """The walk of the biases and the yaw error, and the switches' debounce, over the samples
+        since the last update, oldest first (one, or a discrete plant step's worth: see
+        :func:`_samples_per_step`). Sample j's yaw rate uses the bias before sample j's walk."""
         s = self._sensor_state(context).copy()
-        x = self.plant_state_input.Eval(context)
-        q_WB = _unit(x[self._base_q:self._base_q + 4])
-        if q_WB is not None:
-            gyro_noise = self._noise(context, 2, self._imu_std)[3:6]
-            R_WB = RotationMatrix(Quaternion(wxyz=q_WB)).matrix()
-            s[6] += self._dt * float(R_WB[2] @ (s[0:3] + gyro_noise))
-        s[0:6] += self._noise(context, 3, self._walk_std)
-        forces = self.foot_forces_input.Eval(context)
-        raw = (forces + self._noise(context, 4, self._force_std) > self._contact_threshold).astype(float)
-        switch, timer = s[7:9], s[9:11]
-        timer[:] = np.where(raw != switch, timer + self._dt, 0.0)
-        flip = timer >= self._debounce - 1e-9
-        switch[flip], timer[flip] = raw[flip], 0.0
+        last = self._sample_index(context)
+        draws = self._update_draws(max(0, last - self._samples_per_update + 1), last)
+        walked = np.cumsum(draws[:, 0:6], axis=0)
+        w, qx, qy, qz = self.plant_state_input.Eval(context)[self._base_q:self._base_q + 4].tolist()
+        norm2 = w * w + qx * qx + qy * qy + qz * qz
+        if math.isfinite(norm2) and norm2 > 1e-18:
+            # Third row of R_WB (the world vertical in B) from the quaternion normalised.
+            R_z = np.array([qx * qz - w * qy, qy * qz + w * qx, 0.5 * norm2 - qx * qx - qy * qy]) * (2.0 / norm2)
+            rates = len(draws) * s[0:3] + walked[:-1, 0:3].sum(axis=0) + draws[:, 6:9].sum(axis=0)
+            s[6] += self._dt * float(R_z @ rates)
+        s[0:6] += walked[-1]
+        loaded = (self.foot_forces_input.Eval(context) + draws[:, 9:11] > self._contact_threshold).tolist()
+        switch, timer = s[7:9].tolist(), s[9:11].tolist()
+        for raw in loaded:
+            for foot in (0, 1):
+                timer[foot] = timer[foot] + self._dt if float(raw[foot]) != switch[foot] else 0.0
+                if timer[foot] >= self._debounce - 1e-9:
+                    switch[foot], timer[foot] = float(raw[foot]), 0.0
+        s[7:11] = switch + timer
         discrete_state.get_mutable_vector(self._state_index).SetFromVector(s)
 
     def _imu(self, context, out) -> None:
@@ -319,10 +346,14 @@ class PlantContactReadout(LeafSystem):
 
     | port                       | dir | size     | meaning                                        |
     |----------------------------|-----|----------|------------------------------------------------|
-    | body_spatial_accelerations | in  | abstract | the plant's A_WB of every body                 |
+    | generalized_acceleration   | in  | nv       | the plant's v̇                                   |
     | contact_results            | in  | abstract | the plant's ContactResults (point contact)     |
     | base_acceleration          | out | 3        | a_WBo_W of the base origin (m/s²)              |
     | foot_normal_forces         | out | 2        | [left, right] normal force (N)                 |
+
+    The base's floating joint has velocities [ω_WB; v_WBo] in the world frame, so their
+    derivative's last three are a_WBo_W (the whole plant's list of body accelerations cost ten
+    times as much to read).
     """
 
     def __init__(self, robot: RobotModel, plant: MultibodyPlant):
@@ -331,19 +362,35 @@ class PlantContactReadout(LeafSystem):
             raise RomocoError("simulated foot contact sensors need the point contact model, got "
                               f"{plant.get_contact_model()}")
         instance = robot.model_instance
-        self._base = plant.GetBodyByName(robot.config.base_body, instance).index()
+        base = plant.GetBodyByName(robot.config.base_body, instance)
+        self._base_v = base.floating_velocities_start_in_v() + 3
         self._feet = [plant.GetBodyByName(robot.feet[side].body_name, instance).index()
                       for side in ("left", "right")]
-        self.accelerations_input = self.DeclareAbstractInputPort(
-            "body_spatial_accelerations", plant.get_body_spatial_accelerations_output_port().Allocate())
+        self.accelerations_input = self.DeclareVectorInputPort("generalized_acceleration", plant.num_velocities())
         self.contact_results_input = self.DeclareAbstractInputPort(
             "contact_results", plant.get_contact_results_output_port().Allocate())
         self.base_acceleration_output = self.DeclareVectorOutputPort(
             "base_acceleration", 3, lambda c, out: out.SetFromVector(
-                self.accelerations_input.Eval(c)[self._base].translational()))
+                self.accelerations_input.Eval(c)[self._base_v:self._base_v + 3]),
+            prerequisites_of_calc={self.accelerations_input.ticket()})
         self.foot_forces_output = self.DeclareVectorOutputPort(
             "foot_normal_forces", 2, lambda c, out: out.SetFromVector(
-                foot_normal_forces(self.contact_results_input.Eval(c), self._feet)))
+                foot_normal_forces(self.contact_results_input.Eval(c), self._feet)),
+            prerequisites_of_calc={self.contact_results_input.ticket()})
+
+
+def _samples_per_step(rate_hz: float, plant_time_step: float) -> int:
+    """Samples each sensor update takes: n = rate·h when the plant is discrete with step h and
+    samples n to a step (integer), else 1 (an update per sample).
+
+    A discrete plant's state and contact forces hold between its steps, so the n samples of
+    (t − h, t] all read the same inputs; taking them in one update at t gives the same sensor
+    state at every plant step and controller tick as n updates would, at one simulator event per
+    step instead of n (a second event per 2 ms step cost G1's station as much as the plant's
+    own step).
+    """
+    n = rate_hz * plant_time_step
+    return round(n) if n >= 1.0 and abs(n - round(n)) < 1e-9 else 1
 
 
 def add_sensors(
@@ -352,9 +399,9 @@ def add_sensors(
     """Adds :class:`SimulatedSensors` named "sensors" to ``builder``, fed by ``plant`` through a
     :class:`PlantContactReadout` named "contact_readout"."""
     readout = builder.AddNamedSystem("contact_readout", PlantContactReadout(robot, plant))
-    builder.Connect(plant.get_body_spatial_accelerations_output_port(), readout.accelerations_input)
+    builder.Connect(plant.get_generalized_acceleration_output_port(), readout.accelerations_input)
     builder.Connect(plant.get_contact_results_output_port(), readout.contact_results_input)
-    sensors = builder.AddNamedSystem("sensors", SimulatedSensors(robot, config))
+    sensors = builder.AddNamedSystem("sensors", SimulatedSensors(robot, config, plant.time_step()))
     builder.Connect(plant.get_state_output_port(), sensors.plant_state_input)
     builder.Connect(readout.base_acceleration_output, sensors.base_acceleration_input)
     builder.Connect(readout.foot_forces_output, sensors.foot_forces_input)
