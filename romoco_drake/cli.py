@@ -169,6 +169,7 @@ def make_parser() -> argparse.ArgumentParser:
         engines_cli,
         inertia,
         push,
+        realtime,
         report,
         rom,
         walking,
@@ -199,6 +200,7 @@ def make_parser() -> argparse.ArgumentParser:
     for module in (rom, embedding, walking, engines_cli, agility, dropout, push):
         module.register(bench)
     walking.register_tick(bench)
+    realtime.register(bench)
     inertia.register(bench)
     report.register(sub)
     _register_inertia(sub)

@@ -90,7 +90,7 @@ def run_scenario(
         record = _write_replay(meshcat, Path(record))
     if inspect is not None:
         inspect(built, context)
-    summary = _run_summary(built, context, scenario, link, end, end.time if end.interrupted else duration,
+    summary = run_summary(built, context, scenario, link, end, end.time if end.interrupted else duration,
                            plot_dir, recorder, teleop)
     return summary | ({"record": str(record)} if record is not None else {})
 
@@ -139,7 +139,7 @@ def _write_replay(meshcat: Meshcat, record: Path) -> Path:
     return record
 
 
-def _run_summary(built, context, scenario: Scenario, link: str, end: RunEnd, duration: float,
+def run_summary(built, context, scenario: Scenario, link: str, end: RunEnd, duration: float,
                  plot_dir: Path | None, recorder: LcmLogRecorder | None, teleop: bool) -> dict:
     """The run's facts and what each system measured (module docstring)."""
     summary = {

@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
 
 from romoco_drake.bench.rom import percentiles
 from romoco_drake.bench.sweep import SweepOptions, Variant, add_sweep_args, run_sweep, sweep_options
@@ -181,18 +182,33 @@ def passive_plant_steps(robot, scenario: Scenario, steps: int) -> list[int]:
     """
     station = make_engine_station(scenario.station.engine, robot, scenario.time_step,
                                   sensors=scenario.sensors)
-    simulator = Simulator(station)
+    return _stepped(station, station.GetSubsystemByName("plant"), robot, scenario.time_step, steps)
+
+
+def bare_plant_steps(robot, scenario: Scenario, steps: int) -> list[int]:
+    """Wall time (ns) of each of ``steps`` steps of the robot's bare simulation ``MultibodyPlant``
+    (no sensors, no monitor, no logs), holding the nominal pose's gravity-compensation torque
+    from the nominal pose on the ground: the physics alone, the reference of the timing benches."""
+    builder = DiagramBuilder()
+    plant, _ = robot.add_to_builder(builder, scenario.time_step)
+    builder.ExportInput(plant.get_actuation_input_port(), "actuation")
+    diagram = builder.Build()
+    return _stepped(diagram, plant, robot, scenario.time_step, steps)
+
+
+def _stepped(diagram, plant, robot, time_step: float, steps: int) -> list[int]:
+    """Wall time (ns) of each of ``steps`` steps of ``diagram`` (its input ``actuation``) from the
+    nominal pose, under the nominal pose's gravity compensation."""
+    simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
-    plant = station.GetSubsystemByName("plant")
     plant.SetPositions(plant.GetMyMutableContextFromRoot(context), robot.nominal.q)
-    torque = contact_gravity_compensation(robot, RobotKinematics(robot))
-    station.GetInputPort("actuation").FixValue(context, torque)
+    diagram.GetInputPort("actuation").FixValue(context, contact_gravity_compensation(robot, RobotKinematics(robot)))
     simulator.Initialize()
     out = []
     with frozen_heap():
         for k in range(1, steps + 1):
             t0 = time.perf_counter_ns()
-            simulator.AdvanceTo(k * scenario.time_step)
+            simulator.AdvanceTo(k * time_step)
             out.append(time.perf_counter_ns() - t0)
     return out
 

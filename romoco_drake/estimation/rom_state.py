@@ -35,6 +35,7 @@ class RomStateFromRobot(LeafSystem):
         self.robot = robot
         self.kinematics_port = self.DeclareAbstractInputPort("kinematics", kinematics_model_value(robot))
         self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
+        self._last: tuple[tuple | None, tuple[np.ndarray, np.ndarray] | None] = (None, None)
         self.rom_state_port = self.DeclareVectorOutputPort(
             "rom_state", ROM_STATE_SIZE, self._calc, prerequisites_of_calc={self.all_input_ports_ticket()})
         self.swing_foot_port = self.DeclareVectorOutputPort(
@@ -58,9 +59,17 @@ class RomStateFromRobot(LeafSystem):
         return np.array([c * dx + s * dy, c * dy - s * dx])
 
     def _calc_swing_foot(self, context, out) -> None:
-        phase = self.gait_phase_port.Eval(context)
-        out.SetFromVector(self.swing_foot(self.kinematics_port.Eval(context), side_from_sign(phase[0])))
+        out.SetFromVector(self._outputs(context)[1])
 
     def _calc(self, context, out) -> None:
-        phase = self.gait_phase_port.Eval(context)
-        out.SetFromVector(self.compute(self.kinematics_port.Eval(context), side_from_sign(phase[0])))
+        out.SetFromVector(self._outputs(context)[0])
+
+    def _outputs(self, context) -> tuple[np.ndarray, np.ndarray]:
+        """(rom_state, swing_foot) of the inputs, memoised on the state and stance side: a tick's
+        state machine update invalidates both outputs though neither input's value changed."""
+        kin = self.kinematics_port.Eval(context)
+        side = side_from_sign(self.gait_phase_port.Eval(context)[0])
+        key = (kin.x.tobytes(), side)
+        if key != self._last[0]:
+            self._last = (key, (self.compute(kin, side), self.swing_foot(kin, side)))
+        return self._last[1]

@@ -56,7 +56,7 @@ from __future__ import annotations
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.lcm import DrakeLcmInterface
-from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem, ValueProducer
 from pydrake.systems.lcm import LcmInterfaceSystem
 
 from romoco_drake.interfaces.dropout import Dropout
@@ -129,7 +129,17 @@ class CommandSender(LeafSystem):
         self.estop = EstopLatch(self)
         self.estop_port = self.estop.port
         self._stats = self.DeclareDiscreteState(LinkCounters.size())
-        self.command_port = self.DeclareVectorOutputPort("command", 5 * nu, self._command)
+        # The command and its flags, once per change of what they are computed from (not of time).
+        inputs = [self.actuation_port, self.joint_state_port, self.link_port, self.estop.port] + (
+            [self.motor_command_port] if motor_pd else [])
+        self._checked_entry = self.DeclareCacheEntry(
+            "checked command", ValueProducer(
+                allocate=lambda: AbstractValue.Make((np.zeros(5 * nu), False, False)),
+                calc=lambda context, value: value.set_value(self._checked(context, self.estop.engaged(context)))),
+            {*(self.input_port_ticket(port.get_index()) for port in inputs), self.all_state_ticket()})
+        self.command_port = self.DeclareVectorOutputPort(
+            "command", 5 * nu, lambda context, out: out.SetFromVector(self._checked_entry.Eval(context)[0]),
+            prerequisites_of_calc={self._checked_entry.ticket()})
         self.stats_port = counters_port(self, "stats", LinkCounters, self._stats)
         self.message_port = self.DeclareAbstractOutputPort(
             "message", lambda: AbstractValue.Make(b""), self._message)
@@ -165,12 +175,9 @@ class CommandSender(LeafSystem):
         nu = self.robot.nu
         return damping_command(self.robot, np.clip(q, self._lower[:nu], self._upper[:nu]))
 
-    def _command(self, context, out) -> None:
-        out.SetFromVector(self._checked(context, self.estop.engaged(context))[0])
-
     def _update(self, context, state) -> None:
         engaged, bad = self.estop.take(context, state)
-        _, non_finite, clipped = self._checked(context, self.estop.engaged(context))
+        _, non_finite, clipped = self._checked_entry.Eval(context)
         counts = LinkCounters.from_vector(context.get_discrete_state(self._stats).value()) + LinkCounters(
             rejected_messages=bad + non_finite, clamped_commands=clipped, estop=engaged)
         state.get_mutable_discrete_state().get_mutable_vector(int(self._stats)).SetFromVector(counts.vector())

@@ -265,6 +265,16 @@ def _finite(name: str, field: str, values) -> np.ndarray:
     return array
 
 
+def _all_finite(name: str, fields: dict) -> list[np.ndarray]:
+    """Each of ``fields`` as a float array, checked finite together (one check for the whole
+    message; the first bad field is found only when there is one)."""
+    arrays = [np.asarray(values, dtype=float) for values in fields.values()]
+    if not np.isfinite(np.concatenate(arrays)).all():
+        for field, array in zip(fields, arrays, strict=True):
+            _finite(name, field, array)
+    return arrays
+
+
 def _unit_quaternion(name: str, field: str, values) -> np.ndarray:
     quaternion = _finite(name, field, values)
     norm = math.hypot(*quaternion)  # no overflow (and no RuntimeWarning) for entries beyond 1e154
@@ -287,19 +297,12 @@ def decode_proprioception(data: bytes, num_joints: int) -> Proprioception:
     lcm = _unpack(biped_proprioception_t, data)
     utime = _check_utime(name, lcm.utime)
     _check_count(name, "num_joints", lcm.num_joints, num_joints)
-    imu = np.concatenate([
-        _unit_quaternion(name, "imu_quaternion", lcm.imu_quaternion),
-        _finite(name, "gyro", lcm.gyro),
-        _finite(name, "accel", lcm.accel),
-    ])
-    return Proprioception(
-        utime=utime,
-        q=_finite(name, "q", lcm.q),
-        v=_finite(name, "v", lcm.v),
-        tau=_finite(name, "tau", lcm.tau),
-        imu=imu,
-        foot_contact=np.array(lcm.foot_contact, dtype=float),
-    )
+    q, v, tau, quaternion, gyro, accel = _all_finite(name, {
+        "q": lcm.q, "v": lcm.v, "tau": lcm.tau, "imu_quaternion": lcm.imu_quaternion, "gyro": lcm.gyro,
+        "accel": lcm.accel})
+    imu = np.concatenate([_unit_quaternion(name, "imu_quaternion", quaternion), gyro, accel])
+    return Proprioception(utime=utime, q=q, v=v, tau=tau, imu=imu,
+                          foot_contact=np.array(lcm.foot_contact, dtype=float))
 
 
 def decode_motor_command(data: bytes, num_actuators: int) -> MotorCommand:
@@ -322,12 +325,13 @@ def decode_base_state(data: bytes) -> BaseState:
     """The checked base state in ``data`` (all sizes are fixed by the message)."""
     name = "base_state_t"
     lcm = _unpack(base_state_t, data)
+    quaternion, position, angular_velocity, linear_velocity = _all_finite(name, {
+        "quaternion": lcm.quaternion, "position": lcm.position, "angular_velocity": lcm.angular_velocity,
+        "linear_velocity": lcm.linear_velocity})
     return BaseState(
         utime=_check_utime(name, lcm.utime),
-        quaternion=_unit_quaternion(name, "quaternion", lcm.quaternion),
-        position=_finite(name, "position", lcm.position),
-        angular_velocity=_finite(name, "angular_velocity", lcm.angular_velocity),
-        linear_velocity=_finite(name, "linear_velocity", lcm.linear_velocity),
+        quaternion=_unit_quaternion(name, "quaternion", quaternion),
+        position=position, angular_velocity=angular_velocity, linear_velocity=linear_velocity,
     )
 
 

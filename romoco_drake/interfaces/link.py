@@ -133,6 +133,7 @@ class Inbox:
 
     def __init__(self, system: LeafSystem, channel: str, decode, default: np.ndarray):
         self.decode = decode
+        self._memo: tuple[bytes | None, tuple[int, np.ndarray] | None] = (None, None)
         self.port = system.DeclareAbstractInputPort(channel, AbstractValue.Make(b""))
         self.values = system.DeclareDiscreteState(default)
         self.meta = system.DeclareDiscreteState([-1.0, -np.inf, 0.0])  # utime, arrival time, received
@@ -143,11 +144,21 @@ class Inbox:
             {system.input_port_ticket(self.port.get_index()), system.discrete_state_ticket(self.values),
              system.discrete_state_ticket(self.meta)})
 
+    def _decoded(self, data: bytes) -> tuple[int, np.ndarray]:
+        """``decode(data)``, memoised for the last message: the cache entry and the update both
+        read each message, and the entry again after the update (MessageRejected is not kept;
+        the values are read-only)."""
+        if data is not self._memo[0] and data != self._memo[0]:
+            utime, values = self.decode(data)
+            values.flags.writeable = False  # shared by every reader of the memo
+            self._memo = (data, (utime, values))
+        return self._memo[1]
+
     def _latest(self, context, value) -> None:
         data = self.port.Eval(context)
         if data:
             try:
-                utime, values = self.decode(data)
+                utime, values = self._decoded(data)
                 if utime > context.get_discrete_state(self.meta).GetAtIndex(0):  # else: taken or stale
                     value.set_value(values)
                     return
@@ -163,7 +174,7 @@ class Inbox:
         state.get_mutable_abstract_state(int(self.seen)).set_value(data)
         utime, _, _ = context.get_discrete_state(self.meta).value()
         try:
-            msg_utime, values = self.decode(data)
+            msg_utime, values = self._decoded(data)
         except MessageRejected:
             return False
         if msg_utime <= utime:  # a repeat or out of order

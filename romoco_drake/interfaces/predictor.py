@@ -29,6 +29,7 @@ import numpy as np
 
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.robots.posture import DIVERGED
+from romoco_drake.values import SharedValue
 
 SIDES = ("left", "right")
 BAUMGARTE = 0.2  # share of a contact point's drift removed per step
@@ -45,7 +46,7 @@ class DivergedPrediction(RuntimeError):
 
 
 @dataclass(frozen=True)
-class PredictedState:
+class PredictedState(SharedValue):
     """The prediction: state, contacts, where the feet in contact are held, the ground height,
     and the base's world acceleration over the last step (for a predicted accelerometer)."""
 

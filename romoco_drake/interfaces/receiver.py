@@ -9,8 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.common.eigen_geometry import Quaternion
-from pydrake.common.value import Value
-from pydrake.systems.framework import LeafSystem
+from pydrake.common.value import AbstractValue, Value
+from pydrake.systems.framework import LeafSystem, ValueProducer
 
 from romoco_drake.estimation.ground_truth import plant_state
 from romoco_drake.interfaces.lcm_codec import decode_base_state, decode_proprioception
@@ -20,6 +20,7 @@ from romoco_drake.modes import LinkCounters, LinkStage
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.robots.posture import DIVERGED
 from romoco_drake.spatial import GRAVITY, quaternion_exp
+from romoco_drake.values import SharedValue
 
 
 def predict_base_state(values: np.ndarray, dt: float) -> np.ndarray:
@@ -58,7 +59,7 @@ def nominal_measurements(robot: RobotModel) -> dict[str, np.ndarray]:
 
 
 @dataclass(frozen=True)
-class BlindPrediction:
+class BlindPrediction(SharedValue):
     """A receiver's prediction while proprioception is missing: the :class:`PredictedState`, the
     last IMU message and the prediction's base orientation when it started (the predicted IMU
     orientation turns the last measured one by the base's predicted rotation since)."""
@@ -69,7 +70,7 @@ class BlindPrediction:
 
 
 @dataclass(frozen=True)
-class MissedUpdate:
+class MissedUpdate(SharedValue):
     """A receive update without a new proprioception message, kept while the stream is still
     fresh: what the prediction catches up on if it goes stale."""
 
@@ -242,8 +243,8 @@ class MeasurementReceiver(LeafSystem):
 
         first = np.concatenate([start["joint_state"], start["imu"], start["foot_contact"]])
         self.proprioception = Inbox(self, "proprioception", proprioception, first)
-        self.base_state = Inbox(self, "base_state", base_state,
-                                np.concatenate([start["base_pose"], start["base_velocity"]]))
+        base_default = np.concatenate([start["base_pose"], start["base_velocity"]])
+        self.base_state = Inbox(self, "base_state", base_state, base_default)
         self.command_port = self.DeclareVectorInputPort("command", 5 * robot.nu)
         self.loop_stage_port = self.DeclareVectorInputPort("loop_stage", 1)
         self.predictor = BlindPredictor(self, robot, config, self.proprioception, self.base_state)
@@ -254,11 +255,20 @@ class MeasurementReceiver(LeafSystem):
                   "imu": (self.proprioception, 2 * nj, 2 * nj + 10),
                   "foot_contact": (self.proprioception, 2 * nj + 10, 2 * nj + 12),
                   "base_pose": (self.base_state, 0, 7), "base_velocity": (self.base_state, 7, 13)}
+        # One evaluation per stream for all of its ports (they change with time, so at every event).
+        measured = {
+            inbox: self.DeclareCacheEntry(
+                f"measured {name}", ValueProducer(
+                    allocate=lambda default=default: AbstractValue.Make(default.copy()),
+                    calc=lambda context, value, inbox=inbox: value.set_value(self._measured(context, inbox))),
+                {inbox.latest.ticket(), self.time_ticket(), self.all_state_ticket()})
+            for name, inbox, default in (("proprioception", self.proprioception, first),
+                                         ("base state", self.base_state, base_default))}
         for name, (inbox, a, b) in layout.items():
+            entry = measured[inbox]
             self.DeclareVectorOutputPort(
-                name, b - a, lambda context, out, inbox=inbox, a=a, b=b:
-                out.SetFromVector(self._measured(context, inbox)[a:b]),
-                prerequisites_of_calc={inbox.latest.ticket(), self.time_ticket(), self.all_state_ticket()})
+                name, b - a, lambda context, out, entry=entry, a=a, b=b: out.SetFromVector(entry.Eval(context)[a:b]),
+                prerequisites_of_calc={entry.ticket()})
         self.link_port = self.DeclareStateOutputPort("link", self._link)
         self.stats_port = counters_port(self, "stats", LinkCounters, self._stats)
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.receive_rate_hz, 0.0, self._update)

@@ -20,7 +20,8 @@ from romoco_drake.rom.types import (
 class FootPlacementPlanner(LeafSystem):
     """Plans the swing foot's touchdown from the ROM state, every time its output is evaluated.
 
-    Stateless: the output is a function of the inputs (cached by Drake until they change). With an
+    Stateless: the output is a function of the inputs' values (cached by Drake until they change,
+    and memoised on their values for the last plan). With an
     ``adapter`` (:class:`~romoco_drake.rom.step_adapt.StepAdapter`) the law's plan is then bounded
     to the robot's reach and its step time adapted to the current swing (push recovery); with
     ``swing_foot`` connected, also to where the swing foot can still land in the time left.
@@ -46,6 +47,10 @@ class FootPlacementPlanner(LeafSystem):
         self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
         self.swing_foot_port = self.DeclareVectorInputPort("swing_foot", 2)
+        # The last plan and the input values it was made from. A tick's state machine update
+        # invalidates the output (Drake cannot tell that a rewritten schedule is unchanged), so
+        # the same inputs arrive twice a tick; the plan is a pure function of their values.
+        self._last: tuple[tuple | None, PlannerOutput | None] = (None, None)
         self.planner_output_port = self.DeclareAbstractOutputPort(
             "planner_output", lambda: AbstractValue.Make(self._plan_default()), self._calc_plan
         )
@@ -60,11 +65,21 @@ class FootPlacementPlanner(LeafSystem):
         return self.law.plan(state, "left", 0.0, cmd)
 
     def _calc_plan(self, context, value) -> None:
-        sign, t_in_step = self.gait_phase_port.Eval(context).tolist()
-        cmd = WalkCommand.from_vector(self.command_port.Eval(context))
+        phase = self.gait_phase_port.Eval(context).tolist()
+        command = self.command_port.Eval(context).tolist()
         rom_state = self.rom_state_port.Eval(context).tolist()
-        plan = self.law.plan(rom_state, side_from_sign(sign), t_in_step, cmd)
+        swing = None
+        if self.adapter is not None and self.swing_foot_port.HasValue(context):
+            swing = self.swing_foot_port.Eval(context).tolist()
+        key = (phase, command, rom_state, swing)
+        if key != self._last[0]:
+            self._last = (key, self._plan(phase, command, rom_state, swing))
+        value.set_value(self._last[1])
+
+    def _plan(self, phase: list[float], command: list[float], rom_state: list[float],
+              swing: list[float] | None) -> PlannerOutput:
+        sign, t_in_step = phase
+        plan = self.law.plan(rom_state, side_from_sign(sign), t_in_step, WalkCommand(*command))
         if self.adapter is not None:
-            swing = self.swing_foot_port.Eval(context) if self.swing_foot_port.HasValue(context) else None
             plan = self.adapter.adapt(plan, rom_state, t_in_step, swing)
-        value.set_value(plan)
+        return plan

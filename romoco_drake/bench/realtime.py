@@ -1,0 +1,218 @@
+"""``romoco bench realtime``: can the controller keep its deadline on a robot's computer?
+
+The controller diagram alone, exactly as ``romoco run --hardware`` builds it (LCM receiver,
+estimator, walking loop, command sender), is fed a recorded run's robot messages
+(proprioception and motion capture) on an in-process LCM at the scenario's control rate, and
+each tick is timed. The recording is a simulated run over LCM made first (``romoco run
+--via-lcm --lcm-log``), or a log given with ``--lcm-log`` (one recorded on a robot). The
+replay is open loop, but the controller is deterministic: fed the messages its own run
+received, it computes that run's ticks again, and the report says how closely its motor
+commands match the logged ones.
+
+A tick is every simulator event from the tick's instant to half a period later: the messages'
+delivery and decoding, the controller's updates, the motor command's publication. Ticks are
+released at the control rate on the wall clock (a robot's loop sleeps between ticks; the
+caches and clocks it meets are an idle loop's, not a back-to-back benchmark's). A tick misses
+its deadline when it takes longer than the period. Each tick's time is split over the
+systems whose Python callbacks spent it (:mod:`~romoco_drake.bench.callback_timer`) and the
+rest (``framework``: Drake's event dispatch and C++ systems). The bare ``MultibodyPlant`` step
+of the scenario's robot, timed in the same process, is the reference that makes the numbers
+comparable across machines.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import lcm as lcm_py
+import numpy as np
+from pydrake.lcm import DrakeLcm
+from pydrake.systems.analysis import Simulator
+
+from romoco_drake.bench.callback_timer import timed_callbacks
+from romoco_drake.bench.walking import bare_plant_steps
+from romoco_drake.config import LINK_TICK_OFFSET
+from romoco_drake.errors import RomocoError
+from romoco_drake.interfaces.lcm_codec import (
+    BASE_STATE_CHANNEL,
+    MOTOR_COMMAND_CHANNEL,
+    PROPRIOCEPTION_CHANNEL,
+    decode_motor_command,
+)
+from romoco_drake.runner import add_overlay_arg, run_scenario, run_summary, scenario_from_args
+from romoco_drake.scenario import Scenario
+from romoco_drake.simulation import RunEnd, frozen_heap
+from romoco_drake.wiring import build_diagram
+
+ROBOT_CHANNELS = (PROPRIOCEPTION_CHANNEL, BASE_STATE_CHANNEL)
+WORST = 10  # ticks listed with their costliest system
+
+
+def logged_messages(path: Path) -> tuple[list[tuple[float, str, bytes]], list[bytes]]:
+    """The LCM log at ``path``: the robot's messages (time s, channel, bytes) in log order, and the
+    controller's motor commands."""
+    try:
+        log = lcm_py.EventLog(str(path), "r")
+    except OSError as error:
+        raise RomocoError(f"cannot read LCM log {path}: {error.strerror or error}") from None
+    events, commands = [], []
+    for event in log:
+        if event.channel in ROBOT_CHANNELS:
+            events.append((event.timestamp * 1e-6, event.channel, event.data))
+        elif event.channel == MOTOR_COMMAND_CHANNEL:
+            commands.append(event.data)
+    if not events:
+        raise RomocoError(f"LCM log {path} has no {' or '.join(ROBOT_CHANNELS)} messages to replay")
+    return events, commands
+
+
+def command_agreement(robot, logged: list[bytes], replayed: list[bytes]) -> dict:
+    """How far the replay's motor commands are from the log's at the same utimes: the number
+    matched and the largest torque difference (N·m). The controller is deterministic, so a
+    faithful replay sends the logged commands again."""
+    def torques(messages):
+        out = {}
+        for data in messages:
+            m = decode_motor_command(data, robot.nu)
+            out[m.utime] = m.tau_ff
+        return out
+
+    a, b = torques(logged), torques(replayed)
+    common = sorted(a.keys() & b.keys())
+    diff = max((float(np.max(np.abs(a[u] - b[u]))) for u in common), default=None)
+    return {"commands_matched": len(common), "max_torque_difference_nm": diff}
+
+
+def bench_realtime(scenario: Scenario, duration: float = 10.0, lcm_log: Path | None = None,
+                   pace: bool = True) -> dict:
+    """Replays ``duration`` s of robot messages (recorded now from ``scenario`` over LCM, or read from
+    ``lcm_log``) into the scenario's hardware controller, one tick at a time (module docstring)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        recorded = None
+        if lcm_log is None:
+            lcm_log = Path(tmp) / "run.lcmlog"
+            recorded = run_scenario(scenario, duration=duration, link="via_lcm", lcm_log=lcm_log)
+        events, logged_commands = logged_messages(lcm_log)
+    # Missed deadlines are what is measured here: they must not move the loop to its safe stages.
+    scenario = dataclasses.replace(scenario, link=dataclasses.replace(scenario.link, max_consecutive_misses=0))
+    lcm = DrakeLcm("memq://")
+    replayed_commands: list[bytes] = []
+    lcm.Subscribe(MOTOR_COMMAND_CHANNEL, replayed_commands.append)
+    with timed_callbacks() as timer:
+        built = build_diagram(scenario, link="hardware", lcm=lcm)
+    simulator = Simulator(built.diagram)
+    simulator.Initialize()
+    period = 1.0 / scenario.controller.rate_hz
+    ticks = int(min(duration, events[-1][0]) / period)
+    tick_ns, parts, i = [], [], 0
+    wall0 = time.perf_counter()
+    with frozen_heap():
+        for k in range(1, ticks + 1):
+            t = k * period + LINK_TICK_OFFSET
+            while i < len(events) and events[i][0] <= t:
+                lcm.Publish(events[i][1], events[i][2])
+                i += 1
+            if pace:
+                _sleep_until(wall0 + k * period)
+            timer.lap()
+            start = time.perf_counter_ns()
+            simulator.AdvanceTo(t + 0.5 * period)
+            tick_ns.append(time.perf_counter_ns() - start)
+            parts.append(timer.lap())
+    wall = time.perf_counter() - wall0
+    context = simulator.get_context()
+    replay = run_summary(built, context, scenario, "hardware", RunEnd(context.get_time(), wall),
+                          context.get_time(), None, None, False)
+    lcm.HandleSubscriptions(0)
+    replay |= command_agreement(built.robot, logged_commands, replayed_commands)
+    plant = bare_plant_steps(built.robot, scenario, 1000)
+    return _report(scenario, period, np.array(tick_ns), parts, plant, replay, recorded, pace)
+
+
+def _sleep_until(deadline: float) -> None:
+    """Sleeps to ``deadline`` (perf_counter s): coarsely, then the last 0.2 ms spinning."""
+    left = deadline - time.perf_counter()
+    if left > 2e-4:
+        time.sleep(left - 2e-4)
+    while time.perf_counter() < deadline:
+        pass
+
+
+def _report(scenario: Scenario, period: float, tick_ns: np.ndarray, parts: list[dict[str, int]],
+            plant_ns: list[int], replay: dict, recorded: dict | None, pace: bool) -> dict:
+    """The bench's numbers (ms), its worst ticks with their costliest systems, and the replay's
+    controller summary beside the recorded run's."""
+    names = sorted({name for p in parts for name in p})
+    per_system = {name: np.array([p.get(name, 0) for p in parts]) for name in names}
+    per_system["framework"] = tick_ns - np.sum([per_system[n] for n in names], axis=0)
+    ms = {name: _ms(ns) for name, ns in sorted(per_system.items(), key=lambda item: -np.mean(item[1]))}
+    worst = []
+    for k in np.argsort(tick_ns)[::-1][:WORST]:
+        name = max(per_system, key=lambda n: per_system[n][k])
+        worst.append({"t_s": round((k + 1) * period, 4), "ms": round(tick_ns[k] / 1e6, 3),
+                      "system": name, "system_ms": round(per_system[name][k] / 1e6, 3)})
+    tick = _ms(tick_ns)
+    plant = float(np.median(plant_ns)) / 1e6
+    keys = ("fell", "qp_failures", "safe_mode_entries", "stale_events")
+    return {
+        "scenario": scenario.name, "controller": scenario.controller.name, "planner": scenario.planner.name,
+        "rate_hz": scenario.controller.rate_hz, "ticks": len(tick_ns), "paced": pace,
+        "deadline_misses": int(np.sum(tick_ns > period * 1e9)),
+        "deadline_miss_fraction": round(float(np.mean(tick_ns > period * 1e9)), 5),
+        "tick_ms": tick, "systems_ms": ms, "worst_ticks": worst,
+        "plant_step_ms": round(plant, 4), "tick_p99_to_plant_step": round(tick["p99"] / plant, 3),
+        "replay": {k: replay.get(k) for k in (*keys, "commands_matched", "max_torque_difference_nm")},
+        "recorded": None if recorded is None else {k: recorded.get(k) for k in keys},
+    }
+
+
+def _ms(ns: np.ndarray) -> dict:
+    """Median, mean, p99 and max (ms) of times in ns."""
+    return {"median": round(float(np.median(ns)) / 1e6, 4), "mean": round(float(np.mean(ns)) / 1e6, 4),
+            "p99": round(float(np.percentile(ns, 99)) / 1e6, 4), "max": round(float(np.max(ns)) / 1e6, 4)}
+
+
+def register(bench) -> None:
+    """``romoco bench realtime``."""
+    p = bench.add_parser("realtime", help="the hardware controller alone, fed a recorded run at its rate: "
+                         "deadline misses and where the time goes")
+    p.add_argument("--scenario", default="g1_walk")
+    add_overlay_arg(p)
+    p.add_argument("--planner")
+    p.add_argument("--controller")
+    p.add_argument("--duration", type=float, default=10.0, help="seconds of the run replayed (default 10)")
+    p.add_argument("--lcm-log", type=Path, help="replay this LCM log's robot messages instead of recording "
+                   "a simulated run")
+    p.add_argument("--no-pace", action="store_true", help="ticks back to back instead of at the control rate")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_bench_realtime)
+
+
+def _cmd_bench_realtime(args) -> int:
+    r = bench_realtime(scenario_from_args(args, ("planner", "controller")), args.duration, args.lcm_log,
+                       pace=not args.no_pace)
+    if args.json:
+        print(json.dumps(r))
+        return 0
+    period_ms = 1e3 / r["rate_hz"]
+    print(f"{r['scenario']}: {r['planner']} + {r['controller']}, {r['ticks']} ticks at {r['rate_hz']:g} Hz "
+          f"({period_ms:g} ms){'' if r['paced'] else ', back to back'}")
+    t = r["tick_ms"]
+    print(f"  tick              {t['median']:8.3f} ms median {t['p99']:8.3f} p99 {t['max']:8.3f} max")
+    print(f"  deadline misses   {r['deadline_misses']} ({100 * r['deadline_miss_fraction']:.2f} %)")
+    print(f"  bare plant step   {r['plant_step_ms']:8.3f} ms median; tick p99 / plant step "
+          f"{r['tick_p99_to_plant_step']}")
+    print("  per system (exclusive):")
+    for name, v in r["systems_ms"].items():
+        print(f"    {name:24s} {v['median']:8.3f} ms median {v['p99']:8.3f} p99")
+    print("  worst ticks:")
+    for w in r["worst_ticks"]:
+        print(f"    t {w['t_s']:8.3f} s  {w['ms']:7.3f} ms  {w['system']} {w['system_ms']:.3f} ms")
+    print(f"  replay: {r['replay']}")
+    if r["recorded"] is not None:
+        print(f"  recorded run: {r['recorded']}")
+    return 0
