@@ -17,7 +17,8 @@ its deadline when it takes longer than the period. Each tick's time is split ove
 systems whose Python callbacks spent it (:mod:`~romoco_drake.bench.callback_timer`) and the
 rest (``framework``: Drake's event dispatch and C++ systems). The bare ``MultibodyPlant`` step
 of the scenario's robot, timed in the same process, is the reference that makes the numbers
-comparable across machines.
+comparable across machines; the simulated station's step (sensors, fall monitor, logs), stepped
+alternately with it, gives what the station costs over the physics.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.bench.callback_timer import timed_callbacks
-from romoco_drake.bench.walking import bare_plant_steps
+from romoco_drake.bench.walking import station_and_bare_plant_steps
 from romoco_drake.config import LINK_TICK_OFFSET
 from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces.lcm_codec import (
@@ -129,8 +130,10 @@ def bench_realtime(scenario: Scenario, duration: float = 10.0, lcm_log: Path | N
                           context.get_time(), None, None, False)
     lcm.HandleSubscriptions(0)
     replay |= command_agreement(built.robot, logged_commands, replayed_commands)
-    plant = bare_plant_steps(built.robot, scenario, 1000)
-    return _report(scenario, period, np.array(tick_ns), parts, plant, replay, recorded, pace)
+    station, plant = station_and_bare_plant_steps(built.robot, scenario, 1000)
+    return _report(scenario, period, np.array(tick_ns), parts, plant, replay, recorded, pace) | {
+        "station_step_ms": round(float(np.median(station)) / 1e6, 4),
+        "station_to_plant_step": round(float(np.median(station) / np.median(plant)), 3)}
 
 
 def _sleep_until(deadline: float) -> None:
@@ -206,6 +209,8 @@ def _cmd_bench_realtime(args) -> int:
     print(f"  deadline misses   {r['deadline_misses']} ({100 * r['deadline_miss_fraction']:.2f} %)")
     print(f"  bare plant step   {r['plant_step_ms']:8.3f} ms median; tick p99 / plant step "
           f"{r['tick_p99_to_plant_step']}")
+    print(f"  simulated station {r['station_step_ms']:8.3f} ms median; station / bare plant step "
+          f"{r['station_to_plant_step']} (stepped alternately)")
     print("  per system (exclusive):")
     for name, v in r["systems_ms"].items():
         print(f"    {name:24s} {v['median']:8.3f} ms median {v['p99']:8.3f} p99")

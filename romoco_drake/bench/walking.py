@@ -182,34 +182,53 @@ def passive_plant_steps(robot, scenario: Scenario, steps: int) -> list[int]:
     """
     station = make_engine_station(scenario.station.engine, robot, scenario.time_step,
                                   sensors=scenario.sensors)
-    return _stepped(station, station.GetSubsystemByName("plant"), robot, scenario.time_step, steps)
+    return _stepped([(station, station.GetSubsystemByName("plant"))], robot, scenario.time_step, steps)[0]
 
 
 def bare_plant_steps(robot, scenario: Scenario, steps: int) -> list[int]:
     """Wall time (ns) of each of ``steps`` steps of the robot's bare simulation ``MultibodyPlant``
     (no sensors, no monitor, no logs), holding the nominal pose's gravity-compensation torque
     from the nominal pose on the ground: the physics alone, the reference of the timing benches."""
+    return _stepped([_bare_plant(robot, scenario)], robot, scenario.time_step, steps)[0]
+
+
+def station_and_bare_plant_steps(robot, scenario: Scenario, steps: int) -> tuple[list[int], list[int]]:
+    """(station, bare plant) wall times (ns) of ``steps`` steps each, stepped alternately so that
+    both meet the same machine load: what the simulated station's sensors, monitor and logs cost
+    over the physics (Drake engine)."""
+    station = make_engine_station("drake", robot, scenario.time_step, sensors=scenario.sensors)
+    times = _stepped([(station, station.GetSubsystemByName("plant")), _bare_plant(robot, scenario)],
+                     robot, scenario.time_step, steps)
+    return times[0], times[1]
+
+
+def _bare_plant(robot, scenario: Scenario):
     builder = DiagramBuilder()
     plant, _ = robot.add_to_builder(builder, scenario.time_step)
     builder.ExportInput(plant.get_actuation_input_port(), "actuation")
-    diagram = builder.Build()
-    return _stepped(diagram, plant, robot, scenario.time_step, steps)
+    return builder.Build(), plant
 
 
-def _stepped(diagram, plant, robot, time_step: float, steps: int) -> list[int]:
-    """Wall time (ns) of each of ``steps`` steps of ``diagram`` (its input ``actuation``) from the
-    nominal pose, under the nominal pose's gravity compensation."""
-    simulator = Simulator(diagram)
-    context = simulator.get_mutable_context()
-    plant.SetPositions(plant.GetMyMutableContextFromRoot(context), robot.nominal.q)
-    diagram.GetInputPort("actuation").FixValue(context, contact_gravity_compensation(robot, RobotKinematics(robot)))
-    simulator.Initialize()
-    out = []
+def _stepped(diagrams, robot, time_step: float, steps: int) -> list[list[int]]:
+    """Wall time (ns) of each of ``steps`` steps of each (diagram, its plant) (the diagram's input
+    ``actuation`` fixed), from the nominal pose under the nominal pose's gravity compensation;
+    the diagrams step in turn."""
+    torque = contact_gravity_compensation(robot, RobotKinematics(robot))
+    simulators = []
+    for diagram, plant in diagrams:
+        simulator = Simulator(diagram)
+        context = simulator.get_mutable_context()
+        plant.SetPositions(plant.GetMyMutableContextFromRoot(context), robot.nominal.q)
+        diagram.GetInputPort("actuation").FixValue(context, torque)
+        simulator.Initialize()
+        simulators.append(simulator)
+    out = [[] for _ in simulators]
     with frozen_heap():
         for k in range(1, steps + 1):
-            t0 = time.perf_counter_ns()
-            simulator.AdvanceTo(k * time_step)
-            out.append(time.perf_counter_ns() - t0)
+            for simulator, times in zip(simulators, out, strict=True):
+                t0 = time.perf_counter_ns()
+                simulator.AdvanceTo(k * time_step)
+                times.append(time.perf_counter_ns() - t0)
     return out
 
 

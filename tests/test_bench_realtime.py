@@ -1,0 +1,92 @@
+"""``romoco bench realtime`` and the per-system callback timer it reports with."""
+
+import json
+
+import pytest
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
+
+from romoco_drake.bench.callback_timer import timed_callbacks
+from romoco_drake.bench.realtime import bench_realtime, logged_messages
+from romoco_drake.errors import RomocoError
+from romoco_drake.runner import run_scenario
+from romoco_drake.scenario import load_scenario
+
+
+class _Source(LeafSystem):
+    def __init__(self, clock, cost):
+        super().__init__()
+        self.clock, self.cost = clock, cost
+        self.DeclareVectorOutputPort("y", 1, self._calc)
+
+    def _calc(self, context, out):
+        self.clock[0] += self.cost
+        out.SetAtIndex(0, 1.0)
+
+
+class _Reader(LeafSystem):
+    def __init__(self, clock, cost):
+        super().__init__()
+        self.clock, self.cost = clock, cost
+        self.u = self.DeclareVectorInputPort("u", 1)
+        self.DeclarePeriodicDiscreteUpdateEvent(0.01, 0.0, self._update)
+        self.DeclareDiscreteState(1)
+
+    def _update(self, context, state):
+        self.clock[0] += self.cost
+        state.get_mutable_vector(0).SetAtIndex(0, self.u.Eval(context)[0])
+        self.clock[0] += self.cost
+
+
+def test_callback_times_are_exclusive_and_charged_to_their_system():
+    """A system's update that pulls another system's output is charged its own time only."""
+    now = [0]
+    declare = LeafSystem.DeclareVectorOutputPort
+    with timed_callbacks(clock=lambda: now[0]) as timer:
+        builder = DiagramBuilder()
+        source = builder.AddNamedSystem("source", _Source(now, 7))
+        reader = builder.AddNamedSystem("reader", _Reader(now, 2))
+        builder.Connect(source.get_output_port(), reader.u)
+        diagram = builder.Build()
+    assert LeafSystem.DeclareVectorOutputPort is declare  # the patch is undone
+    context = diagram.CreateDefaultContext()
+    timer.lap()
+    context.SetDiscreteState(diagram.EvalUniquePeriodicDiscreteUpdate(context).value())
+    assert timer.lap() == {"source": 7, "reader": 4}
+    # Systems built outside the context manager are not timed.
+    outside = _Source(now, 1)
+    outside.get_output_port().Eval(outside.CreateDefaultContext())
+    assert timer.lap() == {}
+
+
+def test_realtime_replays_the_logged_run_exactly(tmp_path):
+    """The hardware controller fed a simulated run's robot messages sends that run's commands
+    again; every tick is timed and split over systems; misses are ticks over the period."""
+    scenario = load_scenario("g1_walk")
+    log = tmp_path / "run.lcmlog"
+    run_scenario(scenario, duration=1.2, link="via_lcm", lcm_log=log)
+    r = bench_realtime(scenario, duration=1.0, lcm_log=log, pace=False)
+    assert r["ticks"] == 500 and r["rate_hz"] == 500
+    assert r["replay"]["commands_matched"] >= 499
+    assert r["replay"]["max_torque_difference_nm"] == 0.0
+    assert r["replay"]["stale_events"] == 0 and r["replay"]["safe_mode_entries"] == 0
+    systems = r["systems_ms"]
+    assert {"receiver", "sender", "estimator", "controller", "embedding", "planner", "framework"} <= set(systems)
+    assert all(w["system"] in systems for w in r["worst_ticks"]) and len(r["worst_ticks"]) == 10
+    assert r["tick_ms"]["median"] <= r["tick_ms"]["p99"] <= r["tick_ms"]["max"]
+    assert 0.0 <= r["deadline_miss_fraction"] <= 1.0
+    assert r["deadline_misses"] == round(r["deadline_miss_fraction"] * r["ticks"])
+    assert r["plant_step_ms"] > 0.0
+    json.dumps(r)
+
+
+def test_a_log_without_robot_messages_is_a_one_line_error(tmp_path):
+    import lcm
+
+    path = tmp_path / "empty.lcmlog"
+    log = lcm.EventLog(str(path), "w", overwrite=True)
+    log.write_event(0, "OTHER", b"x")
+    log.close()
+    with pytest.raises(RomocoError, match="no ROMOCO_PROPRIOCEPTION"):
+        logged_messages(path)
+    with pytest.raises(RomocoError, match="cannot read LCM log"):
+        logged_messages(tmp_path / "missing.lcmlog")
