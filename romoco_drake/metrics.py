@@ -82,8 +82,8 @@ def estimator_summary(built, context, until: float | None) -> dict:
     out = {"estimator_rejected_updates": built.estimator.rejected_updates(
         built.estimator.GetMyContextFromRoot(context))}
     if built.plant_station is not None:
-        times, truth = log_samples(built.state_log.FindLog(context), until)
-        estimate = log_samples(built.estimate_log.FindLog(context), until)[1]
+        times, truth = log_samples(built.logs.find(built.state_log, context), until)
+        estimate = log_samples(built.logs.find(built.estimate_log, context), until)[1]
         n = min(truth.shape[1], estimate.shape[1])
         out.update(estimate_errors(built.robot, times[:n], truth[:, :n], estimate[:, :n]))
     return out

@@ -25,6 +25,7 @@ from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces.engines import with_engine
 from romoco_drake.interfaces.hardware import link_summary
 from romoco_drake.interfaces.lcm_log import LcmLogRecorder
+from romoco_drake.logs import RunLogs
 from romoco_drake.interfaces.robot_sim import make_robot_sim, robot_summary
 from romoco_drake.metrics import estimator_summary, log_samples, tracking_summary, velocity_tracking
 from romoco_drake.modes import LinkCounters
@@ -85,7 +86,7 @@ def run_scenario(
             stack.callback(recorder.close)
         end = simulate(simulator, duration, lambda: _plant_state(built, context),
                        _reporter(progress, scenario.name, duration, teleop),
-                       _fall_stop(built, context, stop_after_fall), ctrl_c_ends=teleop)
+                       _fall_stop(built, context, stop_after_fall), ctrl_c_ends=teleop, logs=built.logs)
     if record is not None:
         record = _write_replay(meshcat, Path(record))
     if inspect is not None:
@@ -204,7 +205,8 @@ def run_robot_sim(scenario: Scenario, duration: float | None = None, lcm_url: st
     report = None if progress is None else (
         lambda t, _: progress(f"[robot-sim {robot.name}] t = {t:.1f}/{duration:.1f} s"))
     end = simulate(simulator, duration,
-                   lambda: plant.GetPositionsAndVelocities(plant.GetMyContextFromRoot(context)), report)
+                   lambda: plant.GetPositionsAndVelocities(plant.GetMyContextFromRoot(context)), report,
+                   logs=RunLogs([station.GetSubsystemByName("truth_log")]))
     monitor = station.GetSubsystemByName("monitor")
     return ({"robot": robot.name, "lcm_url": lcm.get_lcm_url(), "duration_s": duration}
             | end.outcome(monitor.summary(monitor.GetMyContextFromRoot(context)))
@@ -227,23 +229,23 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, 
     def own(system):
         return system.GetMyContextFromRoot(context)
 
-    times, states = log_samples(built.state_log.FindLog(context), until)
+    times, states = log_samples(built.logs.find(built.state_log, context), until)
     command = built.command
     if built.command_log is not None:  # teleop: score against the commands the page gave
-        command = CommandSource(segments_from_log(*log_samples(built.command_log.FindLog(context), until)))
+        command = CommandSource(segments_from_log(*log_samples(built.logs.find(built.command_log, context), until)))
     tracking = velocity_tracking(built.robot, command, times, states)
-    ticks = loop.tick_log.FindLog(context).data()[0, 1:]  # the first sample precedes any tick
+    ticks = built.logs.find(loop.tick_log, context).data()[0, 1:]  # the first sample precedes any tick
     planner = loop.planner.summary(own(loop.planner))
     out = ({"planner": planner.pop("planner")} | tracking_summary(tracking)
            | loop.state_machine.summary(own(loop.state_machine)) | loop.limiter.summary(command.segments)
            | loop.controller.summary(own(loop.controller), ticks) | planner)
-    momentum = None if loop.momentum_log is None else log_samples(loop.momentum_log.FindLog(context), until)
+    momentum = None if loop.momentum_log is None else log_samples(built.logs.find(loop.momentum_log, context), until)
     if momentum is not None:
         out |= momentum_summary(*momentum)
     if plot_dir is not None:
         from romoco_drake.plots import plot_run
 
-        errors = log_samples(loop.error_log.FindLog(context), until)
+        errors = log_samples(built.logs.find(loop.error_log, context), until)
         out["plots"] = [str(p) for p in plot_run(Path(plot_dir), scenario.name, built.robot, times, tracking,
                                                  errors, momentum)]
     return out

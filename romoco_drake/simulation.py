@@ -15,6 +15,7 @@ from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.errors import RomocoError
+from romoco_drake.logs import SPILL_PERIOD_S, RunLogs
 from romoco_drake.robots.posture import DIVERGED
 
 CHUNK_S = 0.1  # simulated time per AdvanceTo: progress, stop checks and Ctrl-C act between chunks
@@ -63,18 +64,21 @@ class RunEnd:
 
 def simulate(simulator: Simulator, duration: float, plant_state: Callable[[], np.ndarray | None],
              report: Callable[[float, float], None] | None = None,
-             stop: Callable[[float], bool] | None = None, ctrl_c_ends: bool = False) -> RunEnd:
+             stop: Callable[[float], bool] | None = None, ctrl_c_ends: bool = False,
+             logs: RunLogs | None = None) -> RunEnd:
     """Advances the initialized ``simulator`` to ``duration`` in ``CHUNK_S`` chunks.
 
     A diverged simulation (:func:`divergence` of the error and ``plant_state()``) ends the loop
     as a fall, without a traceback; any other error goes up as it is. ``stop(t)`` true ends it
     after a chunk; with ``ctrl_c_ends`` so does Ctrl-C. ``report(t, rate)`` is called at most
     every ``PROGRESS_WALL_S`` of wall time with the real-time rate since the last report.
+    ``logs`` are spilled to disk every ``SPILL_PERIOD_S`` of simulated time (memory stays flat).
     """
     context = simulator.get_context()
     wall0 = time.perf_counter()
     last_print, last_t = wall0, context.get_time()
     t = context.get_time()
+    next_spill = t + SPILL_PERIOD_S
     with frozen_heap():
         while t < duration - 1e-9:
             t = min(duration, t + CHUNK_S)
@@ -90,6 +94,9 @@ def simulate(simulator: Simulator, duration: float, plant_state: Callable[[], np
                 return RunEnd(context.get_time(), time.perf_counter() - wall0, (context.get_time(), reason))
             if stop is not None and stop(t):
                 return RunEnd(t, time.perf_counter() - wall0, stopped=t)
+            if logs is not None and t >= next_spill:
+                logs.spill(context)
+                next_spill += SPILL_PERIOD_S
             now = time.perf_counter()
             if report is not None and now - last_print > PROGRESS_WALL_S:
                 report(t, (t - last_t) / (now - last_print))

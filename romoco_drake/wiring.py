@@ -40,6 +40,7 @@ from romoco_drake.interfaces.hardware import (
 )
 from romoco_drake.interfaces.lcm_codec import ESTOP_CHANNEL, STATUS_CHANNEL
 from romoco_drake.interfaces.monitor import FallMonitor
+from romoco_drake.logs import RunLogs
 from romoco_drake.interfaces.robot_sim import make_robot_sim
 from romoco_drake.interfaces.teleop import RADIO_PERIOD, EstopGate, MeshcatRadio, PageDisplay
 from romoco_drake.planners.command import CommandLimiter, CommandSegment, CommandSource
@@ -84,6 +85,7 @@ class BuiltDiagram:
     robot_sim: Diagram | None = None  # the LCM robot side (via_lcm)
     estimator: KalmanEstimator | GroundTruthEstimator | None = None
     command_log: VectorLogSink | None = None  # the radio's command (teleop), for the summary
+    logs: RunLogs | None = None  # every log above, read through RunLogs.find (long runs spill them to disk)
 
 
 @dataclass
@@ -170,8 +172,10 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
         state_log = estimate_log
     diagram = builder.Build()
     diagram.set_name(scenario.name or scenario.robot)
+    logs = RunLogs([state_log, estimate_log, command_log] + (
+        [] if walking is None else [walking.tick_log, walking.error_log, walking.momentum_log]))
     return BuiltDiagram(diagram, robot, station, monitor, state_log, estimate_log, kinematics, deadline,
-                        command, walking, plant_station, robot_sim, estimator, command_log)
+                        command, walking, plant_station, robot_sim, estimator, command_log, logs)
 
 
 def _check_link(scenario: Scenario, meshcat: Meshcat | None, link: str, lcm: DrakeLcmInterface | None,

@@ -98,7 +98,7 @@ def agility_job(scenario: Scenario, motion: str, also: Callable | None = None) -
 
     def keep(built, context):
         logs["built"] = built
-        logs["times"], logs["states"] = log_samples(built.state_log.FindLog(context), None)
+        logs["times"], logs["states"] = log_samples(built.logs.find(built.state_log, context), None)
         if also is not None:
             logs["also"] = also(built, context)
 

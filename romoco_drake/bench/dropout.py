@@ -49,7 +49,7 @@ def dropout_job(scenario: Scenario) -> dict:
     tail = {}
 
     def end_speed(built, context):
-        times, states = log_samples(built.state_log.FindLog(context), None)
+        times, states = log_samples(built.logs.find(built.state_log, context), None)
         last = times >= times[-1] - TAIL_S
         tail["vx"] = float(np.mean(heading_velocity(built.robot, times[last], states[:, last])[:, 0]))
 

@@ -96,12 +96,12 @@ def walk_job(scenario: Scenario, duration: float | None = None) -> dict:
     logs = {}
 
     def read(built, context):
-        times, states = log_samples(built.state_log.FindLog(context), None)
+        times, states = log_samples(built.logs.find(built.state_log, context), None)
         tracking = velocity_tracking(built.robot, built.command, times, states)
         keep = _thin(times)
         logs["trace"] = {"t": times[keep].tolist(), "measured": tracking["measured"][keep].tolist(),
                          "wanted": tracking["wanted"][keep].tolist()}
-        logs["errors"] = log_samples(built.walking.error_log.FindLog(context), None)
+        logs["errors"] = log_samples(built.logs.find(built.walking.error_log, context), None)
         logs["walk_start"] = next((seg.start for seg in built.command.segments if seg.command.vx or
                                    seg.command.vy or seg.command.wz), math.inf)
 
@@ -148,7 +148,7 @@ def inertia_probe(built, context) -> dict:
     model = load_ccinn(robot.name)
     plant = robot.plant
     plant_context = plant.CreateDefaultContext()
-    times, states = log_samples(built.state_log.FindLog(context), None)
+    times, states = log_samples(built.logs.find(built.state_log, context), None)
     keep = _thin(times, TRACE_PERIOD_S / 2)
     base = robot.base_body.body_frame()
     true, predicted = [], []
