@@ -52,6 +52,7 @@ from romoco_drake.errors import RomocoError
 from romoco_drake.inertia.ccinn import load_ccinn, predict_inertia_horizon, rpy_from_rotations
 from romoco_drake.inertia.wbo import load_wbo
 from romoco_drake.modes import Mode, MpcStats
+from romoco_drake.planners.mpc_worker import MpcWorker
 from romoco_drake.planners.settings import PlannerSettings
 from romoco_drake.robots.centroidal import centroidal_inertia
 from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_value
@@ -81,7 +82,11 @@ class VimpcConfig(PlannerSettings):
     foothold's largest offset from the hip; ``hip_prediction``: the velocity the hip moves at
     until touchdown in eq. 14, the measured CoM velocity or the command; ``f_max`` (N): the
     normal force bound; ``max_age``
-    (s): how long a reference outlives a failed solve.
+    (s): how long a reference outlives a failed solve, or (``process``) the last one finished.
+    ``execution``: ``inline`` solves inside the update, deterministic, the controller's tick
+    waiting for it; ``process`` solves in a worker process beside the controller
+    (:mod:`~romoco_drake.planners.mpc_worker`), the controller going on with the newest
+    finished solution, as on the robot (its age is in the run summary; not deterministic).
     """
 
     name: str = "vimpc"
@@ -106,6 +111,7 @@ class VimpcConfig(PlannerSettings):
     hip_prediction: Literal["command", "measured"] = "measured"
     f_max: float = 800.0
     max_age: float = 0.02
+    execution: Literal["inline", "process"] = "inline"
 
 
 # The MPC replans at up to 1 kHz over up to 30 knots of 1-200 ms (defaults: 10 knots of 50 ms at
@@ -160,8 +166,14 @@ class VimpcPlanner(LeafSystem):
         self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
         self.mode_port = self.DeclareAbstractInputPort("mode", AbstractValue.Make(Mode.STANDING))
+        if config.execution not in ("inline", "process"):
+            raise ValueError(f"vimpc.execution must be 'inline' or 'process', got {config.execution!r}")
+        self._worker: MpcWorker | None = None  # started at the first walking update (process)
         self._reference = self.DeclareAbstractState(AbstractValue.Make(_NoReference()))
         self._stats = self.DeclareDiscreteState(3)
+        # The reference's age at each walking update, in 1 ms bins (the last: AGE_BINS ms and
+        # more), and the updates that found the worker still solving.
+        self._ages = self.DeclareDiscreteState(AGE_BINS + 2)
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.rate_hz, offset, self._update)
         self.planner_output_port = self.DeclareAbstractOutputPort(
             "planner_output", lambda: AbstractValue.Make(PlannerOutput.placeholder()), self._calc_plan)
@@ -171,7 +183,13 @@ class VimpcPlanner(LeafSystem):
         """The run summary's planner keys: solves, failed solves, updates on the fallback, the
         inertia mode."""
         stats = MpcStats.from_vector(self.mpc_stats_port.Eval(context)).summary()
-        return {"planner": self.config.name} | stats | {"vimpc_inertia": self.config.inertia}
+        out = {"planner": self.config.name} | stats | {"vimpc_inertia": self.config.inertia,
+                                                        "vimpc_execution": self.config.execution}
+        ages = context.get_discrete_state(self._ages).value()
+        if self.config.execution == "process" and ages[:-1].sum() > 0:
+            out["mpc_solution_age_ms"] = age_percentiles(ages[:-1])
+            out["mpc_worker_busy_updates"] = int(ages[-1])
+        return out
 
     # ------------------------------------------------------------------ the MPC tick
     def _update(self, context, state) -> None:
@@ -181,21 +199,49 @@ class VimpcPlanner(LeafSystem):
             return
         kin = self.kinematics_port.Eval(context)
         sign, elapsed = self.gait_phase_port.Eval(context).tolist()
-        cmd = WalkCommand.from_vector(self.command_port.Eval(context))
         t = context.get_time()
-        try:
-            reference = self.solve(kin, side_from_sign(sign), elapsed, cmd, t)
-        except RomocoError:  # the WBO map outside its fitted domain: a failed solve like any other
-            reference = _NoReference()
-        stats[0] += 1.0
         previous = context.get_abstract_state(self._reference).get_value()
-        if not reference.ok:
-            stats[1] += 1.0
-            if isinstance(previous, MpcReference) and t - previous.solved_at <= self.config.max_age + 1e-9:
-                reference = previous
+        if self.config.execution == "process":
+            reference = self._from_worker(state, previous, kin, side_from_sign(sign), elapsed,
+                                          self.command_port.Eval(context), t)
+        else:
+            try:
+                reference = self.solve(kin, side_from_sign(sign), elapsed,
+                                       WalkCommand.from_vector(self.command_port.Eval(context)), t)
+            except RomocoError:  # the WBO map outside its fitted domain: a failed solve like any other
+                reference = _NoReference()
+            stats[0] += 1.0
+            if not reference.ok:
+                stats[1] += 1.0
+                if isinstance(previous, MpcReference) and t - previous.solved_at <= self.config.max_age + 1e-9:
+                    reference = previous
         if not reference.ok:
             stats[2] += 1.0
+        else:
+            ages = state.get_mutable_discrete_state(self._ages).get_mutable_value()
+            ages[min(int((t - reference.solved_at) * 1e3 + 1e-9), AGE_BINS)] += 1.0
         state.get_mutable_abstract_state(self._reference).set_value(reference)
+
+    def _from_worker(self, state, previous, kin: RobotKinematics, side: str, elapsed: float,
+                     command: np.ndarray, t: float):
+        """The newest solution the worker finished (or ``previous`` while it is younger than
+        ``max_age``), after asking for one at this update's state."""
+        if self._worker is None:
+            self._worker = MpcWorker(self.robot.name, self.config)
+        stats = state.get_mutable_discrete_state(self._stats).get_mutable_value()
+        reply = self._worker.newest()
+        reference = previous
+        if reply is not None:
+            stats[0] += 1.0
+            if isinstance(reply, MpcReference) and reply.ok:
+                reference = reply
+            else:
+                stats[1] += 1.0
+        if not self._worker.request(kin.x, side, elapsed, command, t):
+            state.get_mutable_discrete_state(self._ages).get_mutable_value()[-1] += 1.0
+        if isinstance(reference, MpcReference) and t - reference.solved_at <= self.config.max_age + 1e-9:
+            return reference
+        return _NoReference()
 
     def solve(self, kin: RobotKinematics, side: str, elapsed: float, cmd: WalkCommand, t: float
               ) -> MpcReference:
@@ -303,6 +349,15 @@ class VimpcPlanner(LeafSystem):
         return PlannerOutput("vimpc", side, target, swing_yaw, cmd.step_time, self.t_ds,
                              max(cmd.step_time - elapsed, 0.0), cmd.com_height, nan, nan, np.zeros(2), valid,
                              mpc)
+
+
+AGE_BINS = 50  # ms: the age histogram's range
+
+
+def age_percentiles(histogram: np.ndarray) -> dict:
+    """Median and p99 (ms, each a bin's upper edge) of ages counted in 1 ms bins."""
+    cumulative = np.cumsum(histogram) / histogram.sum()
+    return {q: float(np.searchsorted(cumulative, f) + 1) for q, f in (("median", 0.5), ("p99", 0.99))}
 
 
 class _NoReference:
