@@ -57,7 +57,11 @@ class HeadingHold(LeafSystem):
         self.command_in_port = self.DeclareVectorInputPort("command_in", COMMAND_SIZE)
         self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
         self._psi = self.DeclareDiscreteState(1)
-        self.command_port = self.DeclareVectorOutputPort("command", COMMAND_SIZE, self._calc)
+        self.command_port = self.DeclareVectorOutputPort(
+            "command", COMMAND_SIZE, self._calc,
+            prerequisites_of_calc={self.input_port_ticket(self.command_in_port.get_index()),
+                                   self.input_port_ticket(self.state_port.get_index()),
+                                   self.discrete_state_ticket(self._psi)})
         self.DeclareInitializationDiscreteUpdateEvent(self._initialize)
         self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._integrate)
 
