@@ -232,34 +232,34 @@ class NextStep:
     sigma_n: float
 
 
-def _two_step_axis(a: float, g: float, e: float, c: np.ndarray, s2: np.ndarray, lo1, hi1,
-                   lo2: float, hi2: float, w_u: float, w_b: float) -> tuple[np.ndarray, np.ndarray]:
+def _two_step_axis(a, g, e, c: np.ndarray, s2: np.ndarray, lo1, hi1, lo2, hi2, w_u: float, w_b: float
+                   ) -> tuple[np.ndarray, np.ndarray]:
     """(cost, u₁) minimising w_u (u₁ − a)² + w_u (u₂ − g)² + w_b (σ₂ (c − u₁) − u₂ − e)² over the box
-    u₁ ∈ [lo1, hi1], u₂ ∈ [lo2, hi2], elementwise over the (σ₁, σ₂) grid (c = ξ₀ σ₁).
+    u₁ ∈ [lo1, hi1], u₂ ∈ [lo2, hi2], elementwise over the (σ₁, σ₂) grid (c = ξ₀ σ₁); every
+    argument broadcasts, so one call can take both axes stacked on a leading dimension.
 
     Convex in (u₁, u₂), so its minimum over the box is the stationary point when that is inside,
     else the best of the four edges' minima (each a clipped scalar minimiser): exact, no iteration.
     """
     h0 = s2 * c - e  # the offset residual is h0 − σ₂ u₁ − u₂
     rho = w_b / w_u
+
+    def cost(u1, u2):
+        return w_u * (u1 - a) ** 2 + w_u * (u2 - g) ** 2 + w_b * (h0 - s2 * u1 - u2) ** 2
+
     r = (h0 - s2 * a - g) / (1.0 + rho * (1.0 + s2 * s2))
-    candidates = [(a + rho * s2 * r, g + rho * r)]
-    for u1 in (lo1, hi1):
-        u2 = np.clip((w_u * g + w_b * (h0 - s2 * u1)) / (w_u + w_b), lo2, hi2)
-        candidates.append((np.broadcast_to(u1, h0.shape), u2))
-    for u2 in (lo2, hi2):
-        candidates.append((np.clip((w_u * a + w_b * s2 * (h0 - u2)) / (w_u + w_b * s2 * s2), lo1, hi1),
-                           np.broadcast_to(u2, h0.shape)))
-    best_cost, best_u1 = None, None
-    for k, (u1, u2) in enumerate(candidates):
-        cost = w_u * (u1 - a) ** 2 + w_u * (u2 - g) ** 2 + w_b * (h0 - s2 * u1 - u2) ** 2
-        if k == 0:  # the stationary point counts only inside the box
-            inside = (u1 >= lo1 - 1e-12) & (u1 <= hi1 + 1e-12) & (u2 >= lo2 - 1e-12) & (u2 <= hi2 + 1e-12)
-            cost = np.where(inside, cost, np.inf)
-            best_cost, best_u1 = cost, u1
-            continue
-        better = cost < best_cost
-        best_cost, best_u1 = np.where(better, cost, best_cost), np.where(better, u1, best_u1)
+    u1, u2 = a + rho * s2 * r, g + rho * r
+    inside = (u1 >= lo1 - 1e-12) & (u1 <= hi1 + 1e-12) & (u2 >= lo2 - 1e-12) & (u2 <= hi2 + 1e-12)
+    best_cost, best_u1 = np.where(inside, cost(u1, u2), np.inf), u1
+    # The edges; np.minimum(np.maximum(·)) is np.clip without its per-call overhead.
+    edges = [(u1, np.minimum(np.maximum((w_u * g + w_b * (h0 - s2 * u1)) / (w_u + w_b), lo2), hi2))
+             for u1 in (lo1, hi1)]
+    edges += [(np.minimum(np.maximum((w_u * a + w_b * s2 * (h0 - u2)) / (w_u + w_b * s2 * s2), lo1), hi1), u2)
+              for u2 in (lo2, hi2)]
+    for u1, u2 in edges:
+        c_edge = cost(u1, u2)
+        better = c_edge < best_cost
+        best_cost, best_u1 = np.where(better, c_edge, best_cost), np.where(better, u1, best_u1)
     return best_cost, best_u1
 
 
@@ -278,27 +278,29 @@ def solve_step_qp(u_n: tuple[float, float], sigma_n: float, dcm0: tuple[float, f
     w_u, w_t, w_b = w.step, w.timing, w.offset
     s2 = np.asarray(nxt.sigmas, dtype=float)[None, :]
 
+    # Both axes at once, stacked on a leading dimension of 2.
+    a, g, e = (np.array(v, dtype=float)[:, None, None] for v in (u_n, nxt.u_n, nxt.offset))
+    lo2, hi2 = (np.array([nxt.box[0][i], nxt.box[1][i]])[:, None, None] for i in (0, 1))
+    box_lo, box_hi = (np.array([box[0][i], box[1][i]])[:, None, None] for i in (0, 1))
+    xi0 = np.array(dcm0, dtype=float)[:, None, None]
+
     def evaluate(sigma: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
         s1 = sigma[:, None]
         total = w_t * (s1 - sigma_n) ** 2 + w_t * (s2 - nxt.sigma_n) ** 2
-        us = []
-        for axis in (0, 1):
-            lo, hi = box[axis]
-            lo, hi = np.full_like(s1, lo), np.full_like(s1, hi)
-            if window is not None:
-                r = window.radius(np.log(s1) / window.lam)
-                w_lo, w_hi = window.s[axis] - r, window.s[axis] + r
-                apart = (w_lo > hi) | (w_hi < lo)
-                nearest = np.clip(np.clip(window.s[axis], lo, hi), w_lo, w_hi)
-                lo = np.where(apart, nearest, np.maximum(lo, w_lo))
-                hi = np.where(apart, nearest, np.minimum(hi, w_hi))
-            cost, u1 = _two_step_axis(u_n[axis], nxt.u_n[axis], nxt.offset[axis], dcm0[axis] * s1, s2,
-                                      lo, hi, *nxt.box[axis], w_u, w_b)
-            total = total + cost
-            us.append(u1)
+        lo, hi = np.broadcast_to(box_lo, (2, *s1.shape)), np.broadcast_to(box_hi, (2, *s1.shape))
+        if window is not None:
+            r = window.radius(np.log(s1) / window.lam)
+            centre = np.array(window.s, dtype=float)[:, None, None]
+            w_lo, w_hi = centre - r, centre + r
+            apart = (w_lo > hi) | (w_hi < lo)
+            nearest = np.minimum(np.maximum(np.minimum(np.maximum(centre, lo), hi), w_lo), w_hi)
+            lo = np.where(apart, nearest, np.maximum(lo, w_lo))
+            hi = np.where(apart, nearest, np.minimum(hi, w_hi))
+        cost, u1 = _two_step_axis(a, g, e, xi0 * s1, s2, lo, hi, lo2, hi2, w_u, w_b)
+        total = total + cost[0] + cost[1]
         k = np.argmin(total, axis=1)
         rows = np.arange(len(sigma))
-        return total[rows, k], [u[rows, k] for u in us]
+        return total[rows, k], [u1[0][rows, k], u1[1][rows, k]]
 
     lo_s, hi_s = sigma_box
     sigma = np.linspace(lo_s, hi_s, _GRID)
