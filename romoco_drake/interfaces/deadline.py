@@ -3,6 +3,7 @@ on a real-time link a run of misses taking the link's safe stages, as a stale st
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 
@@ -10,6 +11,9 @@ from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.interfaces.link import PUBLISH_DELAY, LinkConfig, counters_port, link_stage
 from romoco_drake.modes import DeadlineStats, LinkStage
+
+
+_STREAK = [f.name for f in dataclasses.fields(DeadlineStats)].index("miss_streak")
 
 
 class DeadlineMonitor(LeafSystem):
@@ -65,6 +69,8 @@ class DeadlineMonitor(LeafSystem):
 
     def _finish(self, context, discrete_state) -> None:
         took = self._clock() - context.get_discrete_state(self._started).GetAtIndex(0)
+        if took <= self.period and not context.get_discrete_state(self._stats).GetAtIndex(_STREAK):
+            return  # on time after a tick on time: the counts stand (the update starts from them)
         s = self._read(context)
         if took > self.period:
             streak = s.miss_streak + 1

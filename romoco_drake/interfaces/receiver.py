@@ -289,7 +289,6 @@ class MeasurementReceiver(LeafSystem):
         return self.predictor.base(blind)
 
     def _update(self, context, state) -> None:
-        counts = LinkCounters.from_vector(context.get_discrete_state(self._stats).value())
         rejected = sum(not inbox.take(context, state) for inbox in (self.proprioception, self.base_state))
         age = self.proprioception.age(context, state)
         if self.require_base_state:
@@ -298,12 +297,16 @@ class MeasurementReceiver(LeafSystem):
         stage = max(stream, LinkStage.decode(self.loop_stage_port.Eval(context)[0]))
         was = LinkStage.decode(context.get_discrete_state(self._link).GetAtIndex(0))
         was_stream = LinkStage.decode(context.get_discrete_state(self._stream).GetAtIndex(0))
-        counts += LinkCounters(stale_events=was_stream == LinkStage.FRESH and stream != LinkStage.FRESH,
-                               rejected_messages=rejected)
-        if np.isfinite(age) and stage > was:  # each stage entered counts (not before the first message,
-            counts = counts.entered(stage)  # nothing was lost yet); skipped ones (ride_through_s 0) do not
-        self.predictor.advance(context, state, self.command_port.Eval(context), stream)
+        went_stale = was_stream == LinkStage.FRESH and stream != LinkStage.FRESH
+        entered = np.isfinite(age) and stage > was  # each stage entered counts (not before the first
+        # message, nothing was lost yet); skipped ones (ride_through_s 0) do not
         discrete = state.get_mutable_discrete_state()
+        if rejected or went_stale or entered:  # else the counts stand (most updates)
+            counts = LinkCounters.from_vector(context.get_discrete_state(self._stats).value()) + LinkCounters(
+                stale_events=went_stale, rejected_messages=rejected)
+            if entered:
+                counts = counts.entered(stage)
+            discrete.get_mutable_vector(int(self._stats)).SetFromVector(counts.vector())
+        self.predictor.advance(context, state, self.command_port.Eval(context), stream)
         discrete.get_mutable_vector(int(self._link)).SetFromVector([float(stage)])
         discrete.get_mutable_vector(int(self._stream)).SetFromVector([float(stream)])
-        discrete.get_mutable_vector(int(self._stats)).SetFromVector(counts.vector())
