@@ -168,7 +168,9 @@ class VimpcPlanner(LeafSystem):
         self.mode_port = self.DeclareAbstractInputPort("mode", AbstractValue.Make(Mode.STANDING))
         if config.execution not in ("inline", "process"):
             raise ValueError(f"vimpc.execution must be 'inline' or 'process', got {config.execution!r}")
-        self._worker: MpcWorker | None = None  # started at the first walking update (process)
+        self._worker: MpcWorker | None = None  # process: started at initialization (seconds)
+        if config.execution == "process":
+            self.DeclareInitializationUnrestrictedUpdateEvent(self._start_worker)
         self._reference = self.DeclareAbstractState(AbstractValue.Make(_NoReference()))
         self._stats = self.DeclareDiscreteState(3)
         # The reference's age at each walking update, in 1 ms bins (the last: AGE_BINS ms and
@@ -222,12 +224,16 @@ class VimpcPlanner(LeafSystem):
             ages[min(int((t - reference.solved_at) * 1e3 + 1e-9), AGE_BINS)] += 1.0
         state.get_mutable_abstract_state(self._reference).set_value(reference)
 
+    def _start_worker(self, context, state) -> None:
+        """Starts the solver process before the first tick: starting it takes seconds, which a
+        tick on the robot does not have."""
+        if self._worker is None:
+            self._worker = MpcWorker(self.robot.name, self.config)
+
     def _from_worker(self, state, previous, kin: RobotKinematics, side: str, elapsed: float,
                      command: np.ndarray, t: float):
         """The newest solution the worker finished (or ``previous`` while it is younger than
         ``max_age``), after asking for one at this update's state."""
-        if self._worker is None:
-            self._worker = MpcWorker(self.robot.name, self.config)
         stats = state.get_mutable_discrete_state(self._stats).get_mutable_value()
         reply = self._worker.newest()
         reference = previous
