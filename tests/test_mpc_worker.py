@@ -3,6 +3,7 @@
 import dataclasses
 
 import numpy as np
+import pytest
 
 from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.planners.mpc_worker import MpcWorker
@@ -42,6 +43,7 @@ def test_age_percentiles_read_the_histogram():
     assert age_percentiles(histogram) == {"median": 6.0, "p99": 10.0}
 
 
+@pytest.mark.slow
 def test_draco_walks_with_the_mpc_beside_the_controller():
     """Closed loop with the MPC in its worker: walking, on command, each reference used at most
     max_age old, the age reported."""
