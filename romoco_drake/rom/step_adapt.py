@@ -141,12 +141,13 @@ class StepAdapter:
         box = b.box(plan.stance_side)
         t_commit = SWING_COMMIT_FRACTION * (plan.t_ss if step_t_ss is None or not math.isfinite(step_t_ss)
                                             else step_t_ss)
-        if t_in_step >= t_commit:
-            # Committed: the state machine and the swing no longer follow the plan's time or target.
-            return replace(plan, timing_adapted=True)
         # A push: the law's step is out of reach or leaves an offset the next steps cannot catch.
         pushed = not (offset_n == implied and b.t_ss_min <= plan.t_ss <= b.t_ss_max
                       and all(lo <= u <= hi for u, (lo, hi) in zip(u_n, box, strict=True)))
+        if t_in_step >= t_commit:
+            # Committed: the state machine and the swing no longer follow the plan's time or target;
+            # the push (the hip strategy's cue) lasts to the touchdown.
+            return replace(plan, timing_adapted=True, step_bounded=pushed)
         if not pushed and (window is None or window.contains(u_n, plan.t_ss)):
             # The law's own step is reachable and viable: the QP's minimum (zero), at any phase.
             return replace(plan, timing_adapted=True)
