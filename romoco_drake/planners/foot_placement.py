@@ -33,7 +33,7 @@ class FootPlacementPlanner(LeafSystem):
     | ``gait_phase`` | in | 2 | stance (+1 left, −1 right), time in step [s] |
     | ``command`` | in | 6 | vx, vy [m/s], wz [rad/s], step width, CoM height [m], SS time [s] |
     | ``swing_foot`` | in | 2 | optional: swing sole (x, y) rel. stance contact [m]; stance yaw frame |
-    | ``schedule`` | in | abstract | optional: the state machine's :class:`GaitSchedule` (the step's own T_SS) |
+    | ``schedule`` | in | abstract | optional: the state machine's :class:`GaitSchedule` (its T_SS) |
     | ``planner_output`` | out | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` |
     """
 
@@ -44,14 +44,15 @@ class FootPlacementPlanner(LeafSystem):
         # only with an adapter.
         self.t_ds = law.t_ds
         self.adapts_timing = adapter is not None
-        self.loop_inputs = ("rom_state", "gait_phase", "command") + (("swing_foot", "schedule") if adapter else ())
+        self.loop_inputs = ("rom_state", "gait_phase", "command") + (
+            ("swing_foot", "schedule") if adapter else ())
         self.rom_state_port = self.DeclareVectorInputPort("rom_state", ROM_STATE_SIZE)
         self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
         self.swing_foot_port = self.DeclareVectorInputPort("swing_foot", 2)
         # The step's own (adapted) T_SS: the adapter's commit point is the state machine's.
-        self.schedule_port = self.DeclareAbstractInputPort(
-            "schedule", AbstractValue.Make(GaitSchedule(Mode.STANDING, "left", 0.0, WalkCommand().step_time, 0, 0, 0, "")))
+        placeholder = GaitSchedule(Mode.STANDING, "left", 0.0, WalkCommand().step_time, 0, 0, 0, "")
+        self.schedule_port = self.DeclareAbstractInputPort("schedule", AbstractValue.Make(placeholder))
         self.planner_output_port = self.DeclareAbstractOutputPort(
             "planner_output", lambda: AbstractValue.Make(self._plan_default()), self._calc_plan
         )
@@ -72,6 +73,7 @@ class FootPlacementPlanner(LeafSystem):
         plan = self.law.plan(rom_state, side_from_sign(sign), t_in_step, cmd)
         if self.adapter is not None:
             swing = self.swing_foot_port.Eval(context) if self.swing_foot_port.HasValue(context) else None
-            step_t_ss = self.schedule_port.Eval(context).t_ss if self.schedule_port.HasValue(context) else None
+            has = self.schedule_port.HasValue(context)
+            step_t_ss = self.schedule_port.Eval(context).t_ss if has else None
             plan = self.adapter.adapt(plan, rom_state, t_in_step, swing, step_t_ss)
         value.set_value(plan)

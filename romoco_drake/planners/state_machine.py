@@ -245,7 +245,8 @@ class GaitStateMachine(LeafSystem):
         dx, dy = (swing_origin - origin)[:2].tolist()
         c, sn = math.cos(heading), math.sin(heading)
         x, y = c * dx + sn * dy, c * dy - sn * dx
-        return math.hypot(x - float(plan.swing_target[0]), y - float(plan.swing_target[1])) > self.landing_radius
+        miss = math.hypot(x - float(plan.swing_target[0]), y - float(plan.swing_target[1]))
+        return miss > self.landing_radius
 
     def _in_air(self, s: GaitSchedule, t: float, kin: RobotKinematics, on: np.ndarray) -> bool:
         """Whether the timed switch waits for a swing foot still in the air (class docstring)."""
