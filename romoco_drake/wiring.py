@@ -310,7 +310,7 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     planner = builder.AddNamedSystem("planner", planner_system)
     signals = {"rom_state": rom_state.rom_state_port, "swing_foot": rom_state.swing_foot_port,
                "gait_phase": machine.gait_phase_port, "command": heading.command_port,
-               "kinematics": kin, "mode": machine.mode_port}
+               "kinematics": kin, "mode": machine.mode_port, "schedule": machine.schedule_port}
     for name in planner.loop_inputs:
         builder.Connect(signals[name], planner.GetInputPort(name))
     if planner.adapts_timing:

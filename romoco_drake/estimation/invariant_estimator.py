@@ -10,9 +10,11 @@ from pydrake.systems.framework import BasicVector
 from romoco_drake.estimation.contact_estimator import ContactEstimator
 from romoco_drake.estimation.ground_truth import plant_state
 from romoco_drake.estimation.invariant_ekf import InekfState, InvariantEkf, InvariantEkfParams
+from romoco_drake.modes import LinkStage
 from romoco_drake.robots.kinematics import declare_kinematics_cache
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.robots.posture import DIVERGED
+from romoco_drake.spatial import GRAVITY_W
 
 
 class InvariantEkfEstimator(ContactEstimator):
@@ -24,6 +26,7 @@ class InvariantEkfEstimator(ContactEstimator):
     | joint_state  | in  | 2·nj    | encoders [q_j; v_j], ``robot.joint_names`` order               |
     | imu          | in  | 10      | [4 ignored]; gyro ω̃_B (rad/s); specific force f̃_B (m/s²)       |
     | foot_contact | in  | 2       | [left, right] contact switches, 1.0 in contact                 |
+    | link_stage   | in  | 1       | optional: the station's LinkStage (predicted past FRESH)      |
     | state        | out | nq + nv | controller-plant state [q; v]                                  |
 
     The IMU's own orientation estimate (the first four entries) is not read: orientation comes
@@ -35,6 +38,12 @@ class InvariantEkfEstimator(ContactEstimator):
     Rate: one update every ``period`` s (discrete state: the packed filter, each foot's time in
     contact, a started flag and the rejection count). The foot's contact point is the mean of its
     sole points. A foot joins the filter on its switch's rising edge and leaves on the falling one.
+
+    Link gaps: while the station's ``link_stage`` is past FRESH its measurements are the link's
+    prediction: the filter propagates at constant velocity (the predicted accelerometer is not
+    integrated) and fuses the predicted stance kinematics; on the first update after the stage is
+    FRESH again the filter re-acquires (:meth:`~.invariant_ekf.InvariantEkf.reacquire`): the
+    velocity doubted again, stance feet re-anchored from the real kinematics.
 
     Start: the first update with valid inputs starts the filter at rest in the nominal pose (base
     at ``initial_base_position`` if given); roll and pitch then converge from gravity. (The first
@@ -56,6 +65,8 @@ class InvariantEkfEstimator(ContactEstimator):
         q0 = robot.nominal.q[b:b + 4]
         self._R0 = RotationMatrix(Quaternion(q0 / np.linalg.norm(q0))).matrix()
         self._filter_index = self._declare_state(self._filter.initial(self._p0, self._R0).pack(), offset)
+        self.link_stage_input = self.DeclareVectorInputPort("link_stage", 1)
+        self._blind_index = self.DeclareDiscreteState(1)  # 1.0 while the link's measurements are predicted
 
     # ------------------------------------------------------------------ kinematics
     def leg_state(self, joint_state: np.ndarray) -> np.ndarray:
@@ -94,8 +105,19 @@ class InvariantEkfEstimator(ContactEstimator):
             discrete_state.get_mutable_vector(self._started_index).SetFromVector([1.0])
         else:
             s = InekfState.unpack(context.get_discrete_state(self._filter_index).value())
+            if context.get_discrete_state(self._blind_index).value()[0] > 0.5:
+                # The link's predicted specific force is no measurement: integrated, it took H1's
+                # velocity estimate 2 m/s off in 0.12 s of a dropout. Constant velocity instead,
+                # corrected by the predicted stance kinematics.
+                accel = s.R.T @ -GRAVITY_W + s.accel_bias
             s = ekf.propagate(s, gyro, accel, self._period, ekf.contact_confidence(previous))
         contact_time = np.where(contact, previous + self._period, 0.0)
+        blind = (self.link_stage_input.HasValue(context)
+                 and self.link_stage_input.Eval(context)[0] >= float(LinkStage.RIDE_THROUGH))
+        was_blind = context.get_discrete_state(self._blind_index).value()[0] > 0.5
+        discrete_state.get_mutable_vector(self._blind_index).SetFromVector([float(blind)])
+        if was_blind and not blind:
+            s = ekf.reacquire(s, h_B)
         for i in range(2):
             if contact[i] and not s.active[i]:
                 s = ekf.touchdown(s, i, h_B[i])

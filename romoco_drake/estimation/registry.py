@@ -28,4 +28,4 @@ ESTIMATORS.add("invariant_ekf", lambda robot, config, start: InvariantEkfEstimat
     robot, 1.0 / config.rate_hz, offset=LINK_TICK_OFFSET),
     "contact-aided right-invariant EKF on encoders, IMU rates and contact switches; starts at the nominal "
     "pose, yaw and position in its own start frame", config=EstimatorSettings,
-    inputs=("joint_state", "imu", "foot_contact"))
+    inputs=("joint_state", "imu", "foot_contact", "link_stage"))

@@ -5,6 +5,8 @@ from __future__ import annotations
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
+from romoco_drake.modes import Mode
+from romoco_drake.planners.state_machine import GaitSchedule
 from romoco_drake.rom.planners import FootPlacementLaw
 from romoco_drake.rom.step_adapt import StepAdapter
 from romoco_drake.rom.types import (
@@ -32,6 +34,7 @@ class FootPlacementPlanner(LeafSystem):
     | ``gait_phase`` | in | 2 | stance (+1 left, −1 right), time in step [s] |
     | ``command`` | in | 6 | vx, vy [m/s], wz [rad/s], step width, CoM height [m], SS time [s] |
     | ``swing_foot`` | in | 2 | optional: swing sole (x, y) rel. stance contact [m]; stance yaw frame |
+    | ``schedule`` | in | abstract | optional: the state machine's :class:`GaitSchedule` (its T_SS) |
     | ``planner_output`` | out | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` |
     """
 
@@ -42,11 +45,15 @@ class FootPlacementPlanner(LeafSystem):
         # only with an adapter.
         self.t_ds = law.t_ds
         self.adapts_timing = adapter is not None
-        self.loop_inputs = ("rom_state", "gait_phase", "command") + (("swing_foot",) if adapter else ())
+        self.loop_inputs = ("rom_state", "gait_phase", "command") + (
+            ("swing_foot", "schedule") if adapter else ())
         self.rom_state_port = self.DeclareVectorInputPort("rom_state", ROM_STATE_SIZE)
         self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
         self.swing_foot_port = self.DeclareVectorInputPort("swing_foot", 2)
+        # The step's own (adapted) T_SS: the adapter's commit point is the state machine's.
+        placeholder = GaitSchedule(Mode.STANDING, "left", 0.0, WalkCommand().step_time, 0, 0, 0, "")
+        self.schedule_port = self.DeclareAbstractInputPort("schedule", AbstractValue.Make(placeholder))
         # The last plan and the input values it was made from. A tick's state machine update
         # invalidates the output (Drake cannot tell that a rewritten schedule is unchanged), so
         # the same inputs arrive twice a tick; the plan is a pure function of their values.
@@ -68,18 +75,21 @@ class FootPlacementPlanner(LeafSystem):
         phase = self.gait_phase_port.Eval(context).tolist()
         command = self.command_port.Eval(context).tolist()
         rom_state = self.rom_state_port.Eval(context).tolist()
-        swing = None
-        if self.adapter is not None and self.swing_foot_port.HasValue(context):
-            swing = self.swing_foot_port.Eval(context).tolist()
-        key = (phase, command, rom_state, swing)
+        swing = step_t_ss = None
+        if self.adapter is not None:
+            if self.swing_foot_port.HasValue(context):
+                swing = self.swing_foot_port.Eval(context).tolist()
+            if self.schedule_port.HasValue(context):
+                step_t_ss = self.schedule_port.Eval(context).t_ss
+        key = (phase, command, rom_state, swing, step_t_ss)
         if key != self._last[0]:
-            self._last = (key, self._plan(phase, command, rom_state, swing))
+            self._last = (key, self._plan(phase, command, rom_state, swing, step_t_ss))
         value.set_value(self._last[1])
 
     def _plan(self, phase: list[float], command: list[float], rom_state: list[float],
-              swing: list[float] | None) -> PlannerOutput:
+              swing: list[float] | None, step_t_ss: float | None) -> PlannerOutput:
         sign, t_in_step = phase
         plan = self.law.plan(rom_state, side_from_sign(sign), t_in_step, WalkCommand(*command))
         if self.adapter is not None:
-            plan = self.adapter.adapt(plan, rom_state, t_in_step, swing)
+            plan = self.adapter.adapt(plan, rom_state, t_in_step, swing, step_t_ss)
         return plan
