@@ -52,7 +52,8 @@ class RunLogs:
                 continue
             if self._directory is None:
                 self._directory = tempfile.TemporaryDirectory(prefix="romoco_logs_")
-            path = self._spilled.setdefault(id(sink), Path(self._directory.name) / f"{len(self._spilled)}.f64")
+            name = f"{len(self._spilled)}.f64"
+            path = self._spilled.setdefault(id(sink), Path(self._directory.name) / name)
             rows = np.vstack([log.sample_times(), log.data()]).T
             with path.open("ab") as f:
                 f.write(np.ascontiguousarray(rows, dtype=np.float64).tobytes())

@@ -25,8 +25,8 @@ from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces.engines import with_engine
 from romoco_drake.interfaces.hardware import link_summary
 from romoco_drake.interfaces.lcm_log import LcmLogRecorder
-from romoco_drake.logs import RunLogs
 from romoco_drake.interfaces.robot_sim import make_robot_sim, robot_summary
+from romoco_drake.logs import RunLogs
 from romoco_drake.metrics import estimator_summary, log_samples, tracking_summary, velocity_tracking
 from romoco_drake.modes import LinkCounters
 from romoco_drake.planners.command import CommandSource, segments_from_log
@@ -232,14 +232,16 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, 
     times, states = log_samples(built.logs.find(built.state_log, context), until)
     command = built.command
     if built.command_log is not None:  # teleop: score against the commands the page gave
-        command = CommandSource(segments_from_log(*log_samples(built.logs.find(built.command_log, context), until)))
+        given = log_samples(built.logs.find(built.command_log, context), until)
+        command = CommandSource(segments_from_log(*given))
     tracking = velocity_tracking(built.robot, command, times, states)
     ticks = built.logs.find(loop.tick_log, context).data()[0, 1:]  # the first sample precedes any tick
     planner = loop.planner.summary(own(loop.planner))
     out = ({"planner": planner.pop("planner")} | tracking_summary(tracking)
            | loop.state_machine.summary(own(loop.state_machine)) | loop.limiter.summary(command.segments)
            | loop.controller.summary(own(loop.controller), ticks) | planner)
-    momentum = None if loop.momentum_log is None else log_samples(built.logs.find(loop.momentum_log, context), until)
+    momentum = (None if loop.momentum_log is None
+                else log_samples(built.logs.find(loop.momentum_log, context), until))
     if momentum is not None:
         out |= momentum_summary(*momentum)
     if plot_dir is not None:

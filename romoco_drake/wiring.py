@@ -40,9 +40,9 @@ from romoco_drake.interfaces.hardware import (
 )
 from romoco_drake.interfaces.lcm_codec import ESTOP_CHANNEL, STATUS_CHANNEL
 from romoco_drake.interfaces.monitor import FallMonitor
-from romoco_drake.logs import RunLogs
 from romoco_drake.interfaces.robot_sim import make_robot_sim
 from romoco_drake.interfaces.teleop import RADIO_PERIOD, EstopGate, MeshcatRadio, PageDisplay
+from romoco_drake.logs import RunLogs
 from romoco_drake.planners.command import CommandLimiter, CommandSegment, CommandSource
 from romoco_drake.planners.foot_placement import FootPlacementPlanner
 from romoco_drake.planners.heading import HeadingHold

@@ -286,7 +286,8 @@ def test_an_update_per_plant_step_equals_an_update_per_sample():
     threshold = config.contact_threshold_fraction * robot.total_mass * 9.81
     q = robot.nominal.q.copy()
     for step in range(600):  # 1.2 s: samples 0 … 1200 cross the 1024-sample block
-        q[robot.base_q_start:robot.base_q_start + 4] = RollPitchYaw(0.1 * rng.standard_normal(3)).ToQuaternion().wxyz()
+        rpy = RollPitchYaw(0.1 * rng.standard_normal(3))
+        q[robot.base_q_start:robot.base_q_start + 4] = rpy.ToQuaternion().wxyz()
         forces = threshold + rng.choice([-5.0, 5.0], size=2)
         for sensors, context in zip((batched, single), contexts, strict=True):
             sensors.plant_state_input.FixValue(context, np.concatenate([q, np.zeros(robot.nv)]))

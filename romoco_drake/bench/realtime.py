@@ -99,7 +99,8 @@ def bench_realtime(scenario: Scenario, duration: float = 10.0, lcm_log: Path | N
             recorded = run_scenario(scenario, duration=duration, link="via_lcm", lcm_log=lcm_log)
         events, logged_commands = logged_messages(lcm_log)
     # Missed deadlines are what is measured here: they must not move the loop to its safe stages.
-    scenario = dataclasses.replace(scenario, link=dataclasses.replace(scenario.link, max_consecutive_misses=0))
+    link = dataclasses.replace(scenario.link, max_consecutive_misses=0)
+    scenario = dataclasses.replace(scenario, link=link)
     lcm = DrakeLcm("memq://")
     replayed_commands: list[bytes] = []
     lcm.Subscribe(MOTOR_COMMAND_CHANNEL, replayed_commands.append)

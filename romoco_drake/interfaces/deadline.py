@@ -12,7 +12,6 @@ from pydrake.systems.framework import LeafSystem
 from romoco_drake.interfaces.link import PUBLISH_DELAY, LinkConfig, counters_port, link_stage
 from romoco_drake.modes import DeadlineStats, LinkStage
 
-
 _STREAK = [f.name for f in dataclasses.fields(DeadlineStats)].index("miss_streak")
 
 

@@ -135,7 +135,8 @@ class CommandSender(LeafSystem):
         self._checked_entry = self.DeclareCacheEntry(
             "checked command", ValueProducer(
                 allocate=lambda: AbstractValue.Make((np.zeros(5 * nu), False, False)),
-                calc=lambda context, value: value.set_value(self._checked(context, self.estop.engaged(context)))),
+                calc=lambda context, value: value.set_value(
+                    self._checked(context, self.estop.engaged(context)))),
             {*(self.input_port_ticket(port.get_index()) for port in inputs), self.all_state_ticket()})
         self.command_port = self.DeclareVectorOutputPort(
             "command", 5 * nu, lambda context, out: out.SetFromVector(self._checked_entry.Eval(context)[0]),

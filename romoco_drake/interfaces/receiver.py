@@ -267,7 +267,8 @@ class MeasurementReceiver(LeafSystem):
         for name, (inbox, a, b) in layout.items():
             entry = measured[inbox]
             self.DeclareVectorOutputPort(
-                name, b - a, lambda context, out, entry=entry, a=a, b=b: out.SetFromVector(entry.Eval(context)[a:b]),
+                name, b - a,
+                lambda context, out, entry=entry, a=a, b=b: out.SetFromVector(entry.Eval(context)[a:b]),
                 prerequisites_of_calc={entry.ticket()})
         self.link_port = self.DeclareStateOutputPort("link", self._link)
         self.stats_port = counters_port(self, "stats", LinkCounters, self._stats)

@@ -295,7 +295,8 @@ class SimulatedSensors(LeafSystem):
         norm2 = w * w + qx * qx + qy * qy + qz * qz
         if math.isfinite(norm2) and norm2 > 1e-18:
             # Third row of R_WB (the world vertical in B) from the quaternion normalised.
-            R_z = np.array([qx * qz - w * qy, qy * qz + w * qx, 0.5 * norm2 - qx * qx - qy * qy]) * (2.0 / norm2)
+            R_z = (2.0 / norm2) * np.array([qx * qz - w * qy, qy * qz + w * qx,
+                                            0.5 * norm2 - qx * qx - qy * qy])
             rates = len(draws) * s[0:3] + walked[:-1, 0:3].sum(axis=0) + draws[:, 6:9].sum(axis=0)
             s[6] += self._dt * float(R_z @ rates)
         s[0:6] += walked[-1]
@@ -366,7 +367,8 @@ class PlantContactReadout(LeafSystem):
         self._base_v = base.floating_velocities_start_in_v() + 3
         self._feet = [plant.GetBodyByName(robot.feet[side].body_name, instance).index()
                       for side in ("left", "right")]
-        self.accelerations_input = self.DeclareVectorInputPort("generalized_acceleration", plant.num_velocities())
+        self.accelerations_input = self.DeclareVectorInputPort("generalized_acceleration",
+                                                               plant.num_velocities())
         self.contact_results_input = self.DeclareAbstractInputPort(
             "contact_results", plant.get_contact_results_output_port().Allocate())
         self.base_acceleration_output = self.DeclareVectorOutputPort(

@@ -129,7 +129,8 @@ class CommandLimiter(LeafSystem):
         # limited_velocity, on three floats (numpy's overhead was most of this update).
         step = [min(max(min(max(v, -v_max), v_max) - h, -a), a)
                 for v, h, v_max, a in zip(target, held, self._max.tolist(), self._max_step, strict=True)]
-        discrete_state.get_mutable_vector(self._velocity).SetFromVector([h + d for h, d in zip(held, step)])
+        velocity = [h + d for h, d in zip(held, step, strict=True)]
+        discrete_state.get_mutable_vector(self._velocity).SetFromVector(velocity)
 
     def _calc(self, context, out) -> None:
         cmd = np.array(self.command_in_port.Eval(context))

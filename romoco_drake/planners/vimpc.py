@@ -215,7 +215,7 @@ class VimpcPlanner(LeafSystem):
             stats[0] += 1.0
             if not reference.ok:
                 stats[1] += 1.0
-                if isinstance(previous, MpcReference) and t - previous.solved_at <= self.config.max_age + 1e-9:
+                if self._young(previous, t):
                     reference = previous
         if not reference.ok:
             stats[2] += 1.0
@@ -223,6 +223,10 @@ class VimpcPlanner(LeafSystem):
             ages = state.get_mutable_discrete_state(self._ages).get_mutable_value()
             ages[min(int((t - reference.solved_at) * 1e3 + 1e-9), AGE_BINS)] += 1.0
         state.get_mutable_abstract_state(self._reference).set_value(reference)
+
+    def _young(self, reference, t: float) -> bool:
+        """Whether ``reference`` is a solution at most ``max_age`` old at time t."""
+        return isinstance(reference, MpcReference) and t - reference.solved_at <= self.config.max_age + 1e-9
 
     def _start_worker(self, context, state) -> None:
         """Starts the solver process before the first tick: starting it takes seconds, which a
@@ -245,7 +249,7 @@ class VimpcPlanner(LeafSystem):
                 stats[1] += 1.0
         if not self._worker.request(kin.x, side, elapsed, command, t):
             state.get_mutable_discrete_state(self._ages).get_mutable_value()[-1] += 1.0
-        if isinstance(reference, MpcReference) and t - reference.solved_at <= self.config.max_age + 1e-9:
+        if self._young(reference, t):
             return reference
         return _NoReference()
 
