@@ -165,10 +165,12 @@ class SimulatedSensors(LeafSystem):
     the rest of a sensor update. IMU turn-on biases come from
     ``default_rng([seed, 1])`` when not given (``gyro_bias``, ``accel_bias``).
 
-    What accumulates lives in discrete state, updated every sample (1/rate_hz) from that sample's
-    draws: the biases (random walks), the on-board orientation's yaw error (ψ̇ = the world-vertical
-    component of the gyro's bias and noise, R_WB(b_g + n_g)·e_z), and the switches with their
-    debounce timers. Read it with :meth:`imu_biases` and :meth:`orientation_yaw_error`.
+    What accumulates lives in discrete state, advanced sample by sample (1/rate_hz) with each
+    sample's draws: the biases (random walks), the on-board orientation's yaw error (ψ̇ = the
+    world-vertical component of the gyro's bias and noise, R_WB(b_g + n_g)·e_z), and the switches
+    with their debounce timers. Read it with :meth:`imu_biases` and :meth:`orientation_yaw_error`.
+    With ``plant_time_step`` h of a discrete plant (rate·h an integer n), one update every h takes
+    that step's n samples (:func:`_samples_per_step`); otherwise an update per sample.
     """
 
     def __init__(self, robot: RobotModel, config: SensorConfig | None = None,
