@@ -74,9 +74,11 @@ def log_samples(log, until: float | None) -> tuple[np.ndarray, np.ndarray]:
     return times[:n], data[:, :n]
 def estimator_summary(built, context, until: float | None) -> dict:
     """A filtering estimator's health and, when the true state is known, its errors against it:
-    base velocity (rms of the error's norm, m/s), yaw drift (rad per minute, from the first to the
-    last sample) and horizontal position drift per metre walked (the error's change over the run
-    over the true path length; None when the robot walked under 0.1 m)."""
+    base velocity (rms of the error's norm, each in its own heading frame, m/s), yaw drift (rad
+    per minute, from the first to the last sample) and horizontal position drift per metre
+    walked (the error's change over the run over the true path length, in the frame the estimate
+    started in: a start off in yaw or position is not drift; None when the robot walked under
+    0.1 m)."""
     if not hasattr(built.estimator, "rejected_updates"):
         return {}
     out = {"estimator_rejected_updates": built.estimator.rejected_updates(
@@ -89,18 +91,32 @@ def estimator_summary(built, context, until: float | None) -> dict:
     return out
 
 
+def _heading_frame_velocity(robot, states: np.ndarray) -> np.ndarray:
+    """(3, N) base linear velocity in each state's own heading frame (what the controller reads: an
+    estimate's yaw is its own frame's)."""
+    j = robot.nq + robot.base_v_start + 3
+    yaw = base_yaw(robot, states)
+    c, s = np.cos(yaw), np.sin(yaw)
+    vx, vy, vz = states[j:j + 3]
+    return np.array([c * vx + s * vy, -s * vx + c * vy, vz])
+
+
 def estimate_errors(robot, times: np.ndarray, truth: np.ndarray, estimate: np.ndarray) -> dict:
     """Estimator errors against the truth, state samples one per column (see estimator_summary)."""
     if len(times) < 2:
         return dict.fromkeys(("velocity_estimate_rms_error", "yaw_drift_rad_per_min", "position_drift_per_m"))
-    j = robot.nq + robot.base_v_start + 3
-    error = np.linalg.norm(estimate[j:j + 3] - truth[j:j + 3], axis=0)
+    error = np.linalg.norm(_heading_frame_velocity(robot, estimate) - _heading_frame_velocity(robot, truth),
+                           axis=0)
     yaw_error = np.unwrap(base_yaw(robot, estimate) - base_yaw(robot, truth))
     minutes = (times[-1] - times[0]) / 60.0
     b = robot.base_q_start + 4
-    p_error = estimate[b:b + 2] - truth[b:b + 2]
+    # The estimate's horizontal frame is where it started: its path, turned by the start's yaw
+    # error about the start, against the true path from its start.
+    c, s = math.cos(yaw_error[0]), math.sin(yaw_error[0])
+    walked_estimate = np.array([[c, s], [-s, c]]) @ (estimate[b:b + 2] - estimate[b:b + 2, :1])
+    p_error = walked_estimate - (truth[b:b + 2] - truth[b:b + 2, :1])
     walked = float(np.sum(np.linalg.norm(np.diff(truth[b:b + 2], axis=1), axis=0)))
-    drift = np.linalg.norm(p_error[:, -1] - p_error[:, 0]) / walked if walked > MIN_WALKED_M else np.nan
+    drift = np.linalg.norm(p_error[:, -1]) / walked if walked > MIN_WALKED_M else np.nan
     return {
         "velocity_estimate_rms_error": finite_or_none([round(float(np.sqrt(np.mean(error**2))), 4)])[0],
         "yaw_drift_rad_per_min": finite_or_none([round(float(yaw_error[-1] - yaw_error[0]) / minutes, 5)])[0],

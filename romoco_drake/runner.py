@@ -271,6 +271,8 @@ def add_run_args(p) -> None:
     p.add_argument("--meshcat", action="store_true", help="serve a live Meshcat view")
     p.add_argument("--record", type=Path, metavar="FILE.html", help="write an offline Meshcat replay")
     p.add_argument("--json", action="store_true", help="print the run summary as JSON (last line)")
+    p.add_argument("--check", action="store_true",
+                   help="exit 1 with a one-line reason if the robot fell or a QP failed (for scripts, CI)")
     p.add_argument("--no-wait", action="store_true", help="with --meshcat, exit when the run ends")
     p.add_argument("--teleop", action="store_true",
                    help="with --meshcat: drive the robot from the page (sliders, buttons, gamepad) at real "
@@ -345,7 +347,21 @@ def _cmd_run(args) -> int:
             input("Press Enter to quit (the Meshcat page replays the run). ")
         except (EOFError, KeyboardInterrupt):
             pass
+    failure = check_failure(summary) if args.check else None
+    if failure is not None:
+        print(f"romoco: check failed: {failure}", file=sys.stderr)
+        return 1
     return 0
+
+
+def check_failure(summary: dict) -> str | None:
+    """Why a run fails ``romoco run --check``: the robot fell, or its controller had QP failures
+    (ticks answered by the safe mode); None when it passes."""
+    if summary["fell"]:
+        return f"{summary['scenario']} {fall_text(summary)}"
+    if summary.get("qp_failures"):
+        return f"{summary['scenario']}: {summary['qp_failures']} QP failures"
+    return None
 
 
 def _print_run(summary: dict, record: Path | None) -> None:

@@ -83,7 +83,7 @@ def test_error_dynamics_match_finite_differences_of_the_right_invariant_error():
 
 def test_kinematic_update_reduces_the_error():
     """Feet in contact at known points, the estimate off in position, velocity and tilt: one
-    correction with the exact foot kinematics moves it closer to the truth, and P shrinks."""
+    correction with the exact foot kinematics moves the velocity to the truth, and P shrinks."""
     ekf = InvariantEkf()
     R = Rotation.from_rotvec([0.05, -0.03, 0.8]).as_matrix()
     p = np.array([1.0, 2.0, 0.75])
@@ -100,6 +100,9 @@ def test_kinematic_update_reduces_the_error():
     after = (np.linalg.norm(after_s.p - truth.p), np.linalg.norm(after_s.v - truth.v),
              np.linalg.norm(_rotation_error(after_s.R, R)[:2]))
     assert after[1] < 0.2 * before[1]
+    # The feet were placed from the estimate's own pose, so this update holds no news of the absolute
+    # position or the tilt (those come from the IMU over time): it must leave both as they were.
+    assert after[0] == pytest.approx(before[0], abs=1e-9) and after[2] == pytest.approx(before[2], abs=1e-9)
     assert np.trace(after_s.P) < trace
     assert np.all(np.linalg.eigvalsh(after_s.P) > 0)
     # The feet were placed by kinematics off by 1 cm. Relative to the base a new foot is uncertain by
@@ -195,6 +198,7 @@ def test_run_summary_errors_against_the_truth():
     times = np.linspace(0.0, 30.0, 301)
     truth = np.tile(np.concatenate([robot.nominal.q, np.zeros(robot.nv)])[:, None], (1, times.size))
     b, bv = robot.base_q_start, robot.nq + robot.base_v_start
+    truth[b:b + 4] = np.array([[1.0], [0.0], [0.0], [0.0]])  # heading 0
     truth[b + 4] = 0.5 * times  # 15 m forward at 0.5 m/s
     truth[bv + 3] = 0.5
     estimate = truth.copy()
@@ -205,4 +209,15 @@ def test_run_summary_errors_against_the_truth():
     errors = estimate_errors(robot, times, truth, estimate)
     assert errors["yaw_drift_rad_per_min"] == pytest.approx(0.02)
     assert errors["position_drift_per_m"] == pytest.approx(0.003)
-    assert errors["velocity_estimate_rms_error"] == pytest.approx(0.02)
+    assert errors["velocity_estimate_rms_error"] == pytest.approx(0.02, rel=0.01)
+    # Started 0.1 rad off in yaw and 0.1 m off in position, the estimate walks the same path in
+    # its own frame: no drift.
+    turned = truth.copy()
+    c, s = np.cos(0.1), np.sin(0.1)
+    turned[b:b + 4] = np.array([[np.cos(0.05)], [0.0], [0.0], [np.sin(0.05)]])
+    turned[b + 4:b + 6] = np.array([[c, -s], [s, c]]) @ truth[b + 4:b + 6] + [[0.1], [0.0]]
+    turned[bv + 3:bv + 5] = np.array([[c, -s], [s, c]]) @ truth[bv + 3:bv + 5]
+    errors = estimate_errors(robot, times, truth, turned)
+    assert errors["yaw_drift_rad_per_min"] == pytest.approx(0.0, abs=1e-9)
+    assert errors["position_drift_per_m"] == pytest.approx(0.0, abs=1e-9)
+    assert errors["velocity_estimate_rms_error"] == pytest.approx(0.0, abs=1e-9)

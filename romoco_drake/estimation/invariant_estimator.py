@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 from pydrake.common.eigen_geometry import Quaternion
-from pydrake.math import RotationMatrix
+from pydrake.math import RollPitchYaw, RotationMatrix
 from pydrake.systems.framework import BasicVector
 
 from romoco_drake.estimation.contact_estimator import ContactEstimator
@@ -46,24 +46,27 @@ class InvariantEkfEstimator(ContactEstimator):
     velocity doubted again, stance feet re-anchored from the real kinematics.
 
     Start: the first update with valid inputs starts the filter at rest in the nominal pose (base
-    at ``initial_base_position`` if given); roll and pitch then converge from gravity. (The first
+    at ``initial_base_position`` if given), moved by ``start_offset`` (xyz in m, roll-pitch-yaw in
+    rad, both about the world axes: a wrong start); roll and pitch then converge from gravity. (The first
     accelerometer readings of a simulation are no gravity reference: the plant reports no
     acceleration before its first step, then the contact settling.) Malformed inputs (NaN/Inf, or
     beyond ``DIVERGED``): the update is skipped and counted (:meth:`rejected_updates`).
     """
 
     def __init__(self, robot: RobotModel, period: float = 0.002, params: InvariantEkfParams | None = None,
-                 initial_base_position: np.ndarray | None = None, offset: float = 0.0):
+                 initial_base_position: np.ndarray | None = None, offset: float = 0.0,
+                 start_offset: tuple[np.ndarray, np.ndarray] = (np.zeros(3), np.zeros(3))):
         super().__init__(robot, period)
         self._filter = InvariantEkf(params or InvariantEkfParams())
         b = robot.base_q_start
-        self._p0 = (robot.nominal.q[b + 4:b + 7].copy() if initial_base_position is None
-                    else np.array(initial_base_position, dtype=float))
+        p0 = robot.nominal.q[b + 4:b + 7] if initial_base_position is None else initial_base_position
+        self._p0 = np.asarray(p0, dtype=float) + np.asarray(start_offset[0], dtype=float)
         self._legs = declare_kinematics_cache(
             self, robot, lambda c: self.leg_state(self.joint_state_input.Eval(c)),
             {self.joint_state_input.ticket()})
         q0 = robot.nominal.q[b:b + 4]
-        self._R0 = RotationMatrix(Quaternion(q0 / np.linalg.norm(q0))).matrix()
+        self._R0 = RollPitchYaw(start_offset[1]).ToRotationMatrix().matrix() \
+            @ RotationMatrix(Quaternion(q0 / np.linalg.norm(q0))).matrix()
         self._filter_index = self._declare_state(self._filter.initial(self._p0, self._R0).pack(), offset)
         self.link_stage_input = self.DeclareVectorInputPort("link_stage", 1)
         self._blind_index = self.DeclareDiscreteState(1)  # 1.0 while the link's measurements are predicted

@@ -12,7 +12,7 @@ from romoco_drake.config import LINK_TICK_OFFSET
 from romoco_drake.estimation.ground_truth import GroundTruthEstimator
 from romoco_drake.estimation.invariant_estimator import InvariantEkfEstimator
 from romoco_drake.estimation.kalman_estimator import KalmanEstimator
-from romoco_drake.estimation.settings import EstimatorSettings
+from romoco_drake.estimation.settings import EstimatorSettings, InvariantEkfSettings
 from romoco_drake.registry import Registry
 
 ESTIMATORS = Registry("estimator")
@@ -25,7 +25,8 @@ ESTIMATORS.add("kalman", lambda robot, config, start: KalmanEstimator(
     "switches; flat ground",
     config=EstimatorSettings, inputs=("joint_state", "imu", "foot_contact"))
 ESTIMATORS.add("invariant_ekf", lambda robot, config, start: InvariantEkfEstimator(
-    robot, 1.0 / config.rate_hz, offset=LINK_TICK_OFFSET),
+    robot, 1.0 / config.rate_hz, offset=LINK_TICK_OFFSET,
+    start_offset=(config.start_offset_xyz, config.start_offset_rpy)),
     "contact-aided right-invariant EKF on encoders, IMU rates and contact switches; starts at the nominal "
-    "pose, yaw and position in its own start frame", config=EstimatorSettings,
-    inputs=("joint_state", "imu", "foot_contact", "link_stage"))
+    "pose (or start_offset_xyz/rpy off it), yaw and position in its own start frame",
+    config=InvariantEkfSettings, inputs=("joint_state", "imu", "foot_contact", "link_stage"))

@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
-from romoco_drake.config import RATE_HZ, declare_ranges
+from romoco_drake.config import RATE_HZ, Range, declare_ranges
 
 
 @dataclass
@@ -21,3 +22,22 @@ class EstimatorSettings:
 
 
 declare_ranges(EstimatorSettings, rate_hz=RATE_HZ)
+
+
+@dataclass
+class InvariantEkfSettings(EstimatorSettings):
+    """The ``invariant_ekf`` entry's settings. ``start_offset_xyz`` (m, world axes) and
+    ``start_offset_rpy`` (rad: roll, pitch, yaw about the world axes): how far the pose the filter
+    starts from is off the nominal pose the robot starts at, as for a robot set down by hand
+    (zero: the filter starts at the nominal pose). Tilt converges from gravity and the stance
+    feet; yaw and horizontal position are unobservable, so their offset stays as the estimate's
+    frame, and what matters is their drift from it (the run summary's ``yaw_drift_rad_per_min``,
+    ``position_drift_per_m``)."""
+
+    start_offset_xyz: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    start_offset_rpy: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+
+
+# A start more than 1 m or half a turn off is no pose estimate to converge from.
+declare_ranges(InvariantEkfSettings, start_offset_xyz=Range(-1.0, 1.0, "m", size=3),
+               start_offset_rpy=Range(-0.5 * math.pi, 0.5 * math.pi, "rad", size=3))

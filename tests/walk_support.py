@@ -1,0 +1,116 @@
+"""What the closed-loop walking tests measure, from a run's log of the simulator's true state.
+
+Per command segment, over its scored window (from a second after the robot's command limiter has
+reached the segment's command, as the run summary scores it, to the segment's end): the mean
+heading-frame velocity, the rms of the 1 s averaged velocity against the command, how far the
+heading lags the heading the limited command turns to, and the radius of the path walked.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from romoco_drake.metrics import AVERAGE_WINDOW_S, SETTLE_S, heading_velocity, moving_average
+from romoco_drake.planners.command import limited_velocity, reach_times
+from romoco_drake.planners.heading import base_yaw
+from romoco_drake.runner import log_samples, run_scenario
+
+MEAN_TOLERANCE = 0.10  # a segment's mean velocity (and yaw rate, path radius) within 10 % of the command
+
+
+@dataclass
+class Walk:
+    """A finished run: its summary, its true-state log and its estimate's (one state per column)."""
+
+    summary: dict
+    robot: object
+    segments: list
+    times: np.ndarray
+    states: np.ndarray
+    estimates: np.ndarray
+
+
+def walk(scenario, duration: float | None = None, **kwargs) -> Walk:
+    """Runs ``scenario`` (``run_scenario``'s keyword arguments) and keeps its true-state log."""
+    kept = {}
+
+    def keep(built, context):
+        kept["times"], kept["states"] = log_samples(built.state_log.FindLog(context), None)
+        kept["estimates"] = log_samples(built.estimate_log.FindLog(context), None)[1]
+        kept["robot"], kept["segments"] = built.robot, built.command.segments
+
+    summary = run_scenario(scenario, duration=duration, inspect=keep, **kwargs)
+    n = min(kept["states"].shape[1], kept["estimates"].shape[1])
+    return Walk(summary, kept["robot"], kept["segments"], kept["times"][:n], kept["states"][:, :n],
+                kept["estimates"][:, :n])
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One command segment's scored window."""
+
+    command: np.ndarray  # (vx, vy, wz) as asked
+    mean: np.ndarray  # mean heading-frame (vx, vy, wz)
+    rms: np.ndarray  # rms of the 1 s averaged (vx, vy, wz) against the command
+    heading_lag: float  # rad: largest |heading of the limited command − heading|
+    radius: float  # m: radius of the circle through the base's path (inf: straight)
+    samples: int
+
+    def mean_error(self) -> np.ndarray:
+        """|mean − command| relative to the command, per axis (NaN where the command is zero)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            error = np.abs(self.mean - self.command) / np.abs(self.command)
+        return np.where(self.command != 0.0, error, np.nan)
+
+
+def segments(run: Walk, end: float | None = None) -> list[Segment]:
+    """The scored window of every segment after the first (standing) one."""
+    robot, times, states = run.robot, run.times, run.states
+    limits = robot.config.walking.command_limits
+    velocity = heading_velocity(robot, times, states)
+    averaged = moving_average(times, velocity, AVERAGE_WINDOW_S)
+    heading = np.unwrap(base_yaw(robot, states))
+    lag = heading - _commanded_heading(run, heading[0])
+    b = robot.base_q_start + 4
+    xy = states[b:b + 2].T
+    reached = reach_times(run.segments, limits)
+    ends = [*(s.start for s in run.segments[1:]), times[-1] if end is None else end]
+    out = []
+    for segment, reach, stop in zip(run.segments[1:], reached[1:], ends[1:], strict=True):
+        scored = (times >= reach + max(SETTLE_S, AVERAGE_WINDOW_S)) & (times < stop)
+        command = segment.command.to_vector()[:3]
+        out.append(Segment(command, velocity[scored].mean(axis=0),
+                           np.sqrt(np.mean((averaged[scored] - command) ** 2, axis=0)),
+                           float(np.abs(lag[scored]).max()), circle_radius(xy[scored]), int(scored.sum())))
+    return out
+
+
+def _commanded_heading(run: Walk, start: float) -> np.ndarray:
+    """The heading the command limiter's yaw rate turns to from ``start``, at each log sample."""
+    limits = run.robot.config.walking.command_limits
+    starts = np.array([s.start for s in run.segments])
+    held, heading, out = np.zeros(3), start, []
+    previous = run.times[0]
+    for t in run.times:
+        dt = t - previous
+        segment = run.segments[int(np.searchsorted(starts, previous, side="right")) - 1]
+        target = segment.command.to_vector()[:3]
+        new = limited_velocity(held, target, limits, dt)
+        heading += 0.5 * (held[2] + new[2]) * dt
+        held, previous = new, t
+        out.append(heading)
+    return np.array(out)
+
+
+def circle_radius(xy: np.ndarray) -> float:
+    """Radius of the least-squares circle through points ``xy`` (N × 2; Kåsa's algebraic fit);
+    inf for points on a line."""
+    A = np.column_stack([xy, np.ones(len(xy))])
+    b = -(xy**2).sum(axis=1)
+    (d, e, f), *_ = np.linalg.lstsq(A, b, rcond=None)
+    r2 = 0.25 * (d * d + e * e) - f
+    scale = np.ptp(xy, axis=0).max()
+    return math.sqrt(r2) if 0.0 < r2 < 1e6 * scale**2 else math.inf
