@@ -13,13 +13,15 @@ limit how fast the torque may change; this one clips the TSC-QP's torque to
 ``max_rate`` N·m/s from the last command sent.
 """
 
+import sys
+
 import numpy as np
 
 from romoco_drake.control.controller import SolverResult
 from romoco_drake.control.registry import CONTROLLERS
 from romoco_drake.control.tscqp import TscQp, TscqpConfig
 from romoco_drake.embedding.references import contact_model
-from romoco_drake.runner import run_scenario
+from romoco_drake.runner import check_failure, run_scenario
 from romoco_drake.scenario import load_scenario, with_overrides
 
 
@@ -58,4 +60,5 @@ def main(duration: float = 4.0) -> dict:
 
 
 if __name__ == "__main__":
-    main()
+    failure = check_failure(main())
+    sys.exit(f"check failed: {failure}" if failure else 0)  # as `romoco run --check`

@@ -12,12 +12,14 @@ Importing this file registers the law as planner `hlip_clamped`, so the command 
     ROMOCO_PLUGINS=examples/custom_planner.py romoco run g1_walk --planner hlip_clamped
 """
 
+import sys
+
 import numpy as np
 
 from romoco_drake.planners.registry import PLANNERS, register_law
 from romoco_drake.robots.model import load_robot
 from romoco_drake.rom.planners import HlipLaw, PlannerParams
-from romoco_drake.runner import run_scenario
+from romoco_drake.runner import check_failure, run_scenario
 from romoco_drake.scenario import load_scenario, with_overrides
 
 
@@ -54,4 +56,5 @@ def main(duration: float = 5.0) -> dict:
 
 
 if __name__ == "__main__":
-    main()
+    failure = check_failure(main())
+    sys.exit(f"check failed: {failure}" if failure else 0)  # as `romoco run --check`

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from romoco_drake.control.tscqp import TscqpConfig
 from romoco_drake.planners.settings import FootPlacementConfig
-from romoco_drake.runner import run_scenario
+from romoco_drake.runner import check_failure, run_scenario
 from romoco_drake.scenario import CommandPoint, Scenario
 
 
@@ -34,4 +34,5 @@ def main(robot: str = "g1", planner: str = "hlip", out_dir: str = "walk_plots",
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:])
+    failure = check_failure(main(*sys.argv[1:]))
+    sys.exit(f"check failed: {failure}" if failure else 0)  # as `romoco run --check`

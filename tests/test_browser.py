@@ -144,6 +144,7 @@ def _start_teleop(tmp_path) -> tuple[subprocess.Popen, str, queue.Queue]:
     pytest.fail("romoco run printed no Meshcat URL")
 
 
+@pytest.mark.slow
 def test_teleop_page_drives_the_robot(browser, tmp_path):
     """Through the page: the robot is there, the vx slider walks it forward (the controller's
     limited command follows it), E-stop latches damping, and the page names the mode."""
@@ -193,6 +194,7 @@ def test_teleop_page_drives_the_robot(browser, tmp_path):
     assert summary["steps"] >= 2
 
 
+@pytest.mark.slow
 def test_replay_loads_and_keeps_the_robot_in_frame(browser, tmp_path):
     """A --record replay opened from file:// loads without a JavaScript error and, at its end,
     the robot (which walked forward) is still in the middle of the picture."""

@@ -111,6 +111,7 @@ def test_bad_scenario_file_is_one_line_exit_2(tmp_path):
     assert f"{path}: {expected}" in out.stderr
 
 
+@pytest.mark.slow
 def test_bench_rom_json_and_plots(tmp_path):
     """The H-LIP bench settles every segment of the profile and writes its two figures."""
     out = romoco("bench", "rom", "--planner", "hlip", "--robot", "cassie", "--json", "--plot", str(tmp_path))
@@ -148,3 +149,23 @@ def test_bench_tick_json():
     parts = ("estimator", "state_machine", "planner", "embedding", "controller")
     assert all(s["tick_ms"][p]["median"] > 0 for p in parts)
     assert s["tick_ms"]["total"]["median"] >= s["tick_ms"]["controller"]["median"]
+
+
+@pytest.mark.parametrize(("outcome", "reason"), [
+    ({"fell": True, "fall_time_s": 2.5, "fall_reason": "base_tilt"}, "g1_walk FELL at 2.50 s (base_tilt)"),
+    ({"qp_failures": 3}, "g1_walk: 3 QP failures"),
+    ({}, None)])
+def test_run_check_exit_code_and_reason(monkeypatch, capsys, outcome, reason):
+    """``romoco run --check`` exits 1 with one line saying why when the robot fell or a QP failed;
+    without ``--check`` the same run exits 0."""
+    from romoco_drake import runner
+    from romoco_drake.cli import main
+
+    summary = {"scenario": "g1_walk", "fell": False, "fall_time_s": None, "fall_reason": None,
+               "qp_failures": 0} | outcome
+    monkeypatch.setattr(runner, "run_scenario", lambda *args, **kwargs: summary)
+    assert main(["run", "g1_walk", "--json"]) == 0
+    capsys.readouterr()
+    assert main(["run", "g1_walk", "--json", "--check"]) == (0 if reason is None else 1)
+    err = capsys.readouterr().err.strip()
+    assert err == ("" if reason is None else f"romoco: check failed: {reason}")

@@ -14,6 +14,7 @@ import signal
 from contextlib import contextmanager
 from unittest import mock
 
+import pytest
 import yaml
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
@@ -161,6 +162,7 @@ def _one_line_or_run(tmp_path_factory, case, run) -> dict | None:
     return summary
 
 
+@pytest.mark.slow
 @FUZZ
 @given(mutated(BASES))
 def test_mutated_scenario_is_one_line_or_a_truthful_run(tmp_path_factory, case):
@@ -175,6 +177,7 @@ def test_mutated_scenario_is_one_line_or_a_truthful_run(tmp_path_factory, case):
         _assert_truthful(summary, loaded["scenario"].initial_height_offset)
 
 
+@pytest.mark.slow
 @FUZZ
 @given(mutated(ROBOTS))
 def test_mutated_robot_is_one_line_or_a_truthful_run(tmp_path_factory, case):

@@ -136,6 +136,7 @@ def _kf_runs(scenario, filters):
     return nees
 
 
+@pytest.mark.slow
 @consistency(3)
 @given(scenario=scenarios())
 def test_kalman_filter_is_consistent_and_a_mistuned_one_is_not(scenario):
@@ -248,6 +249,7 @@ def _inekf_runs(scenario, filters):
     return nees, dofs
 
 
+@pytest.mark.slow
 @consistency(2)
 @given(scenario=scenarios())
 def test_invariant_ekf_is_consistent_and_a_mistuned_one_is_not(scenario):

@@ -3,6 +3,8 @@
 import runpy
 from pathlib import Path
 
+import pytest
+
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
@@ -12,6 +14,7 @@ def test_stand_in_python_example():
     assert summary["fell"] is False and summary["base_height_drift_m"] < 0.02
 
 
+@pytest.mark.slow
 def test_walk_in_python_example(tmp_path):
     module = runpy.run_path(str(EXAMPLES / "walk_in_python.py"))
     summary = module["main"]("g1", "mlip", str(tmp_path), 4.0)
@@ -20,6 +23,7 @@ def test_walk_in_python_example(tmp_path):
     assert all(open(p, "rb").read(4) == b"\x89PNG" for p in summary["plots"])
 
 
+@pytest.mark.slow
 def test_custom_planner_example():
     module = runpy.run_path(str(EXAMPLES / "custom_planner.py"))
     summary = module["main"](4.0)
@@ -35,6 +39,7 @@ def _walked_the_command(summary):
     assert abs(summary["mean_velocity"][0] - 0.2) < 0.03, summary["mean_velocity"]
 
 
+@pytest.mark.slow
 def test_walk_over_lcm_example():
     """The E-stop message latches damping on both sides of the link and is counted once each."""
     module = runpy.run_path(str(EXAMPLES / "walk_over_lcm.py"))
@@ -44,6 +49,7 @@ def test_walk_over_lcm_example():
     assert summary["sent_is_damping"] and summary["applied_is_damping"]
 
 
+@pytest.mark.slow
 def test_custom_controller_example():
     module = runpy.run_path(str(EXAMPLES / "custom_controller.py"))
     summary = module["main"](4.0)

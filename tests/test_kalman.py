@@ -324,6 +324,7 @@ def test_foot_kinematics_velocity_matches_finite_differences():
     np.testing.assert_allclose(kinematics(0.0)[1], fd, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_g1_walks_on_the_kalman_estimate():
     """Closed loop on encoders, IMU and contact switches only (with the sensors' default noise):
     G1 stays up, walks forward as commanded, and the base velocity estimate tracks the truth."""

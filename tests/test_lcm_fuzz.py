@@ -177,7 +177,8 @@ def test_the_right_fingerprint_then_random_bytes_is_rejected_or_meets_the_contra
     decoded(name, DECODERS[name][0]._get_packed_fingerprint() + tail)
 
 
-@pytest.mark.parametrize("name", NAMES)
+@pytest.mark.parametrize("name", [  # the two largest messages take seconds each
+    pytest.param(n, marks=pytest.mark.slow) if n in ("proprioception", "motor_command") else n for n in NAMES])
 @settings(FUZZ, max_examples=25)
 @given(st.data())
 def test_every_truncation_and_every_single_bit_flip_of_a_valid_message(name, data):
@@ -264,6 +265,7 @@ def bolt():
 
 # No shrinking: each example builds a hardware station on its own memq:// LCM, and those are never
 # freed (about 500 in one process exhaust select()'s descriptors and abort it).
+@pytest.mark.slow
 @settings(FUZZ, max_examples=20, phases=[Phase.explicit, Phase.generate])
 @given(st.data())
 def test_measurement_receiver_counts_hostile_bytes_and_keeps_the_newest_good_values(bolt, data):

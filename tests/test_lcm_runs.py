@@ -32,6 +32,7 @@ DROPOUT_T = 3.0  # s: when the walking run's measurements are lost
 # ---------------------------------------------------------------- closed loop over LCM
 
 
+@pytest.mark.slow
 def test_g1_stands_over_lcm_like_the_direct_simulation():
     """g1_stand over LCM (the standing controller's joint PD is sensitive to link latency):
     upright, no link fault on either side, the direct simulation's base height."""
@@ -45,6 +46,7 @@ def test_g1_stands_over_lcm_like_the_direct_simulation():
     assert abs(via["base_height_drift_m"]) < 0.01
 
 
+@pytest.mark.slow
 def test_g1_walks_over_lcm_and_tracks_like_the_direct_simulation():
     """G1 walking forward over LCM: upright, forward, stepping, fault free, and tracking as the
     direct simulation does."""
@@ -77,6 +79,7 @@ def dropout_run():
     return run_scenario(scenario, 6.0, link="via_lcm", inspect=keep_logs), logs
 
 
+@pytest.mark.slow
 def test_g1_walks_through_a_proprioception_dropout_and_a_command_dropout(dropout_run):
     """0.3 s without measurements (ride-through, then STAND: the controller walks on the
     prediction, then steps to a stop) and later 0.1 s without commands (the robot holds its
@@ -89,6 +92,7 @@ def test_g1_walks_through_a_proprioception_dropout_and_a_command_dropout(dropout
     assert summary["robot_link"] == ROBOT_NO_FAULTS | {"stale_events": 1, "hold_events": 1}
 
 
+@pytest.mark.slow
 def test_blind_prediction_beats_constant_velocity_over_the_dropout(dropout_run):
     """Over the 0.3 s blind interval of that run, the joints the controller saw (the model-based
     prediction) are nearer the robot's than a constant-velocity guess from the last message
@@ -168,6 +172,7 @@ def test_estop_latches_damping_on_both_sides():
 # ---------------------------------------------------------------- CLI
 
 
+@pytest.mark.slow
 def test_cli_run_via_lcm_records_a_log_that_plots(tmp_path, capsys):
     """`romoco run --via-lcm --json --lcm-log` reports the link counters; `romoco plot` draws the log."""
     log = tmp_path / "walk.lcmlog"

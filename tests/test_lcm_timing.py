@@ -90,6 +90,7 @@ def _model(deliveries: list[list[int]]):
 @settings(derandomize=True, deadline=None, database=None, max_examples=30,
           phases=[Phase.explicit, Phase.generate], suppress_health_check=[
               HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.filter_too_much])
+@pytest.mark.slow
 @given(deliveries=schedules())
 def test_link_counts_late_and_out_of_order_messages_and_recovers_after_stalls(bolt, deliveries):
     shown, fresh, rejected, gaps = _model(deliveries)

@@ -180,6 +180,7 @@ def test_unsolvable_ticks_and_nan_state_give_the_counted_safe_mode():
     assert system.stats_port.Eval(context).safe_ticks == stats.safe_ticks + 1
 
 
+@pytest.mark.slow
 def test_xo_walks_forward_then_sideways_like_the_alip_template():
     """A shortened Table I: 0.225 m/s forward, then 0.225 m/s to the right, under the momentum
     controller and the general-foot ALIP."""
@@ -232,6 +233,7 @@ def test_line_foot_keeps_the_line_rows_strict_and_ranges_on_locked_joints():
     np.testing.assert_allclose(s.hdot[5], s.hdot_desired[5], atol=tol)
 
 
+@pytest.mark.slow
 def test_h1_tracks_forward_speeds_without_drifting_sideways():
     """H1's first 8 s of ``h1_walk`` (0.2, 0.4, 0.6 m/s) under the momentum controller: the
     lateral velocity stays on its zero command (0.19 m/s rms with every linear row strict)."""

@@ -151,6 +151,7 @@ def test_divergence_becomes_a_simulation_diverged_fall():
     assert divergence(error.value, state).startswith(DIVERGED_MESSAGE)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "duration", "bound"), [("cassie", 2.0, 2e-4), ("draco", 1.5, 1e-4)])
 def test_closed_loops_hold_during_a_walk(name, duration, bound):
     """Cassie's rods (tendon equalities, m) and DRACO's rolling knees (joint equalities, rad) stay

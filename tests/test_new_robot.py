@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import json
 import math
 import textwrap
 
 import numpy as np
 import pytest
 import yaml
+from closed_loop_bounds import check
 
 from romoco_drake.cli import main
 from romoco_drake.robots.model import RobotModel, load_robot_config, load_robot_config_file
@@ -183,3 +185,30 @@ def test_new_robot_errors_are_one_line(tmp_path, capsys):
     (tmp_path / "z.yaml").write_text("keep")
     assert main(["new-robot", str(urdf), "--package-path", str(src), "--out", str(tmp_path / "z.yaml")]) == 2
     assert "--force" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_a_fresh_new_robot_yaml_walks_under_run_check(tmp_path, monkeypatch, capsys):
+    """The README's way in for a robot: ``romoco new-robot`` on G1's URDF, a scenario of its own
+    and ``romoco run --check``, which exits 0 only if it stayed up with no QP failure; it walks
+    its command."""
+    robots = tmp_path / "robots"
+    model = str(model_path(load_robot_config("g1").model))
+    assert main(["new-robot", model, "--out", str(robots / "fresh_g1.yaml")]) == 0
+    scenario = tmp_path / "fresh_g1_walk.yaml"
+    scenario.write_text(textwrap.dedent("""\
+        robot: fresh_g1
+        time_step: 0.002
+        controller: {name: tscqp, rate_hz: 500}
+        planner: {name: hlip}
+        command:
+          - {t: 1.0, vx: 0.2}
+        """))
+    monkeypatch.chdir(tmp_path)  # ./robots holds the new YAML
+    capsys.readouterr()
+    assert main(["run", str(scenario), "--duration", "4", "--check", "--json"]) == 0, capsys.readouterr().err
+    summary = json.loads(capsys.readouterr().out.splitlines()[-1])
+    assert summary["robot"] == "fresh_g1" and summary["steps"] >= 7
+    vx, vy, _ = summary["velocity_rms_error"]
+    check("new_robot.fresh_g1.vx_rms", vx)
+    check("new_robot.fresh_g1.vy_rms", vy)

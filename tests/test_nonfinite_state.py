@@ -166,7 +166,7 @@ def test_a_diverged_estimate_over_lcm_damps_counts_and_ends_with_a_summary(g1, m
     assert np.all(np.isfinite(end["torque"]))
 
 
-@pytest.mark.parametrize("value", [np.nan, np.inf])
+@pytest.mark.parametrize("value", [np.nan, pytest.param(np.inf, marks=pytest.mark.slow)])
 def test_a_non_finite_message_is_rejected_and_the_lost_stream_damps(g1, monkeypatch, value):
     """NaN and inf never pass the link (each message rejected, the last good values kept), so the
     estimate stays usable; the stream counts as lost and ends in damping."""

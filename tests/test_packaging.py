@@ -63,6 +63,7 @@ def _venv_with(wheel: Path, tmp_path: Path) -> Path:
     return venv
 
 
+@pytest.mark.slow
 def test_wheel_install_runs_a_scenario(tmp_path):
     wheel = _build_wheel(tmp_path)
     names = set(zipfile.ZipFile(wheel).namelist())

@@ -132,6 +132,7 @@ def test_contradictory_step_reach_is_a_one_line_error(tmp_path, key, value, mess
     assert "\n" not in str(error.value)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("adapt", [True, False])
 def test_g1_survives_a_lateral_push_only_with_step_adaptation(adapt):
     """G1 at 0.4 m/s, 20 N·s to its right half-way through a right stance (the bench's cell
@@ -143,6 +144,7 @@ def test_g1_survives_a_lateral_push_only_with_step_adaptation(adapt):
     assert summary["fell"] is not adapt
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("momentum", [True, False])
 def test_g1_survives_a_lateral_push_at_the_switch_only_with_the_hip_strategy(momentum):
     """The bench's cell left/0 (20 N·s to the left as the left foot takes the weight, which the

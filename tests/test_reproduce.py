@@ -122,6 +122,7 @@ def test_planner_t_ds_overrides_the_robots_double_support():
     assert built.walking.state_machine.t_ds == 0.0 and built.walking.planner.law.t_ds == 0.0
 
 
+@pytest.mark.slow
 def test_reproduce_all_quick_on_two_workers(tmp_path, capsys):
     """The issue's CI run: every paper at --quick on local Ray; the report states each claim."""
     ray = pytest.importorskip("ray")

@@ -11,6 +11,7 @@ from romoco_drake.runner import run_scenario
 from romoco_drake.scenario import load_scenario
 
 
+@pytest.mark.slow
 def test_stands_three_seconds(robot_name):
     summary = run_scenario(load_scenario(f"{robot_name}_stand"), duration=3.0)
     assert summary["fell"] is False, summary

@@ -67,6 +67,7 @@ def local_ray():
     sweep._started.clear()
 
 
+@pytest.mark.slow
 def test_ray_matrix_equals_in_process_matrix(local_ray):
     """The issue's test: a 4-run matrix on 2 local Ray workers gives the rows of --workers 1."""
     cells = (["g1"], ["hlip", "dcm"], ["tscqp", "id"], 2.0)

@@ -79,6 +79,7 @@ def test_kinematics_of_a_non_finite_state_is_flagged_and_nan():
     assert np.all(np.isnan(kin.M)) and np.all(np.isnan(kin.C)) and np.all(np.isnan(kin.p_com))
 
 
+@pytest.mark.slow
 def test_closed_loop_evaluates_the_kinematics_once_per_tick(monkeypatch):
     """State machine, ROM state, embedding and controller share one evaluation per controller tick."""
     calls = []

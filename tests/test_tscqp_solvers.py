@@ -56,6 +56,7 @@ def _recorded(scenario_name):
     return built.robot, controller.solver.solver.contact, recorder.ticks
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario_name", ["g1_walk", "cassie_walk"])
 def test_daqp_gives_the_reference_solution_in_every_domain(scenario_name):
     """τ, v̇ and the generalized contact force J_hᵀλ agree to 1e-5 (relative to their size).

@@ -86,6 +86,7 @@ def test_standing_runs_no_mpc():
     np.testing.assert_array_equal(system.mpc_stats_port.Eval(context), [0.0, 0.0, 0.0])
 
 
+@pytest.mark.slow
 def test_draco_walks_forward_under_the_vimpc_and_the_wbc():
     """Closed loop, network inertia: 4 s of walking at 0.1 then 0.2 m/s, upright and on command."""
     scenario = dataclasses.replace(load_scenario("draco_walk"), duration_s=5.0,

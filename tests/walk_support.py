@@ -31,6 +31,7 @@ class Walk:
     times: np.ndarray
     states: np.ndarray
     estimates: np.ndarray
+    final_mode: str  # the gait state machine's mode at the end
 
 
 def walk(scenario, duration: float | None = None, **kwargs) -> Walk:
@@ -41,11 +42,13 @@ def walk(scenario, duration: float | None = None, **kwargs) -> Walk:
         kept["times"], kept["states"] = log_samples(built.state_log.FindLog(context), None)
         kept["estimates"] = log_samples(built.estimate_log.FindLog(context), None)[1]
         kept["robot"], kept["segments"] = built.robot, built.command.segments
+        machine = built.walking.state_machine
+        kept["mode"] = machine.schedule(machine.GetMyContextFromRoot(context)).mode
 
     summary = run_scenario(scenario, duration=duration, inspect=keep, **kwargs)
     n = min(kept["states"].shape[1], kept["estimates"].shape[1])
     return Walk(summary, kept["robot"], kept["segments"], kept["times"][:n], kept["states"][:, :n],
-                kept["estimates"][:, :n])
+                kept["estimates"][:, :n], kept["mode"])
 
 
 @dataclass(frozen=True)
@@ -56,7 +59,7 @@ class Segment:
     mean: np.ndarray  # mean heading-frame (vx, vy, wz)
     rms: np.ndarray  # rms of the 1 s averaged (vx, vy, wz) against the command
     heading_lag: float  # rad: largest |heading of the limited command − heading|
-    radius: float  # m: radius of the circle through the base's path (inf: straight)
+    radius: float  # m: radius of the path walked (inf: straight)
     samples: int
 
     def mean_error(self) -> np.ndarray:
@@ -74,8 +77,11 @@ def segments(run: Walk, end: float | None = None) -> list[Segment]:
     averaged = moving_average(times, velocity, AVERAGE_WINDOW_S)
     heading = np.unwrap(base_yaw(robot, states))
     lag = heading - _commanded_heading(run, heading[0])
-    b = robot.base_q_start + 4
-    xy = states[b:b + 2].T
+    # The base sways sideways once per stride (two steps): the path walked is its velocity
+    # averaged over a stride.
+    walking = robot.config.walking
+    j = robot.nq + robot.base_v_start + 3
+    stride_velocity = moving_average(times, states[j:j + 2].T, 2.0 * (walking.t_ss + walking.t_ds))
     reached = reach_times(run.segments, limits)
     ends = [*(s.start for s in run.segments[1:]), times[-1] if end is None else end]
     out = []
@@ -84,7 +90,8 @@ def segments(run: Walk, end: float | None = None) -> list[Segment]:
         command = segment.command.to_vector()[:3]
         out.append(Segment(command, velocity[scored].mean(axis=0),
                            np.sqrt(np.mean((averaged[scored] - command) ** 2, axis=0)),
-                           float(np.abs(lag[scored]).max()), circle_radius(xy[scored]), int(scored.sum())))
+                           float(np.abs(lag[scored]).max()),
+                           path_radius(times[scored], stride_velocity[scored]), int(scored.sum())))
     return out
 
 
@@ -105,12 +112,10 @@ def _commanded_heading(run: Walk, start: float) -> np.ndarray:
     return np.array(out)
 
 
-def circle_radius(xy: np.ndarray) -> float:
-    """Radius of the least-squares circle through points ``xy`` (N × 2; Kåsa's algebraic fit);
-    inf for points on a line."""
-    A = np.column_stack([xy, np.ones(len(xy))])
-    b = -(xy**2).sum(axis=1)
-    (d, e, f), *_ = np.linalg.lstsq(A, b, rcond=None)
-    r2 = 0.25 * (d * d + e * e) - f
-    scale = np.ptp(xy, axis=0).max()
-    return math.sqrt(r2) if 0.0 < r2 < 1e6 * scale**2 else math.inf
+def path_radius(times: np.ndarray, velocity: np.ndarray) -> float:
+    """The radius of a path walked at horizontal ``velocity`` (N × 2, world) over ``times``: its
+    length over the turn of its direction (inf when it does not turn)."""
+    length = float(np.sum(np.linalg.norm(velocity[:-1], axis=1) * np.diff(times)))
+    direction = np.unwrap(np.arctan2(velocity[:, 1], velocity[:, 0]))
+    turned = abs(direction[-1] - direction[0])
+    return length / turned if turned > 0.0 else math.inf
