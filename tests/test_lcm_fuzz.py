@@ -178,7 +178,8 @@ def test_the_right_fingerprint_then_random_bytes_is_rejected_or_meets_the_contra
 
 
 @pytest.mark.parametrize("name", [  # the two largest messages take seconds each
-    pytest.param(n, marks=pytest.mark.slow) if n in ("proprioception", "motor_command") else n for n in NAMES])
+    pytest.param(n, marks=pytest.mark.slow) if n in ("proprioception", "motor_command") else n
+    for n in NAMES])
 @settings(FUZZ, max_examples=25)
 @given(st.data())
 def test_every_truncation_and_every_single_bit_flip_of_a_valid_message(name, data):
