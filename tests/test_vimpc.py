@@ -5,7 +5,9 @@ import functools
 
 import numpy as np
 import pytest
+from closed_loop_bounds import check
 from pydrake.systems.analysis import Simulator
+from walk_support import MEAN_TOLERANCE, segments, walk
 
 from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.modes import Mode
@@ -13,7 +15,6 @@ from romoco_drake.planners.vimpc import VimpcConfig, VimpcPlanner
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import load_robot
 from romoco_drake.rom.types import MpcReference, WalkCommand
-from romoco_drake.runner import run_scenario
 from romoco_drake.scenario import CommandPoint, load_scenario
 
 
@@ -92,9 +93,13 @@ def test_draco_walks_forward_under_the_vimpc_and_the_wbc():
     scenario = dataclasses.replace(load_scenario("draco_walk"), duration_s=5.0,
                                    command=[CommandPoint(1.0, vx=0.1), CommandPoint(2.5, vx=0.2)])
     assert scenario.planner.inertia == "network" and scenario.controller.name == "wbc"
-    out = run_scenario(scenario)
+    run = walk(scenario)
+    out = run.summary
     assert not out["fell"], out["fall_reason"]
-    assert out["steps"] >= 8 and out["mpc_solves"] > 0.9 * 4.0 * scenario.planner.rate_hz
+    check("vimpc.draco.steps", out["steps"])
+    assert out["mpc_solves"] > 0.9 * 4.0 * scenario.planner.rate_hz
     assert out["mpc_failures"] == 0 and out["qp_failures"] == 0
-    assert max(out["velocity_rms_error"][:2]) <= 0.1, out["velocity_rms_error"]
-    assert out["mean_velocity"][0] > 0.5 * (1.5 * 0.1 + 2.5 * 0.2) / 5.0  # half the commanded mean
+    check("vimpc.draco.vx_rms", out["velocity_rms_error"][0])
+    check("vimpc.draco.vy_rms", out["velocity_rms_error"][1])
+    for segment in segments(run):
+        assert segment.mean_error()[0] <= MEAN_TOLERANCE, (segment.command, segment.mean)

@@ -113,9 +113,8 @@ def _commanded_heading(run: Walk, start: float) -> np.ndarray:
 
 
 def path_radius(times: np.ndarray, velocity: np.ndarray) -> float:
-    """The radius of a path walked at horizontal ``velocity`` (N × 2, world) over ``times``: its
-    length over the turn of its direction (inf when it does not turn)."""
-    length = float(np.sum(np.linalg.norm(velocity[:-1], axis=1) * np.diff(times)))
+    """The radius of a path walked at horizontal ``velocity`` (N × 2, world) over ``times``: its mean
+    speed over the rate its direction turns at (a least-squares slope; inf when it does not turn)."""
     direction = np.unwrap(np.arctan2(velocity[:, 1], velocity[:, 0]))
-    turned = abs(direction[-1] - direction[0])
-    return length / turned if turned > 0.0 else math.inf
+    rate = abs(np.polyfit(times, direction, 1)[0])
+    return float(np.linalg.norm(velocity, axis=1).mean()) / rate if rate > 1e-9 else math.inf
