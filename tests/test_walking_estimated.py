@@ -82,7 +82,8 @@ def test_invariant_ekf_from_a_wrong_start_converges_and_drifts_little(wrong_star
     """
     scenario, run = wrong_start
     summary = run.summary
-    assert not summary["fell"] and summary["qp_failures"] == 0 and summary["safe_mode_entries"] == 0
+    assert not summary["fell"], f"fell at {summary['fall_time_s']} s ({summary['fall_reason']})"
+    assert summary["qp_failures"] == 0 and summary["safe_mode_entries"] == 0
     assert summary["estimator_rejected_updates"] == 0
     tilt, v_error, yaw, p_error = _estimate_errors(run)
     assert tilt[0] == pytest.approx(math.radians(3.0), rel=0.02) and yaw[0] == pytest.approx(0.1, abs=1e-3)
