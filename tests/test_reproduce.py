@@ -122,9 +122,41 @@ def test_planner_t_ds_overrides_the_robots_double_support():
     assert built.walking.state_machine.t_ds == 0.0 and built.walking.planner.law.t_ds == 0.0
 
 
+# The quick reproduction's verdict on each claim (romoco reproduce all --quick, measured: the
+# numbers behind each are in the comment). The MPC solve-time claim is a wall-clock time that
+# depends on the machine's load: it is reported, not asserted.
+QUICK_VERDICTS = {
+    # tscqp 0.0693, id 0.0655, velik 0.0521, posik 0.0516 m/s (G1's first 6 s)
+    ("romoco", "QP tracks the commanded velocity best (lowest ‖vx, vy, wz rms‖)"): False,
+    ("romoco", "ID performs close to QP (velocity error within 1.5× QP's)"): True,
+    # tscqp 0.0305, id 0.0411, velik 0.0199, posik 0.016 rad
+    ("romoco", "IK has the best swing-foot orientation (lowest tilt/yaw rms)"): True,
+    ("romoco", "IK tracks velocity worse than QP (both IK controllers)"): False,
+    # tscqp 0.00361, id 0.00358, velik 0.0118, posik 0.00668 rad
+    ("romoco", "IK tracks pelvis orientation worse than QP (both IK controllers)"): True,
+    ("romoco", "ALIP loses stability under the aggressive command"): False,  # at T_DS = 0 ALIP is H-LIP
+    ("romoco", "H-LIP, MLIP and DCM keep walking"): True,
+    # hlip 0.0902, mlip 0.0902, dcm 0.107 m/s
+    ("romoco", "H-LIP, MLIP and DCM track nearly identically (errors within 1.25×)"): True,
+    ("xo", "the robot walks Table I's commands without falling"): True,
+    ("xo", "centroidal angular momentum about an order of magnitude below the contact one "
+           "(ratio ≤ 0.2)"): True,
+    ("xo", "mid-step prediction of the end-of-step contact momentum matches the measured one "
+           "(mean error ≤ 15 % of |L_c|)"): True,  # 3.5 % over 17 steps
+    ("xo", "1 s averaged CoM velocity tracks the command (vx, vy rms ≤ 0.1 m/s)"): True,  # 0.0251, 0.0429
+    # the network-inertia ramp fell at 0.61 m/s, the nominal and updated ones reached 0.92, 0.93
+    ("vimpc", "CCINN (case 3) tracks up to 1.3 m/s (ours ≥ 90 %)"): False,
+    ("vimpc", "CCINN beats both baselines (cases 1, 2)"): False,
+    ("vimpc", "the CCINN predicts the centroidal inertia along a forward walk "
+              "(median relative Frobenius error ≤ 5 %)"): True,  # median 0.1 %, p95 2.3 % over 91 samples
+}
+WALL_CLOCK_CLAIM = "MPC solve time mostly below 2 ms (our median < 2 ms)"
+
+
 @pytest.mark.slow
 def test_reproduce_all_quick_on_two_workers(tmp_path, capsys):
-    """The issue's CI run: every paper at --quick on local Ray; the report states each claim."""
+    """The issue's CI run: every paper at --quick on local Ray; the report states each claim, and
+    each verdict is the one measured (``QUICK_VERDICTS``)."""
     ray = pytest.importorskip("ray")
     try:
         assert main(["reproduce", "all", "--quick", "--workers", "2", "--out", str(tmp_path), "--json"]) == 0
@@ -135,6 +167,8 @@ def test_reproduce_all_quick_on_two_workers(tmp_path, capsys):
     claims, runs = results["claims"], results["runs"]
     assert {c["paper"] for c in claims} == {"romoco", "xo", "vimpc"}
     assert all(c["holds"] in (True, False) and c["ours"] for c in claims)  # everything here is built
+    verdicts = {(c["paper"], c["claim"]): c["holds"] for c in claims if c["claim"] != WALL_CLOCK_CLAIM}
+    assert verdicts == QUICK_VERDICTS, {k: v for k, v in verdicts.items() if QUICK_VERDICTS.get(k) != v}
     fig8 = {r["planner"]: r for r in runs if r["part"] == "fig8"}
     # At T_DS = 0 ALIP's and MLIP's steps are H-LIP's: the same run to the last digit.
     for name in ("alip", "mlip"):
