@@ -42,8 +42,8 @@ def walk(scenario, duration: float | None = None, **kwargs) -> Walk:
     kept = {}
 
     def keep(built, context):
-        kept["times"], kept["states"] = log_samples(built.state_log.FindLog(context), None)
-        kept["estimates"] = log_samples(built.estimate_log.FindLog(context), None)[1]
+        kept["times"], kept["states"] = log_samples(built.logs.find(built.state_log, context), None)
+        kept["estimates"] = log_samples(built.logs.find(built.estimate_log, context), None)[1]
         kept["robot"], kept["segments"] = built.robot, built.command.segments
         machine = built.walking.state_machine
         kept["mode"] = machine.schedule(machine.GetMyContextFromRoot(context)).mode
