@@ -88,16 +88,20 @@ def check(key: str, value: float) -> None:
     """Asserts ``value`` is inside ``BOUNDS[key]``; with ``$ROMOCO_MEASURED`` set, appends the
     value to that file first (how the measured column is filled in; a key without a bound yet
     is only recorded)."""
-    record = os.environ.get("ROMOCO_MEASURED")
-    if record:
-        with open(record, "a") as f:
-            f.write(f"{key} {value!r}\n")
+    if recording():
+        with open(os.environ["ROMOCO_MEASURED"], "a") as f:
+            f.write(f"{key} {float(value)!r}\n")
         if key not in BOUNDS:
             return
     bound = BOUNDS[key]
     inside = value >= bound.limit if bound.floor else value <= bound.limit
     assert inside, (f"{key} = {value:.4g} {'below' if bound.floor else 'above'} its bound {bound.limit:g} "
                     f"(measured {bound.measured:g})")
+
+
+def recording() -> bool:
+    """Whether the checks record what they see (``$ROMOCO_MEASURED``)."""
+    return bool(os.environ.get("ROMOCO_MEASURED"))
 
 
 def main(argv: list[str]) -> int:

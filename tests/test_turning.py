@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 from closed_loop_bounds import check
-from walk_support import MEAN_TOLERANCE, path_radius, segments, walk
+from walk_support import MEAN_TOLERANCE, check_mean, path_radius, segments, walk
 
 from romoco_drake.embedding.outputs import WalkingOutputs
 from romoco_drake.metrics import moving_average
@@ -74,10 +74,7 @@ def test_walks_an_arc_then_stops_and_stands(scenario):
     turn = segments(run)[0]
     assert turn.samples >= 150, "window too short to score"
     robot = scenario.removesuffix("_walk")
-    print(f"{scenario}: mean {turn.mean.round(4)}, rms {turn.rms.round(4)}, heading lag "
-          f"{turn.heading_lag:.4f} rad, radius {turn.radius:.3f} m")
-    mean_error = turn.mean_error()
-    assert mean_error[0] <= MEAN_TOLERANCE and mean_error[2] <= MEAN_TOLERANCE, turn.mean
+    check_mean(f"turning.{robot}", turn)
     assert abs(turn.radius - vx / wz) <= MEAN_TOLERANCE * vx / wz, turn.radius
     check(f"turning.{robot}.vx_rms", turn.rms[0])
     check(f"turning.{robot}.vy_rms", turn.rms[1])

@@ -10,6 +10,8 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 
 def _romoco(*args: str) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "romoco_drake.cli", *args], stdout=subprocess.PIPE,
@@ -22,6 +24,7 @@ def _summary(process: subprocess.Popen) -> dict:
     return json.loads(out.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_robot_sim_and_hardware_controller_talk_over_udp():
     url = f"udpm://239.255.76.67:{7000 + os.getpid() % 997}?ttl=0"  # a port of this test's own
     robot = _romoco("robot-sim", "g1_walk", "--lcm-url", url, "--duration", "2.5", "--wait", "120", "--json")

@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from closed_loop_bounds import BOUNDS, check, recording
 
 from romoco_drake.metrics import AVERAGE_WINDOW_S, SETTLE_S, heading_velocity, moving_average
 from romoco_drake.planners.command import limited_velocity, reach_times
@@ -70,6 +71,25 @@ class Segment:
         with np.errstate(divide="ignore", invalid="ignore"):
             error = np.abs(self.mean - self.command) / np.abs(self.command)
         return np.where(self.command != 0.0, error, np.nan)
+
+
+def check_mean(key: str, segment: Segment) -> None:
+    """The segment's mean velocity within 10 % of its command on each commanded axis (none: a
+    stop), unless a measured shortfall is listed as ``<key>.mean_error`` in
+    ``closed_loop_bounds.BOUNDS``: then within that bound (1.5× what was measured), so the
+    shortfall is on record and cannot grow."""
+    errors = segment.mean_error()
+    if not np.isnan(errors).all():
+        check_mean_error(key, float(np.nanmax(errors)))
+
+
+def check_mean_error(key: str, error: float) -> None:
+    """A mean velocity's relative error against its command: see :func:`check_mean` (recording,
+    every error is recorded, for the shortfalls to be listed)."""
+    if f"{key}.mean_error" in BOUNDS or recording():
+        check(f"{key}.mean_error", error)
+    else:
+        assert error <= MEAN_TOLERANCE, f"{key}: mean velocity {error:.1%} off its command"
 
 
 def segments(run: Walk, end: float | None = None) -> list[Segment]:
