@@ -32,12 +32,10 @@ class LogSamples:
     def data(self) -> np.ndarray:
         return self._data
 
-    def num_samples(self) -> int:
-        return len(self._times)
-
 
 class RunLogs:
-    """The diagram's vector logs (each a ``VectorLogSink``), spilled to a temporary directory."""
+    """The diagram's vector logs (each a ``VectorLogSink``), spilled to a temporary directory that
+    is removed with this object."""
 
     def __init__(self, sinks: list[VectorLogSink]):
         self._sinks = [sink for sink in sinks if sink is not None]
@@ -68,9 +66,3 @@ class RunLogs:
         rows = np.fromfile(path, dtype=np.float64).reshape(-1, 1 + log.get_input_size())
         return LogSamples(np.concatenate([rows[:, 0], log.sample_times()]),
                           np.hstack([rows[:, 1:].T, log.data()]))
-
-    def close(self) -> None:
-        """Removes the spilled files (also done when the object is collected)."""
-        if self._directory is not None:
-            self._directory.cleanup()
-            self._directory, self._spilled = None, {}

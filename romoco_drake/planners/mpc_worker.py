@@ -46,7 +46,6 @@ class MpcWorker:
         if reply != "ready":
             raise RomocoError(f"the MPC worker for {robot_name} failed to start: {reply}")
         self.busy = False
-        self.requests = 0
         weakref.finalize(self, _stop, self._conn, self._process)
 
     def request(self, x: np.ndarray, side: str, elapsed: float, command: np.ndarray, t: float) -> bool:
@@ -55,7 +54,7 @@ class MpcWorker:
         if self.busy:
             return False
         self._conn.send((x, side, elapsed, command, t))
-        self.busy, self.requests = True, self.requests + 1
+        self.busy = True
         return True
 
     def newest(self):
