@@ -24,16 +24,20 @@ def moving_average(times: np.ndarray, values: np.ndarray, window: float) -> np.n
     return (csum[1:] - csum[start]) / count
 
 
-def velocity_tracking(robot: RobotModel, command: CommandSource, times: np.ndarray, states: np.ndarray
-                      ) -> dict:
+def velocity_tracking(robot: RobotModel, command: CommandSource, times: np.ndarray, states: np.ndarray,
+                      velocity: np.ndarray | None = None) -> dict:
     """RMS of the 1 s averaged velocity against the command, after each segment's first second.
+
+    The velocity is the base's in its heading frame (:func:`heading_velocity`), or ``velocity``
+    ((N, 3) at ``times``, e.g. :func:`com_heading_velocity`).
 
     The second counts from when the robot's command limiter (its ``walking.command_limits``) has
     ramped to the segment's command, the segment's start for the small steps of the default
     profiles. The error is against the command as asked, so a segment beyond the velocity
     limits scores what was not walked.
     """
-    measured = moving_average(times, heading_velocity(robot, times, states), AVERAGE_WINDOW_S)
+    velocity = heading_velocity(robot, times, states) if velocity is None else velocity
+    measured = moving_average(times, velocity, AVERAGE_WINDOW_S)
     starts = np.array([s.start for s in command.segments])
     segment = np.searchsorted(starts, times, side="right") - 1
     wanted = np.array([[c.vx, c.vy, c.wz] for c in (s.command for s in command.segments)])[segment]
@@ -43,10 +47,25 @@ def velocity_tracking(robot: RobotModel, command: CommandSource, times: np.ndarr
     rms = np.sqrt(np.mean(err**2, axis=0)) if len(err) else np.full(3, math.nan)
     return {
         "velocity_rms_error": [round(float(e), 4) for e in rms],
-        "mean_velocity": [round(float(v), 4) for v in _mean(heading_velocity(robot, times, states))],
+        "mean_velocity": [round(float(v), 4) for v in _mean(velocity)],
         "measured": measured,
         "wanted": wanted,
     }
+
+
+def com_heading_velocity(robot: RobotModel, times: np.ndarray, states: np.ndarray) -> np.ndarray:
+    """(N, 3): the CoM's forward and lateral velocity in the base's heading frame, and the base's
+    yaw rate (the XO paper's Fig. 9 tracks the CoM, not the pelvis)."""
+    plant = robot.plant
+    context = plant.CreateDefaultContext()
+    v = np.zeros((len(times), 3))
+    for k, x in enumerate(states.T):
+        plant.SetPositionsAndVelocities(context, x)
+        v[k] = plant.CalcCenterOfMassTranslationalVelocityInWorld(context)
+    yaw = base_yaw(robot, states)
+    c, s = np.cos(yaw), np.sin(yaw)
+    wz = heading_velocity(robot, times, states)[:, 2]
+    return np.column_stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], wz])
 
 
 def _mean(values: np.ndarray) -> np.ndarray:

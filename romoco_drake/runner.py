@@ -243,7 +243,7 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, 
     momentum = (None if loop.momentum_log is None
                 else log_samples(built.logs.find(loop.momentum_log, context), until))
     if momentum is not None:
-        out |= momentum_summary(*momentum)
+        out |= momentum_summary(*momentum, built.robot.total_mass, built.robot.config.walking.z0)
     if plot_dir is not None:
         from romoco_drake.plots import plot_run
 

@@ -28,6 +28,11 @@ def skew(v: np.ndarray) -> np.ndarray:
     return out
 
 
+def rotation_angle(R: np.ndarray) -> float:
+    """The angle (rad) of the rotation matrix ``R`` about its axis, in [0, π]."""
+    return float(np.arccos(np.clip(0.5 * (np.trace(R) - 1.0), -1.0, 1.0)))
+
+
 def so3_exp(phi: np.ndarray) -> np.ndarray:
     """Exp(φ) (3×3): the rotation by |φ| (rad) about φ; Rodrigues, its series below |φ| = 1e-4."""
     theta = float(np.linalg.norm(phi))

@@ -100,6 +100,7 @@ class WalkingLoop:
     error_log: VectorLogSink  # embedding tracking errors per group
     limiter: CommandLimiter
     momentum_log: VectorLogSink | None = None  # MomentumLog records, for controllers that regulate momentum
+    inertia_horizon_log: VectorLogSink | None = None  # the VI-MPC's per-knot inertia, every MPC update
     estop_gate: EstopGate | None = None  # the controller's mode, damping after a page E-stop (teleop)
 
 
@@ -206,7 +207,8 @@ def _add_station(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel,
     motor_pd = uses_motor_command(scenario)
     if link == "sim":
         station = make_engine_station(scenario.station.engine, robot, scenario.time_step, meshcat, motor_pd,
-                                      scenario.sensors, disturbances=scenario.disturbances)
+                                      scenario.sensors, disturbances=scenario.disturbances,
+                                      payload=scenario.station.payload)
         return builder.AddNamedSystem("station", station), station, None
     station = builder.AddNamedSystem("station", make_hardware_station(
         robot, lcm, 1.0 / scenario.controller.rate_hz, motor_pd, scenario.link, LINK_TICK_OFFSET,
@@ -215,7 +217,8 @@ def _add_station(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel,
         return station, None, None
     robot_sim = builder.AddNamedSystem("robot", make_robot_sim(
         robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link, motor_pd=motor_pd,
-        disturbances=scenario.disturbances, dropouts=scenario.dropouts, engine=scenario.station.engine))
+        disturbances=scenario.disturbances, dropouts=scenario.dropouts, engine=scenario.station.engine,
+        payload=scenario.station.payload))
     return station, robot_sim.GetSubsystemByName("station"), robot_sim
 
 
@@ -297,8 +300,8 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     heading = builder.AddNamedSystem("heading", HeadingHold(robot, period, offset=offset))
     builder.Connect(limiter.command_port, heading.command_in_port)
     builder.Connect(state, heading.state_port)
-    machine = builder.AddNamedSystem("state_machine", GaitStateMachine(robot, period, planner_system.t_ds,
-                                                                       offset=offset))
+    machine = builder.AddNamedSystem("state_machine", GaitStateMachine(
+        robot, period, planner_system.t_ds, step_in_place=scenario.planner.step_in_place, offset=offset))
     builder.Connect(kin, machine.kinematics_port)
     builder.Connect(limiter.command_port, machine.command_port)
     builder.Connect(machine.stop_port, limiter.stop_port)
@@ -327,10 +330,12 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
                              (rom_state.rom_state_port, recorder.rom_state_port)):
             builder.Connect(source, port)
         momentum_log = LogVectorOutput(recorder.record_port, builder, period)
+    horizon_log = (LogVectorOutput(planner.inertia_horizon_port, builder, 1.0 / planner.config.rate_hz)
+                   if isinstance(planner, VimpcPlanner) else None)
     return WalkingLoop(machine, planner, embedding, controller,
                        LogVectorOutput(controller.tick_ms_port, builder, period),
                        LogVectorOutput(embedding.tracking_error_port, builder, STATE_LOG_PERIOD),
-                       limiter, momentum_log, gate)
+                       limiter, momentum_log, horizon_log, gate)
 
 
 def _add_tracking(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, kin, machine, planner,

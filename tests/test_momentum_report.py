@@ -97,6 +97,8 @@ def test_known_prediction_offset_gives_its_ratio():
 def test_nothing_qualifies_gives_none():
     standing = _log(_double_support() * 5)
     assert momentum_summary(*standing) == {"centroidal_am_ratio": None, "step_end_L_error": None,
+                                           "com_lateral_rms_error": None, "com_height_rms_error": None,
+                                           "momentum_tracking_error": None, "vertical_momentum_ratio": None,
                                            "step_end_L_steps": 0}
     in_place = _log(_step(1, (6.0, 8.0), (6.0, 8.0), cmds=[STOP] * 5) + _double_support())
     assert momentum_summary(*in_place)["centroidal_am_ratio"] is None
@@ -141,3 +143,38 @@ def test_plot_momentum_run_writes_five_figures(tmp_path, step_width):
     assert [p.name for p in paths] == ["xo_fig5_com.png", "xo_fig6_momentum.png", "xo_fig7_phase.png",
                                        "xo_fig8_contact_momentum.png", "xo_fig9_velocity.png"]
     assert all(p.stat().st_size > 0 for p in paths)
+
+
+def _orbit_step(stance: int, p0: float, l0: float, n: int = 25, dt: float = 0.02, bump: float = 0.0
+                ) -> list[np.ndarray]:
+    """One single-support step on the exact sagittal and frontal ALIP flows (eq. 9-10) from
+    (p0, L0) in both planes; ``bump`` adds that much to L_cy at the step's middle sample."""
+    ell = math.sqrt(GRAVITY / HEIGHT)
+    cols = []
+    for k in range(n):
+        t = k * dt
+        p = p0 * math.cosh(ell * t) + l0 * math.sinh(ell * t) / (MASS * HEIGHT * ell)
+        lc = l0 * math.cosh(ell * t) + MASS * HEIGHT * ell * p0 * math.sinh(ell * t)
+        l_y = lc + (bump if k == n // 2 else 0.0)
+        record = MomentumRecord(stance, t, np.array(WALK), l_com=np.zeros(3),
+                                l_contact=np.array([-lc, l_y, 0.0]), com_in_contact=np.array([p, -p]))
+        cols.append(record.pack())
+    return cols
+
+
+def test_orbit_spread_is_zero_on_the_template_and_grows_off_it():
+    """Fig. 7's number: states on the ALIP flow keep e = L²/(m² g H) − p² (spread 0); a momentum
+    kick mid-step moves them off the orbit, in the sagittal plane only."""
+    steps = [_orbit_step(1 if k % 2 else -1, -0.1, 25.0, dt=0.02) for k in range(6)]
+    columns = [c for step in steps for c in step]
+    times = np.arange(len(columns)) * 0.02
+    data = np.column_stack(columns)
+    s = momentum_summary(times, data, MASS, HEIGHT)
+    # Six 0.5 s steps: the first two start within SETTLE_S of the log's start (a transition), the
+    # last may be cut off by the log's end; three are scored.
+    assert s["alip_orbit_steps"] == 3
+    assert s["alip_orbit_spread"][0] < 1e-3 and s["alip_orbit_spread"][1] < 1e-3
+    kicked = [_orbit_step(1 if k % 2 else -1, -0.1, 25.0, dt=0.02, bump=20.0) for k in range(6)]
+    s = momentum_summary(times, np.column_stack([c for step in kicked for c in step]), MASS, HEIGHT)
+    assert s["alip_orbit_spread"][0] > 0.05 and s["alip_orbit_spread"][1] < 1e-3
+    assert "alip_orbit_spread" not in momentum_summary(times, data)  # needs the mass and height

@@ -53,6 +53,24 @@ def test_one_tick_plans_stance_wrenches_and_a_swing_foothold(inertia):
     np.testing.assert_array_equal(system.mpc_stats_port.Eval(context), [1.0, 0.0, 0.0])
 
 
+def test_the_network_inertia_at_the_first_knot_is_the_plants():
+    """At the nominal pose the first knot's feet are about where they stand: the CCINN, fed the foot
+    frames it was trained on, gives the plant's centroidal inertia (fed the soles' centres, as it
+    once was, it was 20 % off); the inertia_horizon port carries it with the solve's time."""
+    from romoco_drake.robots.centroidal import centroidal_inertia
+
+    robot, system, context = _planner("network")
+    Simulator(system, context).AdvanceTo(0.001)
+    horizon = system.inertia_horizon_port.Eval(context)
+    assert horizon[0] == 0.0 and horizon.size == 1 + 9 * system.config.knots
+    plant_context = robot.plant.CreateDefaultContext()
+    robot.plant.SetPositions(plant_context, robot.nominal.q)
+    truth = centroidal_inertia(robot.plant, plant_context)
+    first = horizon[1:10].reshape(3, 3)
+    # 2.6 % measured: knot 0 is the middle of its interval, the swing foot already lifting.
+    assert np.linalg.norm(first - truth) / np.linalg.norm(truth) < 0.05
+
+
 def test_failed_solves_hold_the_last_reference_then_fall_back():
     """A non-finite state fails the solve: the previous reference is kept while it is younger
     than max_age (0.02 s), then the output carries none; both are counted."""

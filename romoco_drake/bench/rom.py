@@ -186,7 +186,8 @@ def planner_cost_us(planner: FootPlacementPlanner, run: TemplateRun, segments: l
 
 def percentiles(ns: list[int]) -> dict:
     a = np.array(ns) / 1e3
-    return {"median": round(float(np.median(a)), 2), "p99": round(float(np.percentile(a, 99)), 2)}
+    return {"mean": round(float(np.mean(a)), 2), "median": round(float(np.median(a)), 2),
+            "p99": round(float(np.percentile(a, 99)), 2)}
 
 
 def bench_rom(planner_name: str, robot: str = "g1", t_ds: float | None = None,

@@ -134,8 +134,9 @@ class MomentumLog(LeafSystem):
         discrete_state.get_mutable_vector(self._record).SetFromVector(record.pack())
 
 
-def momentum_summary(times: np.ndarray, data: np.ndarray) -> dict:
-    """How closely the robot's momenta follow the ALIP template (XO paper, Fig. 6 and 8).
+def momentum_summary(times: np.ndarray, data: np.ndarray, mass: float | None = None,
+                     height: float | None = None) -> dict:
+    """How closely the robot's momenta follow the ALIP template (XO paper, Figs. 5-8).
 
     ``data`` is the (MOMENTUM_LOG_SIZE, N) momentum log. Only single-support samples with a
     non-zero command (|vx| or |vy| > COMMAND_ON) count.
@@ -150,6 +151,15 @@ def momentum_summary(times: np.ndarray, data: np.ndarray) -> dict:
       last sample. The planner's feedback rests on this prediction; mid-step skips the impact
       transient at the step's start.
     - ``step_end_L_steps``: how many steps that mean is over.
+    - Fig. 5, ``com_lateral_rms_error`` and ``com_height_rms_error`` (m): RMS of the CoM's y and z
+      against their references.
+    - Fig. 6, ``momentum_tracking_error``: RMS ‖m v − m v_d‖ / RMS ‖m v_d‖ of the horizontal
+      linear momentum; ``vertical_momentum_ratio``: RMS |m v_z| / RMS ‖m v_xy‖.
+    - Fig. 7 (with ``mass`` and ``height`` H = z0), ``alip_orbit_spread`` (sagittal, frontal): the
+      ALIP flow ṗ = ±L/(mH), L̇ = ±m g p keeps e = L²/(m² g H) − p² constant along each orbit;
+      per complete step past the transitions (SETTLE_S after a command change, as the paper's
+      figure), (max e − min e) / mean(L²/(m² g H) + p²), the median over those steps.
+      ``alip_orbit_steps``: how many steps.
 
     Each ratio is rounded to 4 decimals, or None when nothing qualifies or it is not finite.
     """
@@ -157,11 +167,12 @@ def momentum_summary(times: np.ndarray, data: np.ndarray) -> dict:
     walking = (log.stance != 0) & np.any(np.abs(log.command) > COMMAND_ON, axis=0)
     l_com = np.linalg.norm(log.l_com[:, walking], axis=0)
     l_c = np.linalg.norm(log.l_contact[:, walking], axis=0)
-    am_ratio = _ratio(np.sqrt(np.mean(l_com**2)), np.sqrt(np.mean(l_c**2))) if walking.any() else math.nan
+    am_ratio = _ratio(_rms(l_com), _rms(l_c)) if walking.any() else math.nan
 
     period = float(np.median(np.diff(times))) if len(times) > 1 else math.nan
+    steps = _single_support_steps(log.stance, log.t_in_step)
     errors, sizes = [], []
-    for first, last in _single_support_steps(log.stance, log.t_in_step):
+    for first, last in steps:
         if last == len(times) - 1 or not walking[first:last + 1].all():
             continue
         t_in = log.t_in_step[first:last + 1]
@@ -173,9 +184,62 @@ def momentum_summary(times: np.ndarray, data: np.ndarray) -> dict:
         errors.append(np.linalg.norm(log.l_contact_predicted[:, mid] - measured))
         sizes.append(np.linalg.norm(measured))
     step_error = _ratio(np.mean(errors), np.mean(sizes)) if errors else math.nan
-    am, step = (round(float(v), 4) for v in (am_ratio, step_error))
-    am, step = (v if math.isfinite(v) else None for v in (am, step))
-    return {"centroidal_am_ratio": am, "step_end_L_error": step, "step_end_L_steps": len(errors)}
+
+    moving = np.any(np.abs(log.command) > COMMAND_ON, axis=0)
+    com_error = (log.com - log.com_desired)[:, moving]
+    momentum_error = np.linalg.norm((log.momentum - log.momentum_desired)[:2, moving], axis=0)
+    figures = {"com_lateral_rms_error": _rms(com_error[1]), "com_height_rms_error": _rms(com_error[2]),
+               "momentum_tracking_error": _ratio(_rms(momentum_error), _rms(np.linalg.norm(
+                   log.momentum_desired[:2, moving], axis=0))),
+               "vertical_momentum_ratio": _ratio(_rms(log.momentum[2, moving]),
+                                                 _rms(np.linalg.norm(log.momentum[:2, moving], axis=0)))}
+    out = {"centroidal_am_ratio": am_ratio, "step_end_L_error": step_error} | figures
+    if mass is not None and height is not None:
+        spread, n = _orbit_spread(times, log, steps, mass, height)
+        out |= {"alip_orbit_spread": spread}
+    out = {k: _rounded(v) for k, v in out.items()}
+    out["step_end_L_steps"] = len(errors)
+    if mass is not None and height is not None:
+        out["alip_orbit_steps"] = n
+    return out
+
+
+def _orbit_spread(times: np.ndarray, log: MomentumRecord, steps: list[tuple[int, int]], mass: float,
+                  height: float) -> tuple[list[float | None], int]:
+    """Median relative spread of the ALIP orbital energy per steady step, (sagittal, frontal)
+    (:func:`momentum_summary`), and the number of steps."""
+    from romoco_drake.metrics import SETTLE_S
+
+    changed = np.ones(len(times), dtype=bool)
+    changed[1:] = np.any(log.command[:, 1:] != log.command[:, :-1], axis=0)
+    last_change = np.maximum.accumulate(np.where(changed, times, -np.inf))
+    steady = (times - last_change >= SETTLE_S) & np.any(np.abs(log.command) > COMMAND_ON, axis=0)
+    scale = mass * mass * 9.81 * height
+    spreads = []
+    for first, last in steps:
+        if last == len(times) - 1 or last - first < 2 or not steady[first:last + 1].all():
+            continue
+        per_plane = []
+        for p, ell in ((log.com_in_contact[0], log.l_contact[1]), (log.com_in_contact[1], log.l_contact[0])):
+            p, ell = p[first:last + 1], ell[first:last + 1]
+            e = ell**2 / scale - p**2
+            per_plane.append(float(np.ptp(e) / np.mean(ell**2 / scale + p**2)))
+        spreads.append(per_plane)
+    if not spreads:
+        return [None, None], 0
+    return [_rounded(v) for v in np.median(np.array(spreads), axis=0)], len(spreads)
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x)))) if np.size(x) else math.nan
+
+
+def _rounded(v):
+    """A ratio rounded to 4 decimals, None if not finite; lists element-wise."""
+    if isinstance(v, list):
+        return v
+    v = round(float(v), 4)
+    return v if math.isfinite(v) else None
 
 
 def _single_support_steps(stance: np.ndarray, t_in_step: np.ndarray) -> list[tuple[int, int]]:

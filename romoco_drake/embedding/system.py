@@ -15,13 +15,15 @@ from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_val
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.types import GAIT_PHASE_SIZE, PlannerOutput, side_from_sign
 
-# Output groups of the ``tracking_error`` port: (label, name prefixes). Unmatched outputs (in-air
-# joints) count as "joints".
+# Output groups of the ``tracking_error`` port: (label, name prefixes), the tasks of the RoMoCo
+# paper's eq. 13: z_com; pelvis pitch and roll; the swing foot's x, y, z; its roll and pitch; the
+# stance and swing hip yaw (our swing_sole_yaw). Unmatched outputs (in-air joints) count as "joints".
 ERROR_GROUPS = (
     ("com", ("com_",)),
     ("pelvis", ("pelvis_",)),
     ("swing foot position", ("swing_foot_x", "swing_foot_y", "swing_foot_z")),
-    ("swing foot tilt, hip yaw", ("swing_foot_", "stance_hip_yaw", "swing_sole_yaw")),
+    ("swing foot orientation", ("swing_foot_roll", "swing_foot_pitch")),
+    ("hip yaw", ("stance_hip_yaw", "swing_sole_yaw")),
     ("joints", ()),
 )
 
@@ -40,7 +42,7 @@ class OutputEmbedding(LeafSystem):
     | ``gait_phase`` | in | 2 | stance (+1 left, −1 right), time in step [s] |
     | ``mode`` | in | abstract | :class:`~romoco_drake.modes.Mode` |
     | ``task_references`` | out | abstract | :class:`~romoco_drake.embedding.references.TaskReferences` |
-    | ``tracking_error`` | out | 5 | norm of the active errors y − y_d per ``ERROR_GROUPS`` (m or rad) |
+    | ``tracking_error`` | out | 6 | norm of the active errors y − y_d per ``ERROR_GROUPS`` (m or rad) |
 
     Abstract state: the current step's :class:`SwingState` when walking, the
     :class:`StandState` latched on entering standing, else nothing. Discrete state: the

@@ -32,6 +32,9 @@ The station also watches the plant's true state, for scoring runs whatever the e
 believes: subsystem ``truth_log`` logs it every ``truth_log_period`` s and subsystem
 ``monitor`` (:class:`~romoco_drake.interfaces.monitor.FallMonitor`) records falls.
 
+With ``payload`` the simulated robot carries a mass welded to its base that the controllers'
+model (``robot.plant``) does not have: a model error.
+
 With ``disturbances`` (pushes, :mod:`~romoco_drake.interfaces.disturbance`), subsystem
 ``disturbances`` feeds the plant's applied spatial force input; without, that input stays unconnected.
 """
@@ -46,17 +49,17 @@ from romoco_drake.interfaces.disturbance import Disturbance, DisturbanceSource
 from romoco_drake.interfaces.monitor import FallMonitor
 from romoco_drake.interfaces.motors import MotorCommandAdapter
 from romoco_drake.interfaces.sensors import SensorConfig, add_sensors
-from romoco_drake.robots.model import RobotModel
+from romoco_drake.robots.model import Payload, RobotModel
 
 
 def make_station(
     robot: RobotModel, time_step: float = 0.001, meshcat: Meshcat | None = None, motor_pd: bool = False,
     sensors: SensorConfig | None = None, truth_log_period: float = 0.01,
-    disturbances: list[Disturbance] | None = None,
+    disturbances: list[Disturbance] | None = None, payload: Payload | None = None,
 ) -> Diagram:
     """Builds the simulated station for ``robot`` (see the module docstring for ports)."""
     builder = DiagramBuilder()
-    plant, scene_graph = robot.add_to_builder(builder, time_step, motor_pd=motor_pd)
+    plant, scene_graph = robot.add_to_builder(builder, time_step, motor_pd=motor_pd, payload=payload)
     plant.set_name("plant")
     if motor_pd:
         adapter = builder.AddNamedSystem("motors", MotorCommandAdapter(robot))

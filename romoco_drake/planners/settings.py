@@ -16,9 +16,12 @@ from romoco_drake.config import Range, declare_ranges
 
 @dataclass
 class PlannerSettings:
-    """``name``: the registry entry (``romoco list``)."""
+    """``name``: the registry entry (``romoco list``). ``step_in_place``: the gait starts and keeps
+    stepping under a zero command instead of standing (the RoMoCo paper's Fig. 9 steps G1 in
+    place); point feet always do, having nothing to stand on."""
 
     name: str = "hlip"
+    step_in_place: bool = False
 
 
 @dataclass

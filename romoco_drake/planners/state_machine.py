@@ -99,7 +99,8 @@ class GaitStateMachine(LeafSystem):
       stopped yet, starts from standing if it had.
     - point feet have no support area to stand on (the CoM would balance on the segment between
       two points): such a robot starts walking as soon as it stands balanced, under a zero command
-      too, and keeps stepping in place instead of stopping.
+      too, and keeps stepping in place instead of stopping; ``step_in_place`` asks the same of
+      any robot.
     - any mode → damping (latched) on a non-finite state, the base below ``fall_height`` of its
       nominal height, or a base tilt above ``fall_tilt`` rad; counted in ``safe_mode_entries``.
 
@@ -120,7 +121,7 @@ class GaitStateMachine(LeafSystem):
                  stop_steps: int = 2, fall_height: float = 0.5, fall_tilt: float = math.pi / 4,
                  touchdown_height: float = 0.01, settle_time: float = 0.2, lift_time: float = 0.01,
                  early_touchdown: float = 0.6, touchdown_timeout: float = 0.1, air_height: float = 0.03,
-                 landing_radius: float = 0.05, offset: float = 0.0):
+                 landing_radius: float = 0.05, step_in_place: bool = False, offset: float = 0.0):
         super().__init__()
         self.robot, self.t_ds, self.period = robot, t_ds, period
         self.balance_speed, self.stop_steps = balance_speed, stop_steps
@@ -130,7 +131,7 @@ class GaitStateMachine(LeafSystem):
         self.contact_touchdown = not robot.is_point_foot
         self._min_base_z = fall_height * robot.nominal.base_height
         self._cos_tilt = math.cos(fall_tilt)
-        self.steps_in_place = robot.is_point_foot
+        self.steps_in_place = robot.is_point_foot or step_in_place
         self.kinematics_port = self.DeclareAbstractInputPort("kinematics", kinematics_model_value(robot))
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
         self.foot_contact_port = self.DeclareVectorInputPort("foot_contact", 2)

@@ -33,6 +33,7 @@ and fallback updates are counted on ``mpc_stats`` for the run summary.
 | ``mode`` | in | abstract | :class:`~romoco_drake.modes.Mode` (the MPC runs while walking) |
 | ``planner_output`` | out | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` with ``mpc`` |
 | ``mpc_stats`` | out | 3 | solves, failed solves, updates without a usable reference |
+| ``inertia_horizon`` | out | 1 + 9·knots | the held solve's time, its world inertia per knot (NaN: none) |
 """
 
 from __future__ import annotations
@@ -153,6 +154,14 @@ class VimpcPlanner(LeafSystem):
         R_WB = self._base.EvalPoseInWorld(context).rotation().matrix()
         self._nominal_inertia_B = R_WB.T @ centroidal_inertia(plant, context) @ R_WB
         self._ccinn = load_ccinn(robot.name) if config.inertia == "network" else None
+        # The CCINN was trained on the foot frames' poses (inertia/data.py), the horizon plans the
+        # soles' centres: each knot's sole pose is moved to its foot frame, −c in the sole's axes
+        # (c: the sole centre in a z-up foot frame). Fed the sole poses as they were, the network
+        # was 20 % off on DRACO's nominal pose (0.05 % from the foot frames).
+        self._frame_in_sole = np.array([-robot.feet[side].points.mean(axis=1) for side in SIDES])
+        z_up = all(np.allclose(robot.feet[s].up, [0.0, 0.0, 1.0]) for s in SIDES)
+        if config.inertia == "network" and not z_up:
+            raise ValueError("vimpc network inertia needs z-up foot frames (the CCINN's foot poses)")
         self._wbo = load_wbo(robot.name) if config.inertia == "network" else None
         # The roll and pitch the orientation state has at the nominal pose with a level torso:
         # the MPC's reference. The WBO map is identity at its own fitting pose, not at the
@@ -180,6 +189,9 @@ class VimpcPlanner(LeafSystem):
         self.planner_output_port = self.DeclareAbstractOutputPort(
             "planner_output", lambda: AbstractValue.Make(PlannerOutput.placeholder()), self._calc_plan)
         self.mpc_stats_port = self.DeclareStateOutputPort("mpc_stats", self._stats)
+        self.inertia_horizon_port = self.DeclareVectorOutputPort(
+            "inertia_horizon", 1 + 9 * config.knots, self._calc_inertia_horizon,
+            {self.abstract_state_ticket(self._reference)})
 
     def summary(self, context) -> dict:
         """The run summary's planner keys: solves, failed solves, updates on the fallback, the
@@ -281,6 +293,7 @@ class VimpcPlanner(LeafSystem):
             X_WB[:, :3, 3] = kin.p_base + 0.5 * (x_ref[:-1, 3:6] + x_ref[1:, 3:6]) - x0[3:6]
             X_WB[:, 3, 3] = 1.0
             poses = gs.foot_poses(p_k, yaw_k)
+            poses[..., :3, 3] += np.einsum("ksij,sj->ksi", poses[..., :3, :3], self._frame_in_sole)
             inertia = predict_inertia_horizon(X_WB, poses[:, 0], poses[:, 1], self._ccinn)
         else:
             inertia = turn @ I_now @ turn.transpose(0, 2, 1)
@@ -288,7 +301,7 @@ class VimpcPlanner(LeafSystem):
         wrenches = solution.u[0].reshape(2, 6) if solution.ok else np.zeros((2, 6))
         nxt = x_ref[1]
         return MpcReference(wrenches, nxt[3:6].copy(), nxt[9:12].copy(), nxt[:3].copy(), nxt[6:9].copy(), t,
-                            bool(solution.ok))
+                            bool(solution.ok), inertia)
 
     def _rom_state(self, kin: RobotKinematics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """x₀ = [Θ, p_c, ω, ṗ_c], the base rotation R_WB and the inertia held over the horizon."""
@@ -329,6 +342,14 @@ class VimpcPlanner(LeafSystem):
         return footholds, yaws
 
     # ------------------------------------------------------------------ the output
+    def _calc_inertia_horizon(self, context, output) -> None:
+        """[solved_at, the held reference's inertia per knot (row-major 3×3)], NaN without one."""
+        reference = context.get_abstract_state(self._reference).get_value()
+        if isinstance(reference, MpcReference) and reference.inertia is not None:
+            output.SetFromVector(np.concatenate([[reference.solved_at], reference.inertia.ravel()]))
+        else:
+            output.SetFromVector(np.full(output.size(), np.nan))
+
     def _calc_plan(self, context, value) -> None:
         sign, elapsed = self.gait_phase_port.Eval(context).tolist()
         side = side_from_sign(sign)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import fnmatch
 import functools
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +25,7 @@ from pydrake.multibody.plant import (
     MultibodyPlant,
     MultibodyPlantConfig,
 )
-from pydrake.multibody.tree import JacobianWrtVariable, PdControllerGains, RevoluteJoint
+from pydrake.multibody.tree import JacobianWrtVariable, PdControllerGains, RevoluteJoint, SpatialInertia
 from pydrake.systems.framework import DiagramBuilder
 
 from romoco_drake.config import load_typed
@@ -88,6 +88,18 @@ class Foot:
     points: np.ndarray
     up: np.ndarray  # unit sole normal in the foot frame
     sim_points: np.ndarray  # the simulation's contact points (3×M), by default ``points``
+
+
+PAYLOAD_RADIUS = 0.05  # m: a payload is a solid sphere, this small, centred at its offset
+
+
+@dataclass
+class Payload:
+    """A mass welded to the simulated robot's base (``station.payload``), unknown to the
+    controllers: ``mass_fraction`` of the robot's mass, centred at ``offset`` (m, base frame)."""
+
+    mass_fraction: float = 0.0
+    offset: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
 
 
 @dataclass(frozen=True)
@@ -249,13 +261,16 @@ class RobotModel:
 
     # ----------------------------------------------------------- simulation plant
     def add_to_builder(
-        self, builder: DiagramBuilder, time_step: float, motor_pd: bool = False
+        self, builder: DiagramBuilder, time_step: float, motor_pd: bool = False,
+        payload: Payload | None = None,
     ) -> tuple[MultibodyPlant, SceneGraph]:
         """Adds the simulation plant (SAP, sole contact points, flat ground, loop constraints).
 
         ``motor_pd`` gives every actuator an implicit PD loop with the YAML gains, solved inside
         the SAP step as a position-controlled motor's own loop would run; the plant then takes
-        a desired state [q_d; v_d] (actuator order) besides the feedforward torque.
+        a desired state [q_d; v_d] (actuator order) besides the feedforward torque. ``payload``
+        welds an extra body to the base of this plant only (a model error: ``self.plant``, the
+        controllers' model, stays without it).
         """
         plant_config = MultibodyPlantConfig(
             time_step=time_step,
@@ -271,6 +286,12 @@ class RobotModel:
                 plant.get_mutable_joint_actuator(index).set_controller_gains(gains)
         self._add_contact_geometry(plant)
         self._add_sim_constraints(plant)
+        if payload is not None and payload.mass_fraction > 0.0:
+            mass = payload.mass_fraction * self.total_mass
+            body = plant.AddRigidBody("payload", self.model_instance,
+                                      SpatialInertia.SolidSphereWithMass(mass, PAYLOAD_RADIUS))
+            plant.WeldFrames(plant.GetBodyByName(self.config.base_body, self.model_instance).body_frame(),
+                             body.body_frame(), RigidTransform(np.asarray(payload.offset, dtype=float)))
         plant.Finalize()
         return plant, scene_graph
 

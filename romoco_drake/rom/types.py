@@ -76,7 +76,8 @@ class MpcReference(SharedValue):
     axes (N·m, N), from the first knot of the last solve; zero on a foot the gait schedule has
     in swing. ``com``, ``com_velocity`` (world, m, m/s) and ``orientation`` (roll, pitch, yaw,
     rad), ``angular_velocity`` (world, rad/s): the MPC's reference at the next knot.
-    ``solved_at``: controller time of the solve (s); ``ok``: the solve succeeded.
+    ``solved_at``: controller time of the solve (s); ``ok``: the solve succeeded. ``inertia``
+    (knots×3×3, world, kg·m²): the centroidal inertia the solve held at each knot, or None.
     """
 
     wrenches: np.ndarray
@@ -86,6 +87,7 @@ class MpcReference(SharedValue):
     angular_velocity: np.ndarray
     solved_at: float
     ok: bool
+    inertia: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
