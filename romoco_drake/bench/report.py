@@ -16,17 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from romoco_drake.bench.reproduce import (
-    ERRORS,
-    FIG7_CONTROLLERS,
-    PAPERS,
-    QUICK_SHORTENS,
-    REFERENCES,
-    Claim,
-    reproduce,
-    speed_error,
-    tracking_error,
-)
+from romoco_drake.bench.reproduce import PAPERS, QUICK_SHORTENS, REFERENCES, Claim, reproduce
+from romoco_drake.bench.reproduce_romoco import ERRORS, FIG7_CONTROLLERS, speed_error, tracking_error
 from romoco_drake.bench.sweep import add_sweep_args, sweep_options
 from romoco_drake.errors import RomocoError
 from romoco_drake.simulation import stderr_progress

@@ -185,15 +185,7 @@ def momentum_summary(times: np.ndarray, data: np.ndarray, mass: float | None = N
         sizes.append(np.linalg.norm(measured))
     step_error = _ratio(np.mean(errors), np.mean(sizes)) if errors else math.nan
 
-    moving = np.any(np.abs(log.command) > COMMAND_ON, axis=0)
-    com_error = (log.com - log.com_desired)[:, moving]
-    momentum_error = np.linalg.norm((log.momentum - log.momentum_desired)[:2, moving], axis=0)
-    figures = {"com_lateral_rms_error": _rms(com_error[1]), "com_height_rms_error": _rms(com_error[2]),
-               "momentum_tracking_error": _ratio(_rms(momentum_error), _rms(np.linalg.norm(
-                   log.momentum_desired[:2, moving], axis=0))),
-               "vertical_momentum_ratio": _ratio(_rms(log.momentum[2, moving]),
-                                                 _rms(np.linalg.norm(log.momentum[:2, moving], axis=0)))}
-    out = {"centroidal_am_ratio": am_ratio, "step_end_L_error": step_error} | figures
+    out = {"centroidal_am_ratio": am_ratio, "step_end_L_error": step_error} | _tracking_figures(log)
     if mass is not None and height is not None:
         spread, n = _orbit_spread(times, log, steps, mass, height)
         out |= {"alip_orbit_spread": spread}
@@ -202,6 +194,18 @@ def momentum_summary(times: np.ndarray, data: np.ndarray, mass: float | None = N
     if mass is not None and height is not None:
         out["alip_orbit_steps"] = n
     return out
+
+
+def _tracking_figures(log: MomentumRecord) -> dict:
+    """Figs. 5 and 6 of :func:`momentum_summary`, over the samples with a non-zero command."""
+    moving = np.any(np.abs(log.command) > COMMAND_ON, axis=0)
+    com_error = (log.com - log.com_desired)[:, moving]
+    momentum_error = np.linalg.norm((log.momentum - log.momentum_desired)[:2, moving], axis=0)
+    desired = np.linalg.norm(log.momentum_desired[:2, moving], axis=0)
+    horizontal = np.linalg.norm(log.momentum[:2, moving], axis=0)
+    return {"com_lateral_rms_error": _rms(com_error[1]), "com_height_rms_error": _rms(com_error[2]),
+            "momentum_tracking_error": _ratio(_rms(momentum_error), _rms(desired)),
+            "vertical_momentum_ratio": _ratio(_rms(log.momentum[2, moving]), _rms(horizontal))}
 
 
 def _orbit_spread(times: np.ndarray, log: MomentumRecord, steps: list[tuple[int, int]], mass: float,

@@ -154,14 +154,7 @@ class VimpcPlanner(LeafSystem):
         R_WB = self._base.EvalPoseInWorld(context).rotation().matrix()
         self._nominal_inertia_B = R_WB.T @ centroidal_inertia(plant, context) @ R_WB
         self._ccinn = load_ccinn(robot.name) if config.inertia == "network" else None
-        # The CCINN was trained on the foot frames' poses (inertia/data.py), the horizon plans the
-        # soles' centres: each knot's sole pose is moved to its foot frame, −c in the sole's axes
-        # (c: the sole centre in a z-up foot frame). Fed the sole poses as they were, the network
-        # was 20 % off on DRACO's nominal pose (0.05 % from the foot frames).
-        self._frame_in_sole = np.array([-robot.feet[side].points.mean(axis=1) for side in SIDES])
-        z_up = all(np.allclose(robot.feet[s].up, [0.0, 0.0, 1.0]) for s in SIDES)
-        if config.inertia == "network" and not z_up:
-            raise ValueError("vimpc network inertia needs z-up foot frames (the CCINN's foot poses)")
+        self._frame_in_sole = _foot_frames_in_soles(robot, config.inertia == "network")
         self._wbo = load_wbo(robot.name) if config.inertia == "network" else None
         # The roll and pitch the orientation state has at the nominal pose with a level torso:
         # the MPC's reference. The WBO map is identity at its own fitting pose, not at the
@@ -395,6 +388,19 @@ class _NoReference:
     """The reference state before the first solve and outside walking."""
 
     ok = False
+
+
+def _foot_frames_in_soles(robot: RobotModel, network: bool) -> np.ndarray:
+    """(2, 3): each foot frame's origin in its sole frame (left, right).
+
+    The CCINN was trained on the foot frames' poses (inertia/data.py); the horizon plans the
+    soles' centres, so each knot's sole pose is moved to its foot frame, −c in the sole's axes
+    (c: the sole centre in a z-up foot frame). Fed the sole poses as they were, the network was
+    20 % off on DRACO's nominal pose (0.05 % from the foot frames).
+    """
+    if network and not all(np.allclose(robot.feet[s].up, [0.0, 0.0, 1.0]) for s in SIDES):
+        raise ValueError("vimpc network inertia needs z-up foot frames (the CCINN's foot poses)")
+    return np.array([-robot.feet[side].points.mean(axis=1) for side in SIDES])
 
 
 def _sole_half_extent(robot: RobotModel) -> tuple[float, float]:

@@ -1,0 +1,71 @@
+"""What every ``romoco reproduce`` paper shares: a claim row, the run lengths, small helpers."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+TRACE_PERIOD_S = 0.1  # figure traces are thinned to this period
+
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Run lengths of one reproduction (full or ``quick``)."""
+
+    fig7_robots: tuple[str, ...]
+    fig7_duration: float | None  # None: the profile's 20 s
+    fig8_duration: float
+    fig9_duration: float
+    xo_duration: float | None  # None: Table I's 44 s
+    agility_motions: tuple[str, ...]
+    agility_rate: float
+    solve_ticks: int
+    circle_duration: float | None  # None: no Fig. 6 run
+
+
+
+@dataclass(frozen=True)
+class Claim:
+    """One row of the report; ``holds`` None: not built (nothing measured)."""
+
+    paper: str
+    source: str
+    claim: str
+    paper_value: str
+    ours: str
+    ratio: str
+    holds: bool | None
+    note: str = ""
+
+
+
+def not_built(paper: str, source: str, claim: str, what: str) -> Claim:
+    return Claim(paper, source, claim, "", "not built", "", None, what)
+
+
+# Jobs: module-level so that Ray can ship them.
+
+
+
+def thin(times: np.ndarray, period: float = TRACE_PERIOD_S) -> np.ndarray:
+    """Indices of ``times`` about ``period`` apart."""
+    if len(times) == 0:
+        return np.zeros(0, dtype=int)
+    wanted = np.arange(times[0], times[-1] + 1e-9, period)
+    return np.unique(np.searchsorted(times, wanted).clip(0, len(times) - 1))
+
+
+# Each paper: its variants (tagged with "part") and the claims scored from their rows.
+
+
+
+def fmt(x: float, digits: int = 3) -> str:
+    return "fell" if x == math.inf else f"{x:.{digits}g}"
+
+
+
+def fall_text(row: dict) -> str:
+    return f"fell at {row['fall_time_s']:.2f} s" if row["fell"] else "stayed up"
