@@ -281,9 +281,9 @@ def _horizon_claim(probe: dict) -> Claim:
 
 
 def _wbo_claim(circle: dict) -> Claim:
-    """Fig. 6: torso against whole-body orientation on the circle."""
+    """Fig. 6: torso against whole-body orientation on the circle, up to a second before a fall."""
     t, deg = np.array(circle["wbo_angle"]["t"]), np.array(circle["wbo_angle"]["deg"])
-    live = deg[t <= (circle["fall_time_s"] or math.inf)]
+    live = deg[t <= (circle["fall_time_s"] or math.inf) - 1.0]  # the settled window: no stumble
     largest = float(live.max()) if len(live) else math.nan
     rms = float(np.sqrt(np.mean(live**2))) if len(live) else math.nan
     return Claim("vimpc", "Fig. 6", "torso orientation and WBO differ visibly on the 0.9 m/s, 0.9 rad/s "
