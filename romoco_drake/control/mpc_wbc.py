@@ -40,7 +40,10 @@ class WbcConfig(TscqpConfig):
     push recovery (2f73966); here the MPC's wrenches already plan the CoM height, and DRACO's
     forward agility ramp (``settled``, nominal / updated / network inertia) went from
     0.96 / 0.94 / 1.10 m/s at 10 to 0.92 / 0.90 / 0.86 at 100 (network: fell behind the
-    command); 3 gave 0.99 / 0.99 / 0.95, the same mean over the modes as 10.
+    command); 3 gave 0.99 / 0.99 / 0.95, the same mean over the modes as 10. The other ramps
+    moved less, some the other way: diagonal 0.64 / 0.65 / 0.57 at 10 against 0.67 / 0.71 / 0.60
+    at 100; circle (planner k2 1) 0.70 / 0.70 / 0.66 against 0.77 / 0.86 / 0.81; turning
+    2.55 / 2.55 / 2.46 against 2.49 / 2.49 / 2.42 rad/s.
     """
 
     name: str = "wbc"
