@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from romoco_drake.control.mpc_wbc import MpcWbc, WbcConfig
+from romoco_drake.control.tasks import DEFAULT_TASK_GAINS, task_gains, with_weight
 from romoco_drake.control.terms.angular_momentum import AngularMomentumConfig
 from romoco_drake.control.terms.joint_limits import JointLimitConfig
 from romoco_drake.control.terms.load_split import LoadSplitConfig
@@ -69,11 +70,13 @@ def test_wbc_tracks_a_feasible_wrench_exactly():
 
 @pytest.mark.parametrize("ok", [False, None])
 def test_wbc_without_a_usable_reference_is_the_tscqp(ok):
-    """A failed MPC solve (ok False) or none at all: the WBC's answer is the TSC-QP's."""
+    """A failed MPC solve (ok False) or none at all: the WBC's answer is the TSC-QP's with the
+    WBC's CoM-height weight."""
     robot, core, kin, refs = _draco()
     mpc = None if ok is None else _reference(robot, kin, np.full((2, 6), 50.0), ok=False)
     wbc, _ = MpcWbc(robot, core.contact).compute(kin, dataclasses.replace(refs, mpc=mpc))
-    plain, _ = TscQp(robot, core.contact).compute(kin, refs)
+    gains = with_weight(DEFAULT_TASK_GAINS, "com_z", WbcConfig().com_height_weight)
+    plain, _ = TscQp(robot, core.contact, gains=gains).compute(kin, refs)
     np.testing.assert_allclose(wbc.tau, plain.tau, atol=1e-9)
 
 
@@ -94,3 +97,15 @@ def test_wbc_keeps_every_tscqp_term_while_tracking_the_mpc():
     np.testing.assert_allclose(added[:nv, :nv], 2.0 * w_k * A_k.T @ A_k, atol=1e-9 * scale)
     np.testing.assert_allclose(added[nv:nv + n_f, nv:nv + n_f], 2.0 * w_f * np.eye(n_f), atol=1e-9 * scale)
     assert base.n_lim == 0 and kept.n_lim > 0 and len(kept.A) == len(base.A) + kept.n_lim
+
+
+def test_wbc_weights_the_com_height_by_its_config():
+    """``com_height_weight`` sets the com_z task's weight alone, its gains as the TSC-QP's."""
+    gains = with_weight(DEFAULT_TASK_GAINS, "com_z", 3.0)
+    kp, kd, weight = task_gains(["com_z", "com_x", "swing_foot_x"], gains)
+    kp0, kd0, weight0 = task_gains(["com_z", "com_x", "swing_foot_x"])
+    np.testing.assert_array_equal(weight, [3.0, weight0[1], weight0[2]])
+    np.testing.assert_array_equal(kp, kp0)
+    np.testing.assert_array_equal(kd, kd0)
+    robot, core, _, _ = _draco()
+    assert MpcWbc(robot, core.contact, WbcConfig(com_height_weight=3.0))._tasks.gains == gains

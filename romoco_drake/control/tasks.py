@@ -59,6 +59,12 @@ def task_gains(names, gains=DEFAULT_TASK_GAINS) -> tuple[np.ndarray, np.ndarray,
             np.array([g.weight for g in rows]))
 
 
+def with_weight(gains: tuple[TaskGain, ...], output: str, weight: float) -> tuple[TaskGain, ...]:
+    """``gains`` with ``output`` weighted ``weight`` (its gains as ``gains`` set them)."""
+    g = next(g for g in gains if fnmatch.fnmatchcase(output, g.outputs))
+    return (TaskGain(output, g.kp, g.kd, weight), *gains)
+
+
 # Singular values below this fraction of the largest count as zero (redundant contact rows
 # and unactuated directions are zero to round-off; real ones are ≥ 1e-3 of the largest).
 RANK_RTOL = 1e-8
