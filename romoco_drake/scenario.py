@@ -245,15 +245,13 @@ def validate_scenario(scenario: Scenario, source: str | Path | None = None) -> N
 
 def _check_controller(scenario: Scenario, where: str | Path) -> None:
     """A controller term that cannot act is an error, not a silent no-op: a point foot carries a
-    force only, so there is no centre of pressure for the ankle strategy to move; the hip and ankle
-    strategies ``when: recovering`` act only while a step adapter bounds the step."""
+    force only, so there is no centre of pressure for the ankle strategy to move; the hip strategy
+    ``when: recovering`` acts only while a step adapter bounds the step."""
+    momentum = getattr(scenario.controller, "angular_momentum", None)
     adapts = isinstance(scenario.planner, FootPlacementConfig) and scenario.planner.step_adaptation.enabled
-    for name, field in (("angular_momentum", "weight"), ("ankle", "gain")):
-        term = getattr(scenario.controller, name, None)
-        if term is not None and getattr(term, field) > 0.0 and term.when == "recovering" and not adapts:
-            raise ConfigError(where, f"controller.{name}.when", "'recovering' needs the planner's step "
-                              "adaptation (planner.step_adaptation.enabled), which this scenario does not "
-                              "have")
+    if momentum is not None and momentum.weight > 0.0 and momentum.when == "recovering" and not adapts:
+        raise ConfigError(where, "controller.angular_momentum.when", "'recovering' needs the planner's step "
+                          "adaptation (planner.step_adaptation.enabled), which this scenario does not have")
     ankle = getattr(scenario.controller, "ankle", None)
     if ankle is not None and ankle.gain > 0.0 and load_robot_config(scenario.robot).feet.type == "point":
         raise ConfigError(where, "controller.ankle.gain", f"robot '{scenario.robot}' has point feet: they "

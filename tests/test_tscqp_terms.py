@@ -142,12 +142,6 @@ def test_ankle_strategy_pulls_toward_the_weight_at_the_capture_point_shifted_cop
     np.testing.assert_allclose(s, np.sqrt(w) * moment[:2], rtol=1e-12)
     no_plan = dataclasses.replace(ctx, refs=dataclasses.replace(refs, com_flow=None))
     np.testing.assert_array_equal(term.rows(no_plan)[1], np.zeros(2))
-    recovering = AnkleStrategy(contact, robot.total_mass, PivotMomentConfig(weight=w),
-                               AnkleConfig(gain=gain, when="recovering"))
-    assert not refs.recovering
-    np.testing.assert_array_equal(recovering.rows(ctx)[1], np.zeros(2))
-    pushed = dataclasses.replace(ctx, refs=dataclasses.replace(refs, recovering=True))
-    np.testing.assert_allclose(recovering.rows(pushed)[1], s, rtol=1e-12)
 
 
 def test_load_split_pulls_the_double_support_forces_toward_the_commanded_total_force():

@@ -5,17 +5,13 @@ weight with its centre of pressure moved by ``gain`` × the DCM's horizontal err
 step's ALIP plan (``TaskReferences.com_plan``), toward the error: the capture-point control law
 (Englsberger et al. 2011) inside the sole (the CoP rows bound it). Planners plan with the pivot
 at the sole centre; they replan every tick from the measured state, so what the ankle adds is
-taken into account at once. ``when: recovering`` moves the target only while the step adapter
-bounds the planner's step (``TaskReferences.recovering``), as the angular-momentum term does;
-otherwise the pivot moment's zero target stays.
+taken into account at once.
 """
 
 from __future__ import annotations
 
 import math
-import dataclasses
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
@@ -24,24 +20,20 @@ from romoco_drake.control.terms.pivot_moment import PivotMoment, PivotMomentConf
 from romoco_drake.control.terms.term import TermContext
 from romoco_drake.embedding.contact import ContactModel
 from romoco_drake.errors import RomocoError
-from romoco_drake.robots.kinematics import heading_rotation
 from romoco_drake.spatial import GRAVITY
 
 
 @dataclass
 class AnkleConfig:
-    """The ankle strategy: the stance CoP shift per metre of DCM error; ``when``: in every single
-    support, or only while recovering from a push (module docstring). Off at 0: always on, on G1
-    (0.1) it made the 0 → 1 m/s step fall; on H1 and Cassie (line feet) it tracked worse (H1 vx
-    rms error 0.035 → 0.064 m/s)."""
+    """The ankle strategy: the stance CoP shift per metre of DCM error. Off at 0: on G1 (0.1) it
+    made the 0 → 1 m/s step fall; on H1 and Cassie (line feet) it tracked worse (H1 vx rms error
+    0.035 → 0.064 m/s)."""
 
     gain: float = 0.0
-    when: Literal["always", "recovering"] = "always"
-    axes: list[float] = dataclasses.field(default_factory=lambda: [1.0, 1.0])
 
 
 # A CoP shift 10× the DCM error is a bang-bang ankle.
-declare_ranges(AnkleConfig, gain=Range(0.0, 10.0), axes=Range(0.0, 1.0, size=2))
+declare_ranges(AnkleConfig, gain=Range(0.0, 10.0))
 
 
 class AnkleStrategy(PivotMoment):
@@ -53,17 +45,13 @@ class AnkleStrategy(PivotMoment):
         if not config.gain >= 0.0:
             raise RomocoError(f"the ankle gain must be non-negative, got {config.gain}")
         self.gain, self.weight = config.gain, total_mass * GRAVITY
-        self.only_recovering = config.when == "recovering"
-        self.axes = np.asarray(config.axes, dtype=float)
 
     def target(self, ctx: TermContext) -> np.ndarray:
         plan = ctx.refs.com_plan
-        if plan is None or (self.only_recovering and not ctx.refs.recovering):
+        if plan is None:
             return np.zeros(2)
         p, v = ctx.kin.p_com, ctx.kin.v_com
         height = max(p[2] - self.contact.sole_center(ctx.kin, ctx.refs.stance_side)[2], 1e-3)
         lam = math.sqrt(GRAVITY / height)
         shift = self.gain * ((p[:2] + v[:2] / lam) - (plan[0] + plan[1] / lam))
-        R = heading_rotation(ctx.kin.R_base)[:2, :2]
-        shift = R @ (self.axes * (R.T @ shift))
         return np.array([shift[1] * self.weight, -shift[0] * self.weight])
