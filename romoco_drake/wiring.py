@@ -315,11 +315,14 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
                "gait_phase": machine.gait_phase_port, "command": heading.command_port,
                "kinematics": kin, "mode": machine.mode_port, "schedule": machine.schedule_port}
     for name in planner.loop_inputs:
-        builder.Connect(signals[name], planner.GetInputPort(name))
+        if name != "swing_reference":  # the embedding's, connected below once it exists
+            builder.Connect(signals[name], planner.GetInputPort(name))
     if planner.adapts_timing:
         builder.Connect(planner.planner_output_port, machine.planner_output_port)
     embedding, controller, gate = _add_tracking(builder, scenario, robot, kin, machine, planner, station,
                                                 estop)
+    if "swing_reference" in planner.loop_inputs:
+        builder.Connect(embedding.swing_reference_port, planner.GetInputPort("swing_reference"))
     momentum_log = None
     if traits(scenario.controller.name).momentum_log:
         recorder = builder.AddNamedSystem("momentum_log", MomentumLog(robot, period, offset))

@@ -146,3 +146,18 @@ def test_error_wraps_angles():
     i = refs.names.index("pelvis_yaw")
     wrapped = dataclasses.replace(refs, y_des=refs.y_des + np.eye(len(refs.y))[i] * 2 * np.pi)
     np.testing.assert_allclose(wrapped.error, refs.error, atol=1e-12)
+
+
+def test_swing_reference_is_the_latched_swing_of_this_step_only():
+    """The planner's step adaptation reads the swing being tracked; another step's swing is NaN."""
+    _, system, context, simulator, plan, _, _ = _setup("g1", tau=0.0)
+    for k in range(50):  # the tick at k·PERIOD runs when advancing past it
+        system.gait_phase_port.FixValue(context, [1.0, k * PERIOD])
+        simulator.AdvanceTo((k + 1) * PERIOD)
+    system.gait_phase_port.FixValue(context, [1.0, 0.1])
+    p, v, a = system.swing_state(context).trajectory.evaluate(0.1)
+    np.testing.assert_allclose(system.swing_reference_port.Eval(context),
+                               [p[0], p[1], v[0], v[1], a[0], a[1]], atol=1e-12)
+    assert np.linalg.norm(v[:2]) > 0.1
+    system.gait_phase_port.FixValue(context, [-1.0, 0.0])  # the next step, before its swing latches
+    assert np.all(np.isnan(system.swing_reference_port.Eval(context)))

@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from romoco_drake.embedding.bezier import quintic_bezier
 from romoco_drake.errors import RomocoError
 from romoco_drake.rom.planners import PlannerParams, foot_placement_laws, make_planner
 from romoco_drake.rom.step_adapt import (
@@ -16,6 +17,7 @@ from romoco_drake.rom.step_adapt import (
     StepAdapter,
     StepAdaptWeights,
     StepBounds,
+    SwingWindow,
     _two_step_axis,
     solve_step_qp,
 )
@@ -91,12 +93,51 @@ def test_late_step_lands_where_the_swing_can_still_reach():
     law = make_planner("hlip", PlannerParams(mass=MASS))
     plan = law.plan(state, "left", tau, CMD)
     free = adapter.adapt(plan, state, tau)
-    bound = adapter.adapt(plan, state, tau, foot)
+    bound = adapter.adapt(plan, state, tau, foot + (0.0,) * 4)  # at rest
     assert free.swing_target[0] == pytest.approx(BOUNDS.forward)
     reach = bounds.swing_speed * (bound.t_ss - tau)
     assert abs(bound.swing_target[0] - foot[0]) <= reach + 1e-9
     assert abs(bound.swing_target[1] - foot[1]) <= reach + 1e-9
     assert bound.swing_target[0] < free.swing_target[0] - 0.05
+
+
+def _peak_speed(s, v, a, target, duration):
+    """The peak speed of the embedding's swing (a quintic at rest on landing) from (s, v, a) to ``target``."""
+    curve = quintic_bezier([s], [v], [a], [target], [0.0], [0.0], duration)
+    return float(np.max(np.abs(curve.evaluate(np.linspace(0.0, duration, 2001))[1])))
+
+
+def test_swing_window_is_where_the_replanned_swing_keeps_the_peak_speed():
+    """Its ends are the targets whose quintic from the swing's state just reaches 1.875 swing_speed
+    (the peak of a swing from rest covering swing_speed·D); beyond them the peak is higher."""
+    rng = np.random.default_rng(7)
+    speed, tau, lam = 2.0, 0.1, LAM
+    for _ in range(30):
+        s, v, a = rng.uniform(-0.3, 0.3), rng.uniform(-2.0, 2.0), rng.uniform(-30.0, 30.0)
+        t_ss = tau + rng.uniform(0.08, 0.3)
+        window = SwingWindow((s, 0.0), (v, 0.0), (a, 0.0), speed, tau, lam)
+        lo, hi = (float(e[0]) for e in window.interval(t_ss))
+        peaks = [_peak_speed(s, v, a, u, t_ss - tau) for u in (lo, hi, lo - 0.02, hi + 0.02)]
+        if lo < hi:
+            assert peaks[0] == pytest.approx(1.875 * speed, rel=0.01)
+            assert peaks[1] == pytest.approx(1.875 * speed, rel=0.01)
+            assert min(peaks[2:]) > 1.875 * speed
+        else:  # the start state alone is too fast: one target, no worse than those around it
+            assert peaks[0] <= min(peaks[2:]) + 1e-9
+    at_rest = SwingWindow((0.1, -0.2), (0.0, 0.0), (0.0, 0.0), speed, tau, lam).interval(0.3)
+    np.testing.assert_allclose(np.ravel(at_rest), [0.1 - 0.4, -0.2 - 0.4, 0.1 + 0.4, -0.2 + 0.4], atol=1e-9)
+
+
+def test_a_swing_under_way_keeps_its_target_in_the_window():
+    """A swing from rest at full speed (swing_speed·D) still reaches its target from any point on
+    its way: the window moves with the foot (one of swing_speed·(T − t) about the foot alone held
+    85 % of the distance left after a fifth of the swing)."""
+    speed, duration, target = 2.0, 0.3, 0.6
+    curve = quintic_bezier([0.0], [0.0], [0.0], [target], [0.0], [0.0], duration)
+    for tau in np.linspace(0.0, 0.27, 10):
+        p, v, a = (float(x[0]) for x in curve.evaluate(tau))
+        window = SwingWindow((p, 0.0), (v, 0.0), (a, 0.0), speed, tau, LAM)
+        assert window.contains((target, 0.0), duration)
 
 
 def test_step_time_never_ends_before_the_step_is_committed():

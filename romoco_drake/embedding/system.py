@@ -43,6 +43,7 @@ class OutputEmbedding(LeafSystem):
     | ``mode`` | in | abstract | :class:`~romoco_drake.modes.Mode` |
     | ``task_references`` | out | abstract | :class:`~romoco_drake.embedding.references.TaskReferences` |
     | ``tracking_error`` | out | 6 | norm of the active errors y − y_d per ``ERROR_GROUPS`` (m or rad) |
+    | ``swing_reference`` | out | 6 | swing (x, y), velocity, acceleration now; stance yaw frame; NaN: none |
 
     Abstract state: the current step's :class:`SwingState` when walking, the
     :class:`StandState` latched on entering standing, else nothing. Discrete state: the
@@ -67,6 +68,12 @@ class OutputEmbedding(LeafSystem):
             "task_references", self._default_references, self._calc_references)
         self._errors = self.DeclareDiscreteState(len(ERROR_GROUPS))
         self.tracking_error_port = self.DeclareStateOutputPort("tracking_error", self._errors)
+        # Read by the planner's step adaptation (where the swing can still go): from the state and
+        # the gait phase only, so no loop through the planner's output.
+        self.swing_reference_port = self.DeclareVectorOutputPort(
+            "swing_reference", 6, self._calc_swing_reference,
+            prerequisites_of_calc={self.abstract_state_ticket(self._swing),
+                                   self.gait_phase_port.ticket(), self.time_ticket()})
         self.DeclareInitializationUnrestrictedUpdateEvent(self._update_swing)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, offset, self._update_swing)
         # Discrete updates see the tick's final references (after the unrestricted ones), the same
@@ -115,6 +122,16 @@ class OutputEmbedding(LeafSystem):
             else:
                 new = self.core.start_step(self._kinematics(context), side, step_start, plan, tau)
         state.get_mutable_abstract_state(int(self._swing)).set_value(new)
+
+    def _calc_swing_reference(self, context, out) -> None:
+        swing = self.swing_state(context)
+        sign, tau = self.gait_phase_port.Eval(context)
+        if (swing is None or swing.trajectory is None or swing.stance_side != side_from_sign(sign)
+                or abs(swing.step_start - (context.get_time() - tau)) > 1e-6):
+            out.SetFromVector(np.full(6, np.nan))
+            return
+        p, v, a = swing.trajectory.evaluate(float(tau))
+        out.SetFromVector(np.array([p[0], p[1], v[0], v[1], a[0], a[1]]))
 
     def _calc_references(self, context, value) -> None:
         if not self._kinematics(context).finite:  # the controllers damp; these are never tracked

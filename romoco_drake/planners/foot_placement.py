@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
@@ -26,7 +28,9 @@ class FootPlacementPlanner(LeafSystem):
     and memoised on their values for the last plan). With an
     ``adapter`` (:class:`~romoco_drake.rom.step_adapt.StepAdapter`) the law's plan is then bounded
     to the robot's reach and its step time adapted to the current swing (push recovery); with
-    ``swing_foot`` connected, also to where the swing foot can still land in the time left.
+    ``swing_foot`` connected, also to where the swing foot can still land in the time left: from
+    ``swing_reference`` (the swing being tracked) when that is for this step, else from the measured
+    foot at rest (a step's first tick, before its swing is latched).
 
     | port | kind | size | meaning |
     |---|---|---|---|
@@ -34,6 +38,7 @@ class FootPlacementPlanner(LeafSystem):
     | ``gait_phase`` | in | 2 | stance (+1 left, −1 right), time in step [s] |
     | ``command`` | in | 6 | vx, vy [m/s], wz [rad/s], step width, CoM height [m], SS time [s] |
     | ``swing_foot`` | in | 2 | optional: swing sole (x, y) rel. stance contact [m]; stance yaw frame |
+    | ``swing_reference`` | in | 6 | optional: the embedding's swing (x, y, velocity, acceleration); same |
     | ``schedule`` | in | abstract | optional: the state machine's :class:`GaitSchedule` (its T_SS) |
     | ``planner_output`` | out | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` |
     """
@@ -46,11 +51,12 @@ class FootPlacementPlanner(LeafSystem):
         self.t_ds = law.t_ds
         self.adapts_timing = adapter is not None
         self.loop_inputs = ("rom_state", "gait_phase", "command") + (
-            ("swing_foot", "schedule") if adapter else ())
+            ("swing_foot", "swing_reference", "schedule") if adapter else ())
         self.rom_state_port = self.DeclareVectorInputPort("rom_state", ROM_STATE_SIZE)
         self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
         self.swing_foot_port = self.DeclareVectorInputPort("swing_foot", 2)
+        self.swing_reference_port = self.DeclareVectorInputPort("swing_reference", 6)
         # The step's own (adapted) T_SS: the adapter's commit point is the state machine's.
         placeholder = GaitSchedule(Mode.STANDING, "left", 0.0, WalkCommand().step_time, 0, 0, 0, "")
         self.schedule_port = self.DeclareAbstractInputPort("schedule", AbstractValue.Make(placeholder))
@@ -78,7 +84,11 @@ class FootPlacementPlanner(LeafSystem):
         swing = step_t_ss = None
         if self.adapter is not None:
             if self.swing_foot_port.HasValue(context):
-                swing = self.swing_foot_port.Eval(context).tolist()
+                swing = self.swing_foot_port.Eval(context).tolist() + [0.0] * 4
+            if self.swing_reference_port.HasValue(context):
+                reference = self.swing_reference_port.Eval(context).tolist()
+                if all(map(math.isfinite, reference)):
+                    swing = reference
             if self.schedule_port.HasValue(context):
                 step_t_ss = self.schedule_port.Eval(context).t_ss
         key = (phase, command, rom_state, swing, step_t_ss)

@@ -27,12 +27,18 @@ from the bound, later when it comes back.
 
 The reachable box is in the stance yaw frame: forward/backward, and a lateral band on the swing
 foot's own side of the stance foot (at least ``lateral_min`` away), so a crossing step is never
-asked for. A step must also be one the swing leg can still make: given the swing foot's current
-position s (when the planner is given it), the touchdown point lies within ``swing_speed``·(T − t)
-of s on each axis, so a step shortened late in the swing is not asked to land far away (the
-swing would land fast and slide, or late). That window depends on σ through T = ln σ / λ, so
-the QP is solved over σ₁ on a grid refined around its best point and over σ₂ on a grid, with
-(u₁, u₂) minimised exactly for each pair (:func:`solve_step_qp`).
+asked for. A step must also be one the swing leg can still make (when the planner is given the
+swing foot's position s and velocity v): the embedding replans the swing as a quintic from its
+state to the target, at rest on landing, and the touchdown point is one such quintic from (s, v)
+reaches in T − t without exceeding the peak speed of a swing from rest covering ``swing_speed``·D
+in D (1.875 ``swing_speed``), per axis (:class:`SwingWindow`). A step shortened late in the swing is
+then not asked to land far away (the swing would land fast and slide, or late), and a foot
+already moving keeps the target it is moving toward: a window of ``swing_speed``·(T − t) about s
+alone shrank under a swing that starts slowly (G1 pushed forward at phase 0.75: the third step's
+target retreated from 0.37 to 0.17 m while the foot accelerated toward it, and the robot fell).
+That window depends on σ through T = ln σ / λ, so the QP is solved over σ₁ on a grid refined
+around its best point and over σ₂ on a grid, with (u₁, u₂) minimised exactly for each pair
+(:func:`solve_step_qp`).
 """
 
 from __future__ import annotations
@@ -110,8 +116,9 @@ class StepAdapter:
               swing_foot: Sequence[float] | None = None, step_t_ss: float | None = None) -> PlannerOutput:
         """``plan`` with its foothold and single-support time adapted; ``rom_state`` is the six numbers
         of the ``rom_state`` port (stance yaw frame, momentum about the stance contact);
-        ``swing_foot`` the swing sole's (x, y) relative to the stance contact in the same frame
-        (None: the step is not bounded by what the swing can still reach); ``step_t_ss`` the
+        ``swing_foot`` the swing sole's (x, y) relative to the stance contact, its velocity and its
+        acceleration in the same frame (None: the step is not bounded by what the swing can still
+        reach); ``step_t_ss`` the
         current step's own single-support time as the state machine runs it (None: the law's),
         whose ``SWING_COMMIT_FRACTION`` is the commit point. An adapted step longer than the law's
         is still being adapted after the law's own commit point: with the law's, the adapter
@@ -131,9 +138,9 @@ class StepAdapter:
             return plan
         window = None
         if swing_foot is not None and b.swing_speed > 0.0:
-            s = (float(swing_foot[0]), float(swing_foot[1]))
+            s = tuple(float(a) for a in swing_foot)
             if all(map(math.isfinite, s)):
-                window = SwingWindow(s, b.swing_speed, t_in_step, lam)
+                window = SwingWindow(s[:2], s[2:4], s[4:], b.swing_speed, t_in_step, lam)
         sigma_n = math.exp(lam * plan.t_ss)
         u_n = (float(plan.swing_target[0]), float(plan.swing_target[1]))
         implied = tuple(d * sigma_n - u for d, u in zip(dcm0, u_n, strict=True))
@@ -202,23 +209,48 @@ class StepAdapter:
         return b_x, b_y
 
 
+# A quintic swing over D from (0, v, a) to (d, 0, 0) has velocity v h(r) + a D k(r) + (d / D) g(r) at
+# r = t / D; sampled on the interior (g > 0), with r = 1/2 where g peaks (1.875) among the samples.
+_R = np.linspace(0.0, 1.0, 65)[1:-1]
+_G = 30.0 * _R ** 2 * (1.0 - _R) ** 2
+_H = 1.0 - 18.0 * _R ** 2 + 32.0 * _R ** 3 - 15.0 * _R ** 4
+_K = _R - 4.5 * _R ** 2 + 6.0 * _R ** 3 - 2.5 * _R ** 4
+_PEAK = 1.875
+
+
 @dataclass(frozen=True)
 class SwingWindow:
-    """Where the swing foot can still land: within ``speed``·(T − ``tau``) of its position ``s``
-    on each axis, for a touchdown at T = ln σ / ``lam`` (the module docstring)."""
+    """Where the swing foot can still land (the module docstring): the targets d from ``s`` whose
+    quintic from (``s``, ``v``, ``a``), landing at T = ln σ / ``lam``, keeps within the peak speed
+    1.875 ``speed`` (at each sample r, (±1.875 ``speed`` − v h − a D k) / g bounds d / D; at rest
+    that is |d| ≤ ``speed``·D, D = T − ``tau``). Where the start state alone exceeds it (no d
+    does), the window is the one d of least squared velocity over the swing."""
 
     s: tuple[float, float]
+    v: tuple[float, float]
+    a: tuple[float, float]
     speed: float
     tau: float
     lam: float
 
-    def radius(self, t_ss):
-        """How far (m, per axis) the foot can still move before a touchdown at ``t_ss``."""
-        return self.speed * np.maximum(t_ss - self.tau, 0.0)
+    def interval(self, t_ss):
+        """(lo, hi) of the touchdown point, with a leading dimension of 2 (x, y) over ``t_ss``'s shape."""
+        d = np.maximum(np.asarray(t_ss, dtype=float) - self.tau, 0.0)
+        vmax = _PEAK * self.speed
+        lo, hi = [], []
+        for s, v, a in zip(self.s, self.v, self.a, strict=True):
+            rest = v * _H + a * d[..., None] * _K  # the swing's velocity with d = 0
+            low = np.max((-vmax - rest) / _G, axis=-1)
+            high = np.min((vmax - rest) / _G, axis=-1)
+            least = -np.sum(rest * _G, axis=-1) / np.sum(_G * _G)
+            crossed = low > high
+            lo.append(s + d * np.where(crossed, least, low))
+            hi.append(s + d * np.where(crossed, least, high))
+        return np.stack(lo), np.stack(hi)
 
     def contains(self, u: Sequence[float], t_ss: float) -> bool:
-        r = float(self.radius(t_ss))
-        return all(abs(a - c) <= r for a, c in zip(u, self.s, strict=True))
+        lo, hi = self.interval(t_ss)
+        return all(lo[i] <= u[i] <= hi[i] for i in range(2))
 
 
 # The σ grid: points over the whole range, then rounds of points around the best one so far;
@@ -297,9 +329,8 @@ def solve_step_qp(u_n: tuple[float, float], sigma_n: float, dcm0: tuple[float, f
         total = w_t * (s1 - sigma_n) ** 2 + w_t * (s2 - nxt.sigma_n) ** 2
         lo, hi = np.broadcast_to(box_lo, (2, *s1.shape)), np.broadcast_to(box_hi, (2, *s1.shape))
         if window is not None:
-            r = window.radius(np.log(s1) / window.lam)
+            w_lo, w_hi = window.interval(np.log(s1) / window.lam)
             centre = np.array(window.s, dtype=float)[:, None, None]
-            w_lo, w_hi = centre - r, centre + r
             apart = (w_lo > hi) | (w_hi < lo)
             nearest = np.minimum(np.maximum(np.minimum(np.maximum(centre, lo), hi), w_lo), w_hi)
             lo = np.where(apart, nearest, np.maximum(lo, w_lo))
