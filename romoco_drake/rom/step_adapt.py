@@ -28,14 +28,15 @@ from the bound, later when it comes back.
 The reachable box is in the stance yaw frame: forward/backward, and a lateral band on the swing
 foot's own side of the stance foot (at least ``lateral_min`` away), so a crossing step is never
 asked for. A step must also be one the swing leg can still make (when the planner is given the
-swing foot's position s and velocity v): the embedding replans the swing as a quintic from its
-state to the target, at rest on landing, and the touchdown point is one such quintic from (s, v)
-reaches in T − t without exceeding the peak speed of a swing from rest covering ``swing_speed``·D
-in D (1.875 ``swing_speed``), per axis (:class:`SwingWindow`). A step shortened late in the swing is
-then not asked to land far away (the swing would land fast and slide, or late), and a foot
-already moving keeps the target it is moving toward: a window of ``swing_speed``·(T − t) about s
-alone shrank under a swing that starts slowly (G1 pushed forward at phase 0.75: the third step's
-target retreated from 0.37 to 0.17 m while the foot accelerated toward it, and the robot fell).
+swing's position s, velocity v and acceleration a): the embedding replans the swing as a quintic
+from its state to the target, at rest on landing, and the touchdown point is one such quintic
+from (s, v, a) reaches in T − t without exceeding the peak speed of a swing from rest covering
+``swing_speed``·D in D (1.875 ``swing_speed``), per axis (:class:`SwingWindow`). A step shortened
+late in the swing is then not asked to land far away (the swing would land fast and slide, or
+late), and a foot already moving keeps the target it is moving toward: a window of
+``swing_speed``·(T − t) about s alone shrank under a swing that starts slowly (G1 pushed forward at
+phase 0.75: the third step's target retreated from 0.37 to 0.17 m while the foot accelerated
+toward it, and the robot fell).
 That window depends on σ through T = ln σ / λ, so the QP is solved over σ₁ on a grid refined
 around its best point and over σ₂ on a grid, with (u₁, u₂) minimised exactly for each pair
 (:func:`solve_step_qp`).
