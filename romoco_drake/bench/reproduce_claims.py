@@ -1,4 +1,9 @@
-"""What every ``romoco reproduce`` paper shares: a claim row, the run lengths, small helpers."""
+"""What every ``romoco reproduce`` paper shares: a claim row, the run lengths, small helpers.
+
+Each paper's jobs (``reproduce_romoco``, ``reproduce_xo``, ``reproduce_vimpc``) are module-level
+functions so that Ray can ship them; its variants are tagged with a ``part`` and its claims are
+scored from their rows.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +13,6 @@ from dataclasses import dataclass
 import numpy as np
 
 TRACE_PERIOD_S = 0.1  # figure traces are thinned to this period
-
 
 
 @dataclass(frozen=True)
@@ -26,7 +30,6 @@ class Settings:
     circle_duration: float | None  # None: no Fig. 6 run
 
 
-
 @dataclass(frozen=True)
 class Claim:
     """One row of the report; ``holds`` None: not built (nothing measured)."""
@@ -41,13 +44,8 @@ class Claim:
     note: str = ""
 
 
-
 def not_built(paper: str, source: str, claim: str, what: str) -> Claim:
     return Claim(paper, source, claim, "", "not built", "", None, what)
-
-
-# Jobs: module-level so that Ray can ship them.
-
 
 
 def thin(times: np.ndarray, period: float = TRACE_PERIOD_S) -> np.ndarray:
@@ -58,13 +56,9 @@ def thin(times: np.ndarray, period: float = TRACE_PERIOD_S) -> np.ndarray:
     return np.unique(np.searchsorted(times, wanted).clip(0, len(times) - 1))
 
 
-# Each paper: its variants (tagged with "part") and the claims scored from their rows.
-
-
-
 def fmt(x: float, digits: int = 3) -> str:
+    """A number to ``digits`` significant digits, or "fell" for the infinite error of a fall."""
     return "fell" if x == math.inf else f"{x:.{digits}g}"
-
 
 
 def fall_text(row: dict) -> str:

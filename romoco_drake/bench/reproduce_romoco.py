@@ -74,7 +74,6 @@ def walk_job(scenario: Scenario, duration: float | None = None) -> dict:
             "trace": logs["trace"]}
 
 
-
 def group_rms(times: np.ndarray, errors: np.ndarray, start: float, end: float) -> dict:
     """RMS of each ERRORS group's error over ``start`` ≤ t ≤ ``end`` where the group is active."""
     from romoco_drake.embedding.system import ERROR_GROUPS
@@ -87,7 +86,6 @@ def group_rms(times: np.ndarray, errors: np.ndarray, start: float, end: float) -
         e = e[np.isfinite(e) & (e > 0.0)]  # 0: the group is not active (standing, double support)
         rms[name] = round(float(np.sqrt(np.mean(e**2))), 5) if len(e) else None
     return rms
-
 
 
 def step_in_place_job(scenario: Scenario, duration: float) -> dict:
@@ -111,7 +109,6 @@ def step_in_place_job(scenario: Scenario, duration: float) -> dict:
             "roughness_L": [roughness(ell[i, stepping]) for i in range(2)]}
 
 
-
 def pivot_momentum(robot, times: np.ndarray, states: np.ndarray, period: float = 0.005
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(t, v, L/(m z0)) every ``period``: the CoM's horizontal velocity and the horizontal angular
@@ -133,14 +130,12 @@ def pivot_momentum(robot, times: np.ndarray, states: np.ndarray, period: float =
     return times[keep], np.array(v).T, np.array([ell[1], -ell[0]])
 
 
-
 def roughness(x: np.ndarray) -> float | None:
     """RMS of a signal's sample-to-sample change over its RMS about the mean: how jumpy it is for
     its size (a touchdown's velocity jump raises it; a smooth sway keeps it low)."""
     if len(x) < 3 or not np.ptp(x) > 0.0:
         return None
     return round(float(np.sqrt(np.mean(np.diff(x) ** 2)) / np.std(x)), 4)
-
 
 
 def fig7_scenario(robot: str, controller: str, feedforward: str = PAPER_IK_FEEDFORWARD) -> Scenario:
@@ -150,7 +145,6 @@ def fig7_scenario(robot: str, controller: str, feedforward: str = PAPER_IK_FEEDF
         scenario = dataclasses.replace(scenario, controller=dataclasses.replace(scenario.controller,
                                                                                 feedforward=feedforward))
     return scenario
-
 
 
 def romoco_variants(settings: Settings) -> list[Variant]:
@@ -187,13 +181,11 @@ def romoco_variants(settings: Settings) -> list[Variant]:
     return fig7 + model_error + fig8 + fig9
 
 
-
 def speed_error(row: dict) -> float:
     """‖(vx, vy) velocity rms error‖ (m/s) of a walk, as Fig. 7's forward and lateral panels;
     infinite if it fell (a fall tracks nothing)."""
     e = row["velocity_rms_error"][:2]
     return math.inf if row["fell"] or any(v is None for v in e) else float(np.linalg.norm(e))
-
 
 
 def tracking_error(row: dict, name: str) -> float:
@@ -202,10 +194,8 @@ def tracking_error(row: dict, name: str) -> float:
     return math.inf if row["fell"] or value is None else value
 
 
-
 def _listed(values: dict, unit: str) -> str:
     return ", ".join(f"{c} {fmt(v)}" for c, v in values.items()) + f" {unit}"
-
 
 
 def romoco_claims(rows: list[dict]) -> list[Claim]:
@@ -253,7 +243,6 @@ def romoco_claims(rows: list[dict]) -> list[Claim]:
     return claims
 
 
-
 def _model_error_claims(rows: list[dict]) -> list[Claim]:
     """§VI-A: ID "is more sensitive to modeling errors" than QP."""
     wrong = {r["controller"]: r for r in rows if r["part"] == "model_error"}
@@ -273,7 +262,6 @@ def _model_error_claims(rows: list[dict]) -> list[Claim]:
                   f"Model error: an unmodelled payload of {MODEL_ERROR.mass_fraction:.0%} of the "
                   "robot's mass "
                   f"welded {MODEL_ERROR.offset[2]:g} m above the pelvis origin of the simulated robot only.")]
-
 
 
 def _fig8_claims(rows: list[dict]) -> list[Claim]:
@@ -312,7 +300,6 @@ def _fig8_claims(rows: list[dict]) -> list[Claim]:
     return claims
 
 
-
 def _fig9_claims(rows: list[dict]) -> list[Claim]:
     run = next((r for r in rows if r["part"] == "fig9"), None)
     if run is None:
@@ -335,7 +322,6 @@ def _fig9_claims(rows: list[dict]) -> list[Claim]:
                   f"{rough_l[0]}",
                   "", smoother, "Roughness: RMS sample-to-sample change over RMS about the mean, every "
                                 "5 ms.")]
-
 
 
 def law_gap(robot: str, a: tuple[str, str], b: tuple[str, str], samples: int = 1000, seed: int = 0

@@ -37,7 +37,6 @@ def solve_time_job(scenario: Scenario, ticks: int) -> dict:
     return {"mpc_solve_ms": s["tick_ms"]["mpc_solve"], "mpc_update_ms": s["tick_ms"]["mpc_update"]}
 
 
-
 def inertia_probe(built, context) -> dict:
     """Fig. 3: along the run, every TRACE_PERIOD_S / 2, the CCINN's inertia and the plant's now
     (six base-frame entries each), and over the MPC horizon the inertia the planner predicted for
@@ -71,7 +70,6 @@ def inertia_probe(built, context) -> dict:
         out["horizon"] = (horizon_errors(robot, times, states, h_times, h_data, planner.config.dt)
                           | {"length_s": planner.config.knots * planner.config.dt})
     return {"inertia_probe": out}
-
 
 
 def horizon_errors(robot, times: np.ndarray, states: np.ndarray, h_times: np.ndarray, h_data: np.ndarray,
@@ -113,14 +111,12 @@ def horizon_errors(robot, times: np.ndarray, states: np.ndarray, h_times: np.nda
     return out
 
 
-
 def horizon_medians(horizon: dict, end: float) -> list[float | None]:
     """Median error per knot over the solves of :func:`horizon_errors` whose knots all end by ``end``."""
     rows = [row for t, row in zip(horizon["t"], horizon["errors"], strict=True) if t <= end]
     columns = zip(*rows, strict=True) if rows else []
     return [round(float(np.median([e for e in col if e is not None])), 4)
             if any(e is not None for e in col) else None for col in columns]
-
 
 
 def vimpc_variants(settings: Settings) -> list[Variant]:
@@ -141,7 +137,6 @@ def vimpc_variants(settings: Settings) -> list[Variant]:
     return out
 
 
-
 def forward_probe(built, context) -> dict:
     """A forward ramp's step lengths; on the network mode also Fig. 3's inertia probe."""
     samples = log_samples(built.logs.find(built.state_log, context), None)
@@ -149,7 +144,6 @@ def forward_probe(built, context) -> dict:
     if built.walking.planner.config.inertia == "network":
         out |= inertia_probe(built, context)
     return out
-
 
 
 def step_lengths(robot, times: np.ndarray, states: np.ndarray, period: float = 0.01) -> dict:
@@ -187,7 +181,6 @@ def step_lengths(robot, times: np.ndarray, states: np.ndarray, period: float = 0
     return out
 
 
-
 def wbo_job(scenario: Scenario, duration: float) -> dict:
     """Fig. 6: the angle between the torso's orientation and the whole-body orientation (WBO)
     every TRACE_PERIOD_S / 2 of the run (deg), and the fall."""
@@ -208,7 +201,6 @@ def wbo_job(scenario: Scenario, duration: float) -> dict:
     s = run_scenario(scenario, duration=duration, inspect=read)
     return {"fell": s["fell"], "fall_time_s": s["fall_time_s"], "velocity_rms_error": s["velocity_rms_error"],
             "wbo_angle": {"t": logs["t"], "deg": logs["angle_deg"]}}
-
 
 
 def vimpc_claims(rows: list[dict]) -> list[Claim]:
@@ -298,7 +290,6 @@ def _longest_step(row: dict) -> float:
     steps = row["step_lengths"]
     lengths = [x for t, x in zip(steps["t"], steps["length"], strict=True) if t <= end]
     return max(lengths, default=0.0)
-
 
 
 def inertia_error(row: dict) -> tuple[float, float, int]:

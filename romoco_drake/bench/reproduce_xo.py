@@ -51,12 +51,10 @@ def xo_job(scenario: Scenario, duration: float | None = None) -> dict:
             | {"figures": figures})
 
 
-
 def xo_variants(settings: Settings) -> list[Variant]:
     if "xo_walk" not in scenario_names():
         return []
     return [Variant(load_scenario("xo_walk"), {"part": "xo"}, xo_job, {"duration": settings.xo_duration})]
-
 
 
 def xo_claims(rows: list[dict]) -> list[Claim]:
