@@ -56,6 +56,12 @@ def thin(times: np.ndarray, period: float = TRACE_PERIOD_S) -> np.ndarray:
     return np.unique(np.searchsorted(times, wanted).clip(0, len(times) - 1))
 
 
+def sole_centres(robot, context) -> dict[str, np.ndarray]:
+    """Each sole's centre in world (the mean of its contact points) at the plant ``context``."""
+    return {side: robot.foot_frames[side].CalcPoseInWorld(context).multiply(robot.feet[side].points)
+            .mean(axis=1) for side in ("left", "right")}
+
+
 def fmt(x: float, digits: int = 3) -> str:
     """A number to ``digits`` significant digits, or "fell" for the infinite error of a fall."""
     return "fell" if x == math.inf else f"{x:.{digits}g}"

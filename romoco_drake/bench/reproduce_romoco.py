@@ -13,6 +13,7 @@ from romoco_drake.bench.reproduce_claims import (
     fall_text,
     fmt,
     not_built,
+    sole_centres,
     thin,
 )
 from romoco_drake.bench.sweep import Variant
@@ -121,9 +122,7 @@ def pivot_momentum(robot, times: np.ndarray, states: np.ndarray, period: float =
     v, ell = [], []
     for x in states[:, keep].T:
         plant.SetPositionsAndVelocities(context, x)
-        soles = [robot.foot_frames[side].CalcPoseInWorld(context).multiply(robot.feet[side].points)
-                 .mean(axis=1) for side in ("left", "right")]
-        pivot = min(soles, key=lambda p: p[2])
+        pivot = min(sole_centres(robot, context).values(), key=lambda p: p[2])
         v.append(plant.CalcCenterOfMassTranslationalVelocityInWorld(context)[:2])
         ell.append(plant.CalcSpatialMomentumInWorldAboutPoint(context, pivot).rotational()[:2] / scale)
     ell = np.array(ell).T

@@ -16,6 +16,7 @@ from romoco_drake.bench.reproduce_claims import (
     Settings,
     fall_text,
     not_built,
+    sole_centres,
     thin,
 )
 from romoco_drake.bench.sweep import Variant
@@ -159,9 +160,8 @@ def step_lengths(robot, times: np.ndarray, states: np.ndarray, period: float = 0
     soles = {side: [] for side in ("left", "right")}
     for x in states[:robot.nq, keep].T:
         plant.SetPositions(context, x)
-        for side in soles:
-            soles[side].append(robot.foot_frames[side].CalcPoseInWorld(context)
-                               .multiply(robot.feet[side].points).mean(axis=1))
+        for side, centre in sole_centres(robot, context).items():
+            soles[side].append(centre)
     yaw = base_yaw(robot, states[:, keep])
     holds = []
     for side, p in soles.items():
