@@ -45,6 +45,7 @@ from romoco_drake.planners.vimpc import INERTIA_MODES, VimpcConfig
 from romoco_drake.registry import Registry
 from romoco_drake.robots.model import load_robot, load_robot_config, robot_names
 from romoco_drake.robots.source import DIAGRAMS_DIR
+from romoco_drake.rom.terrain import BoxPiece, RampPiece, StairsPiece, TerrainConfig
 
 MAX_DURATION_S = 3600.0  # one hour of simulated time: longer is a typo, not a study
 
@@ -90,6 +91,9 @@ class Scenario:
     disturbances: list[Disturbance] = dataclasses.field(default_factory=list)
     # Lost LCM messages (interfaces/dropout.py); only with both link ends simulated (--via-lcm).
     dropouts: list[Dropout] = dataclasses.field(default_factory=list)
+    # The ground (rom/terrain.py): a floor and blocks, ramps and stair flights on it; the station
+    # collides with it and the controller plans on it.
+    terrain: TerrainConfig = dataclasses.field(default_factory=TerrainConfig)
     # Filled in by load_scenario, not read from YAML: the file's name and the overlays applied.
     name: str = ""
     overlays: list[str] = dataclasses.field(default_factory=list)
@@ -108,6 +112,19 @@ declare_ranges(Scenario, duration_s=positive(MAX_DURATION_S, "s"),
 # push), each torque component by 1 kN·m.
 declare_ranges(Disturbance, t=Range(0.0, MAX_DURATION_S, "s"), duration=positive(10.0, "s"),
                force=Range(-5000.0, 5000.0, "N", size=3), torque=Range(-1000.0, 1000.0, "N·m", size=3))
+# Terrain (rom/terrain.py): within 1 km of the origin, heights within 100 m; pieces at least 1 cm
+# across; a ramp steeper than 30° or a stair rise above 0.5 m is no walking terrain; friction as a
+# robot's feet.
+_PLACE, _SIZE = Range(-1000.0, 1000.0, "m", size=2), Range(0.01, 1000.0, "m")
+_HEIGHT, _YAW = Range(-100.0, 100.0, "m"), Range(-10.0, 10.0, "rad")
+_FRICTION = Range(0.0, 2.0, "", lo_open=True)
+declare_ranges(TerrainConfig, floor=_HEIGHT)
+declare_ranges(BoxPiece, center=_PLACE, size=Range(0.01, 1000.0, "m", size=2), top=_HEIGHT, yaw=_YAW,
+               friction=_FRICTION)
+declare_ranges(RampPiece, start=_PLACE, length=_SIZE, width=_SIZE, slope_deg=Range(-30.0, 30.0, "deg"),
+               base=_HEIGHT, yaw=_YAW, friction=_FRICTION)
+declare_ranges(StairsPiece, start=_PLACE, steps=Range(1, 100, ""), rise=Range(-0.5, 0.5, "m"), run=_SIZE,
+               width=_SIZE, base=_HEIGHT, yaw=_YAW, friction=_FRICTION)
 # Dropout (interfaces/dropout.py): within the run's clock, up to 10 s (longer is a lost robot).
 declare_ranges(Dropout, t=Range(0.0, MAX_DURATION_S, "s"), duration=positive(10.0, "s"))
 
@@ -237,6 +254,11 @@ def validate_scenario(scenario: Scenario, source: str | Path | None = None) -> N
     if times != sorted(times):
         raise ConfigError(where, "command", f"times must increase, got {times}")
     _check_disturbances(scenario, where)
+    for i, piece in enumerate(scenario.terrain.pieces):
+        try:
+            piece.kind()
+        except ValueError as e:
+            raise ConfigError(where, f"terrain.pieces[{i}]", str(e)) from None
     for i, dropout in enumerate(scenario.dropouts):
         if dropout.stream not in STREAM_CHANNELS:
             raise ConfigError(where, f"dropouts[{i}].stream",
