@@ -239,7 +239,8 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, 
     planner = loop.planner.summary(own(loop.planner))
     out = ({"planner": planner.pop("planner")} | tracking_summary(tracking)
            | loop.state_machine.summary(own(loop.state_machine)) | loop.limiter.summary(command.segments)
-           | loop.controller.summary(own(loop.controller), ticks) | planner)
+           | loop.controller.summary(own(loop.controller), ticks) | planner
+           | loop.embedding.summary(own(loop.embedding)))
     momentum = (None if loop.momentum_log is None
                 else log_samples(built.logs.find(loop.momentum_log, context), until))
     if momentum is not None:

@@ -23,8 +23,9 @@ from romoco_drake.config import (
 from romoco_drake.control.controller import WholeBodyController
 from romoco_drake.control.momentum_log import MomentumLog
 from romoco_drake.control.registry import CONTROLLERS, traits
-from romoco_drake.embedding.references import EmbeddingCore
+from romoco_drake.embedding.references import EmbeddingCore, contact_model
 from romoco_drake.embedding.system import OutputEmbedding
+from romoco_drake.embedding.terrain import TerrainSteps
 from romoco_drake.errors import ConfigError, RomocoError
 from romoco_drake.estimation.ground_truth import GroundTruthEstimator
 from romoco_drake.estimation.kalman_estimator import KalmanEstimator
@@ -53,6 +54,7 @@ from romoco_drake.planners.vimpc import VimpcPlanner
 from romoco_drake.robots.kinematics import RobotKinematicsSystem
 from romoco_drake.robots.model import RobotModel, load_robot
 from romoco_drake.rom.planners import FootPlacementLaw
+from romoco_drake.rom.terrain import Terrain
 from romoco_drake.rom.types import WalkCommand
 from romoco_drake.scenario import CommandPoint, Scenario, validate_scenario
 
@@ -346,8 +348,10 @@ def _add_tracking(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel
     """The output embedding and the whole-body controller (behind an E-stop gate with ``estop``),
     its command to the station. Returns (embedding, controller, gate or None)."""
     period, offset = 1.0 / scenario.controller.rate_hz, LINK_TICK_OFFSET
-    embedding = builder.AddNamedSystem("embedding",
-                                       OutputEmbedding(robot, period, EmbeddingCore(robot), offset))
+    terrain = Terrain(scenario.terrain)
+    steps = None if terrain.is_flat else TerrainSteps(robot, terrain, scenario.terrain.overhang)
+    embedding = builder.AddNamedSystem("embedding", OutputEmbedding(
+        robot, period, EmbeddingCore(robot, contact_model(robot), steps), offset))
     solver = CONTROLLERS[scenario.controller.name].factory(robot, scenario.controller)
     controller = builder.AddNamedSystem("controller",
                                         WholeBodyController(robot, period, solver, offset=offset))

@@ -115,11 +115,14 @@ class SwingTrajectory(SharedValue):
         z = curve.evaluate(t - t0)
         return tuple(np.concatenate([a, b]) for a, b in zip(xy, z, strict=True))
 
-    def replan(self, t: float, target: np.ndarray, duration: float | None = None) -> SwingTrajectory:
+    def replan(self, t: float, target: np.ndarray, duration: float | None = None,
+               apex_height: float | None = None) -> SwingTrajectory:
         """A trajectory to a new ``target`` that continues this one from swing time t, landing at
-        ``duration`` (default: this one's; a step whose timing is adapted lands earlier or later)."""
+        ``duration`` (default: this one's; a step whose timing is adapted lands earlier or later),
+        with a new ``apex_height`` if given (a moved target over other ground)."""
         p, v, a = self.evaluate(t)
-        return plan_swing(p, target, self.duration if duration is None else duration, self.apex_height, t=t,
+        return plan_swing(p, target, self.duration if duration is None else duration,
+                          self.apex_height if apex_height is None else apex_height, t=t,
                           v_start=v, a_start=a, liftoff_z=self.liftoff_z)
 
 

@@ -36,6 +36,7 @@ import numpy as np
 from romoco_drake.embedding.bezier import BezierCurve, SwingTrajectory, plan_swing, quintic_bezier
 from romoco_drake.embedding.contact import ContactModel, contact_frame, contact_frame_state
 from romoco_drake.embedding.outputs import InAirOutputs, Output, StandingOutputs, WalkingOutputs
+from romoco_drake.embedding.terrain import StepGround, TerrainSteps
 from romoco_drake.modes import Domain, Mode
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
@@ -119,6 +120,7 @@ class SwingState(SharedValue):
     liftoff_com_height: float  # CoM height above the stance sole at the step start
     # {c} origin x, y, heading, time into the step, and (p_x, p_y, L_cx, L_cy) in {c}, at the latch
     com_start: tuple[float, ...] | None = None
+    ground: StepGround | None = None  # the step's footholds and tilt on terrain (None: flat floor)
 
 
 @dataclass(frozen=True)
@@ -145,8 +147,10 @@ def contact_model(robot: RobotModel) -> ContactModel:
 class EmbeddingCore:
     """Evaluates task references for a robot on the controller plant (no AutoDiff)."""
 
-    def __init__(self, robot: RobotModel, contact: ContactModel | None = None):
+    def __init__(self, robot: RobotModel, contact: ContactModel | None = None,
+                 terrain: TerrainSteps | None = None):
         self.robot = robot
+        self.terrain = terrain
         self.walking = WalkingOutputs(robot)
         self.standing = StandingOutputs(robot)
         self.in_air = InAirOutputs(robot)
@@ -164,6 +168,8 @@ class EmbeddingCore:
         # The yaw outputs, where the feet have them (None: a point foot's or a leg without hip yaw).
         self._stance_yaw_index = names.index("stance_hip_yaw") if "stance_hip_yaw" in names else None
         self._swing_yaw_index = names.index("swing_sole_yaw") if "swing_sole_yaw" in names else None
+        self._tilt_index = [names.index(n) if n in names else None
+                            for n in ("swing_foot_roll", "swing_foot_pitch")]
         ss = np.ones(len(names), dtype=bool)
         ds = np.zeros_like(ss)
         for name in ("com_z", "stance_hip_yaw", "pelvis_pitch", "pelvis_roll"):
@@ -178,14 +184,21 @@ class EmbeddingCore:
         out = self.walking.evaluate(kin, stance_side)
         q = kin.q
         i = self._swing_index
-        start = out.y[i:i + 3]
-        trajectory = plan_swing(start, self._target(plan), plan.t_ss, self.swing_height)
+        start = out.y[i:i + 3].copy()
+        origin, heading = contact_frame(self.robot, kin, stance_side)
+        ground = None
+        if self.terrain is None:
+            trajectory = plan_swing(start, self._target(plan), plan.t_ss, self.swing_height)
+        else:
+            side = _OTHER_SIDE[stance_side]
+            ground = self.terrain.place(origin, heading, plan.swing_target, plan.swing_yaw, side, start)
+            trajectory = plan_swing(start, ground.target, plan.t_ss,
+                                    self.swing_height + self.terrain.apex_raise(ground, side))
         yaws = (float(q[self._hip_yaw_q[stance_side]]) if self._stance_yaw_index is not None else 0.0,
                 float(out.y[self._swing_yaw_index]) if self._swing_yaw_index is not None else 0.0)
-        origin, heading = contact_frame(self.robot, kin, stance_side)
         p_x, p_y, _, l_cx, l_cy, _ = contact_frame_state(kin, origin, heading).tolist()
         com_start = (float(origin[0]), float(origin[1]), heading, tau, p_x, p_y, l_cx, l_cy)
-        return SwingState(stance_side, t, yaws, trajectory, float(out.y[0]), com_start)
+        return SwingState(stance_side, t, yaws, trajectory, float(out.y[0]), com_start, ground)
 
     def update_swing(self, swing: SwingState, tau: float, plan: PlannerOutput) -> SwingState:
         """Replans the swing toward the plan's latest target, from the trajectory's own state at
@@ -194,8 +207,13 @@ class EmbeddingCore:
         if swing.trajectory is None or tau >= self.swing_freeze * swing.trajectory.duration:
             return swing
         duration = plan.t_ss if plan.timing_adapted and plan.t_ss > tau else swing.trajectory.duration
-        trajectory = swing.trajectory.replan(tau, self._target(plan), duration)
-        return replace(swing, trajectory=trajectory)
+        if swing.ground is None:
+            return replace(swing, trajectory=swing.trajectory.replan(tau, self._target(plan), duration))
+        g, side = swing.ground, _OTHER_SIDE[swing.stance_side]
+        ground = self.terrain.place(g.origin, g.heading, plan.swing_target, plan.swing_yaw, side, g.liftoff)
+        apex = self.swing_height + self.terrain.apex_raise(ground, side)
+        trajectory = swing.trajectory.replan(tau, ground.target, duration, apex)
+        return replace(swing, trajectory=trajectory, ground=ground)
 
     @staticmethod
     def _target(plan: PlannerOutput) -> np.ndarray:
@@ -232,7 +250,10 @@ class EmbeddingCore:
         single = tau < t_ss
         k = len(out.names)
         y_d, yd_d, ydd_d = np.zeros(k), np.zeros(k), np.zeros(k)
-        y_d[0], yd_d[0], ydd_d[0] = _blend(swing.liftoff_com_height, plan.com_height, tau, HEIGHT_BLEND_S)
+        if swing.ground is None:
+            y_d[0], yd_d[0], ydd_d[0] = _blend(swing.liftoff_com_height, plan.com_height, tau, HEIGHT_BLEND_S)
+        else:
+            self._follow_ground(kin, swing, plan, tau, t_ss, y_d, yd_d, ydd_d)
         # The swing sole turns to the planned yaw relative to the stance sole; the pelvis turns
         # half of it on the stance leg.
         s = min(max(tau / t_ss, 0.0), 1.0)
@@ -255,6 +276,24 @@ class EmbeddingCore:
             flow = (swing.com_start, tau, plan.com_height, self.robot.total_mass)
         return self._pack(Mode.WALKING, domain, stance, out, y_d, yd_d, ydd_d, active, kin, flow, plan.mpc,
                           plan.step_bounded)
+
+    def _follow_ground(self, kin: RobotKinematics, swing: SwingState, plan: PlannerOutput, tau: float,
+                       t_ss: float, y_d, yd_d, ydd_d) -> None:
+        """The CoM height along the step's virtual slope and the swing sole's tilt from the ground
+        it lifted off to the ground it lands on (embedding/terrain.py)."""
+        g, k = swing.ground, swing.ground.slope
+        c, s = math.cos(g.heading), math.sin(g.heading)
+        d = kin.p_com - g.origin
+        p_x, v_x = c * d[0] + s * d[1], c * kin.v_com[0] + s * kin.v_com[1]
+        base = _blend(swing.liftoff_com_height - k * swing.com_start[4], plan.com_height, tau, HEIGHT_BLEND_S)
+        y_d[0] = base[0] + k * p_x
+        yd_d[0] = base[1] + k * v_x
+        ydd_d[0] = base[2] + k * GRAVITY / plan.com_height * p_x
+        progress = min(max(tau / t_ss, 0.0), 1.0)
+        rate = 1.0 / t_ss if tau < t_ss else 0.0
+        for i, lift, land in zip(self._tilt_index, g.liftoff_tilt, g.landing_tilt, strict=True):
+            if i is not None:
+                y_d[i], yd_d[i] = lift + progress * (land - lift), rate * (land - lift)
 
     def _standing(self, kin: RobotKinematics, stand: StandState | None, t: float) -> TaskReferences:
         out = self.standing.evaluate(kin)
@@ -301,6 +340,9 @@ class EmbeddingCore:
         n_f = A_f.shape[1]
         return TaskReferences(mode, domain, stance, out.names, out.y, out.J, out.Jdot_v, y_d, yd_d, ydd_d,
                               active, holonomic, n_f, A_f, b_f, com_flow, mpc, recovering)
+
+
+_OTHER_SIDE = {"left": "right", "right": "left"}
 
 
 def alip_com_flow(start: tuple[float, ...], tau: float, height: float, mass: float) -> np.ndarray:

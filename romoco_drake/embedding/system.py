@@ -28,6 +28,10 @@ ERROR_GROUPS = (
 )
 
 
+# A step on terrain lands where planned, on a foothold moved to supported ground, or in place.
+FOOTHOLD_STATUS = ("planned", "adjusted", "in_place")
+
+
 class OutputEmbedding(LeafSystem):
     """Turns the planner's discrete foot placement into continuous whole-body task references.
 
@@ -47,8 +51,10 @@ class OutputEmbedding(LeafSystem):
 
     Abstract state: the current step's :class:`SwingState` when walking, the
     :class:`StandState` latched on entering standing, else nothing. Discrete state: the
-    tracking errors of the last tick. A non-finite state latches nothing and gives standing
-    references with NaN outputs (the controllers are damping then), so NaN tracking errors.
+    tracking errors of the last tick; on terrain, how many steps landed where planned, on a
+    foothold moved to supported ground, and in place for want of one (``FOOTHOLD_STATUS``).
+    A non-finite state latches nothing and gives standing references with NaN outputs (the
+    controllers are damping then), so NaN tracking errors.
     """
 
     def __init__(self, robot: RobotModel, period: float, core: EmbeddingCore | None = None,
@@ -67,6 +73,7 @@ class OutputEmbedding(LeafSystem):
         self.task_references_port = self.DeclareAbstractOutputPort(
             "task_references", self._default_references, self._calc_references)
         self._errors = self.DeclareDiscreteState(len(ERROR_GROUPS))
+        self._footholds = self.DeclareDiscreteState(len(FOOTHOLD_STATUS))
         self.tracking_error_port = self.DeclareStateOutputPort("tracking_error", self._errors)
         # Read by the planner's step adaptation (where the swing can still go): from the state and
         # the gait phase only, so no loop through the planner's output.
@@ -99,6 +106,20 @@ class OutputEmbedding(LeafSystem):
         value = self.memory(context)
         return value if isinstance(value, SwingState) else None
 
+    def summary(self, context) -> dict:
+        """On terrain, the run summary's ``footholds``: steps per :data:`FOOTHOLD_STATUS`."""
+        if self.core.terrain is None:
+            return {}
+        counts = context.get_discrete_state(self._footholds).value()
+        return {"footholds": {k: int(n) for k, n in zip(FOOTHOLD_STATUS, counts, strict=True)}}
+
+    def _count_step(self, context, state, swing: SwingState | None) -> None:
+        """Counts the ground of the step that ends (its last placement)."""
+        if swing is not None and swing.ground is not None:
+            counts = context.get_discrete_state(self._footholds).value().copy()
+            counts[FOOTHOLD_STATUS.index(swing.ground.status)] += 1
+            state.get_mutable_discrete_state(self._footholds).SetFromVector(counts)
+
     def _update_swing(self, context, state) -> None:
         swing = self.swing_state(context)
         mode = self._mode(context)
@@ -107,6 +128,7 @@ class OutputEmbedding(LeafSystem):
         if mode == Mode.STANDING:
             new = self.memory(context)
             if not isinstance(new, StandState):
+                self._count_step(context, state, swing)
                 new = self.core.start_standing(self._kinematics(context), context.get_time())
         elif mode != Mode.WALKING:
             new = _NoSwing()
@@ -120,6 +142,7 @@ class OutputEmbedding(LeafSystem):
             if same_step:
                 new = self.core.update_swing(swing, tau, plan)
             else:
+                self._count_step(context, state, swing)
                 new = self.core.start_step(self._kinematics(context), side, step_start, plan, tau)
         state.get_mutable_abstract_state(int(self._swing)).set_value(new)
 

@@ -89,10 +89,13 @@ class TerrainPiece:
 @dataclass
 class TerrainConfig:
     """The scenario's terrain: an infinite floor at ``floor`` (m), which the feet may step on
-    unless ``floor_steppable`` is false (stepping stones over a pit), and the ``pieces`` on it."""
+    unless ``floor_steppable`` is false (stepping stones over a pit), and the ``pieces`` on it.
+    ``overhang`` (m): how far a sole may reach past a patch's edge and still count as supported
+    (0: the whole sole on the patch; a stone no longer than the sole needs some)."""
 
     floor: float = 0.0
     floor_steppable: bool = True
+    overhang: float = 0.0
     pieces: list[TerrainPiece] = field(default_factory=list)
 
 

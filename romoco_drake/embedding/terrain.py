@@ -1,0 +1,129 @@
+"""Steps on terrain: the output embedding's footholds, swing clearance, sole tilt and CoM height
+when the ground is not the flat floor (:mod:`romoco_drake.rom.terrain`).
+
+- **Footholds.** The planner's target (relative to the stance sole, in its yaw frame) is moved to
+  the nearest foothold where the whole sole is supported (:meth:`Terrain.foothold`) within
+  ``FOOTHOLD_REACH``; its height becomes the swing target's z. With none in reach the step is
+  taken in place (the swing foot lands where it lifted off, ground it stood on) and counted.
+- **Swing clearance.** The apex rises above the highest ground under the sole's path, from the
+  heel at lift-off to the toe at touchdown (a riser's edge between two treads).
+- **Sole tilt.** The swing sole turns from the tilt of the ground it lifted off to the tilt of
+  the ground it lands on (pitch and roll of a sole lying on a plane of normal n, in the output
+  convention of :mod:`~romoco_drake.embedding.outputs`: θ^y = −a_z, θ^x = l_z).
+- **CoM height.** The CoM follows the virtual slope from the stance foothold to the next one:
+  z = z0 + k p_x above the stance sole, p_x the CoM ahead of it along the stance heading and
+  k = Δz/Δx of the step. Under this constraint the ALIP stays exactly linear: L = m(z ṗ − p ż)
+  = m z0 ṗ about the contact, so L̇ = m g p holds with the planner's own z0 (the virtual-slope
+  constraint of Gibson, Dosunmu-Ogunbanjo, Gong and Grizzle, "Terrain-adaptive, ALIP-based
+  bipedal locomotion controller via model predictive control and virtual constraints", IROS
+  2022). On stairs it is the line between treads; on a ramp, the ramp's slope.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from romoco_drake.embedding.outputs import sole_frame
+from romoco_drake.robots.model import RobotModel
+from romoco_drake.rom.terrain import Terrain
+
+# How far (m) a planned foothold may move to reach supported ground: beyond it, the step is taken
+# in place. A tread's depth: a foothold on a riser's edge moves at most half a sole's length.
+FOOTHOLD_REACH = 0.2
+# A step shorter than this (m) along the heading has no virtual slope (stepping in place up a
+# riser would give an unbounded k).
+SLOPE_MIN_STEP = 0.05
+# The steepest virtual slope the CoM follows (Δz/Δx): a 0.1 m riser over a 0.1 m step.
+SLOPE_MAX = 1.0
+# Each sample of the path's clearance reaches this far past the sole's centre (m) beyond half its length.
+PATH_MARGIN = 0.02
+
+
+@dataclass(frozen=True)
+class StepGround:
+    """The ground of one step: the stance sole's centre ``origin`` (3,, world) and ``heading``
+    (rad); the swing ``target`` and the swing sole's ``liftoff`` point relative to it (3,, stance
+    yaw frame); the swing sole's (roll, pitch) on the ground it lifted off and on the ground it
+    lands on; the virtual ``slope`` k; and ``status``: ``planned`` (the plan's foothold is
+    supported), ``adjusted`` (moved to supported ground) or ``in_place`` (none in reach)."""
+
+    origin: np.ndarray
+    heading: float
+    target: np.ndarray
+    liftoff: np.ndarray
+    liftoff_tilt: tuple[float, float]
+    landing_tilt: tuple[float, float]
+    slope: float
+    status: str
+
+
+def sole_tilt(normal: np.ndarray, yaw: float) -> tuple[float, float]:
+    """(roll, pitch) of a sole of heading ``yaw`` lying on a plane of unit ``normal`` (up)."""
+    n = np.asarray(normal, dtype=float)
+    c, s = math.cos(yaw), math.sin(yaw)
+    a = np.array([c, s, -(n[0] * c + n[1] * s) / n[2]])
+    a /= np.linalg.norm(a)
+    left = np.cross(n, a)
+    return float(left[2]), float(-a[2])
+
+
+class TerrainSteps:
+    """Places a robot's steps on a :class:`~romoco_drake.rom.terrain.Terrain` (module docstring).
+
+    ``overhang`` (m): how far a sole may reach past a patch's edge and still count as supported
+    (the terrain's setting; 0 asks for the whole sole on the patch)."""
+
+    def __init__(self, robot: RobotModel, terrain: Terrain, overhang: float = 0.0):
+        self.terrain = terrain
+        self.footprint, self.half_length = {}, {}
+        for side in ("left", "right"):
+            R_FS, p_FS = sole_frame(robot, side)
+            corners = (R_FS.T @ (robot.feet[side].points - p_FS[:, None]))[:2].T
+            shrunk = np.sign(corners) * np.maximum(np.abs(corners) - overhang, 0.0)
+            self.footprint[side] = shrunk
+            self.half_length[side] = float(np.max(np.abs(corners[:, 0])))
+
+    def place(self, origin: np.ndarray, heading: float, target, swing_yaw: float, swing_side: str,
+              liftoff: np.ndarray) -> StepGround:
+        """The step's ground from stance ``origin``/``heading``, the plan's ``target`` (x, y rel.
+        stance, stance yaw frame), the sole's planned ``swing_yaw`` (rel. stance) and its
+        ``liftoff`` position (3,, rel. stance), where an unreachable step lands."""
+        c, s = math.cos(heading), math.sin(heading)
+        R = np.array([[c, -s], [s, c]])
+        yaw = heading + swing_yaw
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        footprint = self.footprint[swing_side] @ np.array([[cy, sy], [-sy, cy]])
+        planned = origin[:2] + R @ np.asarray(target, dtype=float)[:2]
+        foothold = self.terrain.foothold(planned, footprint, FOOTHOLD_REACH)
+        lift_W = origin[:2] + R @ liftoff[:2]
+        lift_tilt = sole_tilt(self.terrain.normal(lift_W), heading)
+        if foothold is None:
+            rel = np.asarray(liftoff, dtype=float).copy()
+            return StepGround(origin, heading, rel, liftoff, lift_tilt, lift_tilt, 0.0, "in_place")
+        xy = R.T @ (foothold.position[:2] - origin[:2])
+        rel = np.array([xy[0], xy[1], foothold.position[2] - origin[2]])
+        slope = 0.0
+        if abs(rel[0]) >= SLOPE_MIN_STEP:
+            slope = float(np.clip(rel[2] / rel[0], -SLOPE_MAX, SLOPE_MAX))
+        status = "planned" if foothold.shift < 1e-9 else "adjusted"
+        return StepGround(origin, heading, rel, liftoff, lift_tilt, sole_tilt(foothold.normal, yaw), slope,
+                          status)
+
+    def apex_raise(self, ground: StepGround, swing_side: str) -> float:
+        """How far (m) the swing's apex must rise above the higher of its lift-off and touchdown
+        heights to clear the highest ground under the sole's path (heel behind the lift-off
+        point, toe past the target)."""
+        c, s = math.cos(ground.heading), math.sin(ground.heading)
+        R = np.array([[c, -s], [s, c]])
+        start = ground.liftoff
+        a, b = start[:2], ground.target[:2]
+        d = b - a
+        norm = float(np.linalg.norm(d))
+        reach = self.half_length[swing_side] + PATH_MARGIN
+        u = d / norm if norm > 1e-9 else np.zeros(2)
+        highest = self.terrain.highest_along(ground.origin[:2] + R @ (a - reach * u),
+                                             ground.origin[:2] + R @ (b + reach * u)) - ground.origin[2]
+        return max(0.0, highest - max(float(start[2]), float(ground.target[2])))
