@@ -116,9 +116,11 @@ def command_segments(scenario: Scenario, robot: RobotModel) -> list[CommandSegme
 
 
 def initial_positions(robot: RobotModel, scenario: Scenario) -> np.ndarray:
-    """Where the simulation starts: the nominal pose, raised by the drop-test offset."""
+    """Where the simulation starts: the nominal pose (standing on z = 0) raised onto the terrain
+    under its base, and by the drop-test offset above that."""
     q = robot.nominal.q.copy()
-    q[robot.base_q_start + 6] += scenario.initial_height_offset
+    z = robot.base_q_start + 6
+    q[z] += Terrain(scenario.terrain).height(q[z - 2:z]) + scenario.initial_height_offset
     return q
 
 
@@ -170,7 +172,7 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
         monitor = plant_station.GetSubsystemByName("monitor")
         state_log = plant_station.GetSubsystemByName("truth_log")
     else:
-        monitor = builder.AddNamedSystem("monitor", FallMonitor(robot))
+        monitor = builder.AddNamedSystem("monitor", FallMonitor(robot, terrain=Terrain(scenario.terrain)))
         builder.Connect(estimator.state_output, monitor.state_input)
         state_log = estimate_log
     diagram = builder.Build()
@@ -210,7 +212,7 @@ def _add_station(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel,
     if link == "sim":
         station = make_engine_station(scenario.station.engine, robot, scenario.time_step, meshcat, motor_pd,
                                       scenario.sensors, disturbances=scenario.disturbances,
-                                      payload=scenario.station.payload)
+                                      payload=scenario.station.payload, terrain=Terrain(scenario.terrain))
         return builder.AddNamedSystem("station", station), station, None
     station = builder.AddNamedSystem("station", make_hardware_station(
         robot, lcm, 1.0 / scenario.controller.rate_hz, motor_pd, scenario.link, LINK_TICK_OFFSET,
@@ -220,7 +222,7 @@ def _add_station(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel,
     robot_sim = builder.AddNamedSystem("robot", make_robot_sim(
         robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link, motor_pd=motor_pd,
         disturbances=scenario.disturbances, dropouts=scenario.dropouts, engine=scenario.station.engine,
-        payload=scenario.station.payload))
+        payload=scenario.station.payload, terrain=Terrain(scenario.terrain)))
     return station, robot_sim.GetSubsystemByName("station"), robot_sim
 
 

@@ -23,6 +23,7 @@ from romoco_drake.interfaces.disturbance import Disturbance
 from romoco_drake.interfaces.sensors import SensorConfig
 from romoco_drake.interfaces.station import make_station
 from romoco_drake.robots.model import Payload, RobotModel
+from romoco_drake.rom.terrain import Terrain
 
 ENGINES = ("drake", "mujoco")
 
@@ -55,16 +56,18 @@ def make_engine_station(
     engine: str, robot: RobotModel, time_step: float = 0.001, meshcat: Meshcat | None = None,
     motor_pd: bool = False, sensors: SensorConfig | None = None, truth_log_period: float = 0.01,
     disturbances: list[Disturbance] | None = None, payload: Payload | None = None,
+    terrain: Terrain | None = None,
 ) -> Diagram:
     """The simulated station of ``robot`` on ``engine`` (same arguments as ``make_station``)."""
     if check_engine(engine) == "drake":
         return make_station(robot, time_step, meshcat, motor_pd, sensors, truth_log_period, disturbances,
-                            payload)
+                            payload, terrain)
     if payload is not None:
         raise RomocoError("station.payload is simulated on the drake engine only (engine: drake)")
     from romoco_drake.interfaces.mujoco_station import make_mujoco_station
 
-    return make_mujoco_station(robot, time_step, meshcat, motor_pd, sensors, truth_log_period, disturbances)
+    return make_mujoco_station(robot, time_step, meshcat, motor_pd, sensors, truth_log_period, disturbances,
+                               terrain)
 
 
 def with_engine(scenario, engine: str | None):

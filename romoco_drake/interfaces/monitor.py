@@ -5,6 +5,11 @@ A fall is any of: base below ``height_fraction`` of its nominal height; base til
 touching the ground; a non-finite state (the simulation diverged). Only the soles carry
 collision geometry in simulation, so "touching" is judged by body frame origins: a
 non-foot body origin below ``body_clearance`` (m).
+
+Heights are above the terrain's ground (:meth:`Terrain.height <romoco_drake.rom.terrain.Terrain.height>`)
+under the base or the body, not above z = 0: a robot standing on a landing has not fallen, one in
+a stepping-stone pit has (over a gap the ground is the pit's floor). The recorded heights are the
+base's above the ground under it; on the default flat ground at z = 0, its world z.
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ from pydrake.systems.framework import LeafSystem
 from romoco_drake.robots.kinematics import RobotKinematics, declare_kinematics_cache
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.robots.posture import base_fault
+from romoco_drake.rom.terrain import Terrain
 
 FALL_REASONS = ("", "base_low", "base_tilt", "body_contact", "invalid_state")
 
@@ -31,9 +37,11 @@ class FallMonitor(LeafSystem):
     """
 
     def __init__(self, robot: RobotModel, period: float = 0.01, height_fraction: float = 0.5,
-                 max_tilt: float = np.deg2rad(45.0), body_clearance: float = 0.02):
+                 max_tilt: float = np.deg2rad(45.0), body_clearance: float = 0.02,
+                 terrain: Terrain | None = None):
         super().__init__()
         self._robot = robot
+        self._terrain = terrain or Terrain()
         self._nominal_height = robot.nominal.base_height
         self._height_fraction = height_fraction
         self._cos_max_tilt = np.cos(max_tilt)
@@ -52,17 +60,25 @@ class FallMonitor(LeafSystem):
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
 
     def check(self, x: np.ndarray) -> tuple[str, float]:
-        """(fall reason or "", base height) for state ``x``."""
+        """(fall reason or "", base height above the ground under it) for state ``x``."""
         return self._check(RobotKinematics(self._robot, x))
+
+    def _ground(self, p_W: np.ndarray) -> float:
+        """The ground's z under ``p_W`` (the floor where ``p_W`` is not finite)."""
+        return self._terrain.height(p_W[:2]) if np.all(np.isfinite(p_W[:2])) else self._terrain.floor
 
     def _check(self, kin: RobotKinematics) -> tuple[str, float]:
         r = self._robot
-        reason, height = base_fault(r, kin.x, self._height_fraction * self._nominal_height,
+        i = r.base_q_start
+        ground = self._ground(kin.x[i + 4:i + 6])
+        reason, height = base_fault(r, kin.x, ground + self._height_fraction * self._nominal_height,
                                     self._cos_max_tilt)
+        height -= ground
         if reason:
             return reason, height
         for body in self._bodies:
-            if r.plant.EvalBodyPoseInWorld(kin.context, body).translation()[2] < self._clearance:
+            p_WB = r.plant.EvalBodyPoseInWorld(kin.context, body).translation()
+            if p_WB[2] < self._ground(p_WB) + self._clearance:
                 return "body_contact", height
         return "", height
 

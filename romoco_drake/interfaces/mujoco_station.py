@@ -8,7 +8,8 @@ and benches read: ``plant`` (a :class:`~romoco_drake.interfaces.mujoco_plant.Muj
 ``SetPositions`` and ``GetPositionsAndVelocities`` stand in for the MultibodyPlant's),
 ``truth_log``, ``monitor``
 (:class:`~romoco_drake.interfaces.monitor.FallMonitor` on the true state) and, with pushes,
-``disturbances``.
+``disturbances``. The robot stands on ``terrain`` (default: flat ground at z = 0), drawn as the
+Drake station draws it.
 
 The sensors are the Drake station's own :class:`~romoco_drake.interfaces.sensors.SimulatedSensors`
 fed by the MuJoCo plant's state, base acceleration and foot forces. The motors differ in one way:
@@ -32,6 +33,8 @@ from romoco_drake.interfaces.mujoco_plant import MujocoPlant
 from romoco_drake.interfaces.sensors import SensorConfig, SimulatedSensors
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.robots.mujoco_model import mujoco_model
+from romoco_drake.robots.terrain_geometry import add_terrain_illustration
+from romoco_drake.rom.terrain import Terrain
 
 SENSOR_PORTS = ("joint_state", "imu", "foot_contact", "base_pose", "base_velocity")
 
@@ -39,11 +42,12 @@ SENSOR_PORTS = ("joint_state", "imu", "foot_contact", "base_pose", "base_velocit
 def make_mujoco_station(
     robot: RobotModel, time_step: float = 0.001, meshcat: Meshcat | None = None, motor_pd: bool = False,
     sensors: SensorConfig | None = None, truth_log_period: float = 0.01,
-    disturbances: list[Disturbance] | None = None,
+    disturbances: list[Disturbance] | None = None, terrain: Terrain | None = None,
 ) -> Diagram:
     """The MuJoCo station for ``robot`` (see the module docstring for ports)."""
+    terrain = terrain or Terrain()
     builder = DiagramBuilder()
-    plant = builder.AddNamedSystem("plant", MujocoPlant(mujoco_model(robot, time_step), motor_pd))
+    plant = builder.AddNamedSystem("plant", MujocoPlant(mujoco_model(robot, time_step, terrain), motor_pd))
     builder.ExportInput(plant.actuation_input, "actuation")
     if motor_pd:
         builder.ExportInput(plant.motor_command_input, "motor_command")
@@ -58,7 +62,7 @@ def make_mujoco_station(
     builder.ExportOutput(stage.get_output_port(), "link_stage")
     truth = LogVectorOutput(plant.state_output, builder, truth_log_period)
     truth.set_name("truth_log")
-    monitor = builder.AddNamedSystem("monitor", FallMonitor(robot))
+    monitor = builder.AddNamedSystem("monitor", FallMonitor(robot, terrain=terrain))
     builder.Connect(plant.state_output, monitor.state_input)
     if disturbances:
         pushes = builder.AddNamedSystem("disturbances",
@@ -66,20 +70,22 @@ def make_mujoco_station(
         builder.Connect(plant.body_poses_output, pushes.body_poses_port)
         builder.Connect(pushes.forces_port, plant.forces_input)
     if meshcat is not None:
-        _add_drawing(builder, robot, meshcat, plant)
+        _add_drawing(builder, robot, meshcat, plant, terrain)
     diagram = builder.Build()
     diagram.set_name(f"{robot.name}_mujoco_station")
     return diagram
 
 
-def _add_drawing(builder: DiagramBuilder, robot: RobotModel, meshcat: Meshcat, plant: MujocoPlant) -> None:
-    """Meshcat draws the MuJoCo state through a geometry-only plant (prefix ``robot``, as the Drake
-    station's)."""
+def _add_drawing(builder: DiagramBuilder, robot: RobotModel, meshcat: Meshcat, plant: MujocoPlant,
+                 terrain: Terrain) -> None:
+    """Meshcat draws the MuJoCo state and the terrain through a geometry-only plant (prefix
+    ``robot``, as the Drake station's)."""
     scene_graph = builder.AddNamedSystem("scene_graph", SceneGraph())
     drawn = MultibodyPlant(0.0)
     drawn.set_name("drawn_plant")
     drawn.RegisterAsSourceForSceneGraph(scene_graph)
     robot.add_model(drawn)
+    add_terrain_illustration(drawn, terrain)
     drawn.Finalize()
     poses = builder.AddNamedSystem("geometry_poses", MultibodyPositionToGeometryPose(drawn, True))
     builder.Connect(plant.state_output, poses.get_input_port())

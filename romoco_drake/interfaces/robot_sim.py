@@ -51,6 +51,7 @@ from romoco_drake.interfaces.link import (
 from romoco_drake.interfaces.sensors import SensorConfig
 from romoco_drake.modes import LinkStage, RobotLinkCounters
 from romoco_drake.robots.model import Payload, RobotModel
+from romoco_drake.rom.terrain import Terrain
 
 
 class CommandReceiver(LeafSystem):
@@ -208,7 +209,7 @@ def make_robot_sim(robot: RobotModel, lcm: DrakeLcmInterface, time_step: float =
                    wait_for_commands_s: float = 0.0, motor_pd: bool = True,
                    disturbances: list[Disturbance] | None = None,
                    dropouts: list[Dropout] | None = None, engine: str = "drake",
-                   payload: Payload | None = None) -> Diagram:
+                   payload: Payload | None = None, terrain: Terrain | None = None) -> Diagram:
     """The simulated robot behind LCM (module docstring); no exported ports.
 
     Measurements are published every ``publish_period`` s (the robot's own rate). With
@@ -224,13 +225,14 @@ def make_robot_sim(robot: RobotModel, lcm: DrakeLcmInterface, time_step: float =
     ``disturbances`` push the simulated robot (:func:`~romoco_drake.interfaces.station.make_station`);
     ``dropouts`` lose the measurements it sends (:mod:`~romoco_drake.interfaces.dropout`).
     ``engine`` simulates the robot (:mod:`~romoco_drake.interfaces.engines`), with ``payload``
-    welded to its base.
+    welded to its base, standing on ``terrain`` (default: flat ground at z = 0).
     """
     config = config or LinkConfig()
     builder = DiagramBuilder()
     builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
     station = builder.AddNamedSystem("station", make_engine_station(
-        engine, robot, time_step, meshcat, motor_pd, sensors, disturbances=disturbances, payload=payload))
+        engine, robot, time_step, meshcat, motor_pd, sensors, disturbances=disturbances, payload=payload,
+        terrain=terrain))
     receiver = builder.AddNamedSystem("receiver", CommandReceiver(robot, config, time_step))
     sender = builder.AddNamedSystem("sender", MeasurementSender(robot))
     subscribe(builder, lcm, MOTOR_COMMAND_CHANNEL, receiver.GetInputPort("command"), wait_for_commands_s)

@@ -35,6 +35,10 @@ believes: subsystem ``truth_log`` logs it every ``truth_log_period`` s and subsy
 With ``payload`` the simulated robot carries a mass welded to its base that the controllers'
 model (``robot.plant``) does not have: a model error.
 
+With ``terrain`` (:class:`~romoco_drake.rom.terrain.Terrain`, default flat ground at z = 0) the
+plant collides with, and Meshcat draws, the terrain's floor and solids, and the monitor judges
+heights above the ground under the robot.
+
 With ``disturbances`` (pushes, :mod:`~romoco_drake.interfaces.disturbance`), subsystem
 ``disturbances`` feeds the plant's applied spatial force input; without, that input stays unconnected.
 """
@@ -50,16 +54,19 @@ from romoco_drake.interfaces.monitor import FallMonitor
 from romoco_drake.interfaces.motors import MotorCommandAdapter
 from romoco_drake.interfaces.sensors import SensorConfig, add_sensors
 from romoco_drake.robots.model import Payload, RobotModel
+from romoco_drake.rom.terrain import Terrain
 
 
 def make_station(
     robot: RobotModel, time_step: float = 0.001, meshcat: Meshcat | None = None, motor_pd: bool = False,
     sensors: SensorConfig | None = None, truth_log_period: float = 0.01,
     disturbances: list[Disturbance] | None = None, payload: Payload | None = None,
+    terrain: Terrain | None = None,
 ) -> Diagram:
     """Builds the simulated station for ``robot`` (see the module docstring for ports)."""
     builder = DiagramBuilder()
-    plant, scene_graph = robot.add_to_builder(builder, time_step, motor_pd=motor_pd, payload=payload)
+    plant, scene_graph = robot.add_to_builder(builder, time_step, motor_pd=motor_pd, payload=payload,
+                                              terrain=terrain)
     plant.set_name("plant")
     if motor_pd:
         adapter = builder.AddNamedSystem("motors", MotorCommandAdapter(robot))
@@ -80,7 +87,7 @@ def make_station(
     builder.ExportOutput(stage.get_output_port(), "link_stage")
     truth = LogVectorOutput(plant.get_state_output_port(), builder, truth_log_period)
     truth.set_name("truth_log")
-    monitor = builder.AddNamedSystem("monitor", FallMonitor(robot))
+    monitor = builder.AddNamedSystem("monitor", FallMonitor(robot, terrain=terrain))
     builder.Connect(plant.get_state_output_port(), monitor.state_input)
     if disturbances:
         pushes = builder.AddNamedSystem("disturbances",

@@ -1,9 +1,9 @@
 """RobotModel: one robot's simulation plant, controller plant and controller facts.
 
-The simulation plant is a discrete MultibodyPlant (SAP) with sole contact spheres on a
-flat ground and the robot's internal loops as SAP constraints. The controller plant is
-the same multibody tree with no geometry and no constraints (continuous), owned by
-controllers; the internal loops reach controllers as holonomic rows
+The simulation plant is a discrete MultibodyPlant (SAP) with sole contact spheres on the
+scenario's terrain (flat ground by default) and the robot's internal loops as SAP constraints.
+The controller plant is the same multibody tree with no geometry and no constraints
+(continuous), owned by controllers; the internal loops reach controllers as holonomic rows
 (:meth:`RobotModel.internal_constraints`).
 """
 
@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from pydrake.geometry import Box, ProximityProperties, SceneGraph, Sphere
+from pydrake.geometry import ProximityProperties, SceneGraph, Sphere
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import (
@@ -32,6 +32,8 @@ from romoco_drake.config import load_typed
 from romoco_drake.errors import ConfigError, RomocoError
 from romoco_drake.robots.config import RobotConfig
 from romoco_drake.robots.source import ROBOTS_DIR, package_paths, prepare_model, resolve_relative_paths
+from romoco_drake.robots.terrain_geometry import add_terrain_collision, add_terrain_illustration
+from romoco_drake.rom.terrain import Terrain
 
 SOLE_SPHERE_RADIUS = 0.005
 
@@ -262,15 +264,16 @@ class RobotModel:
     # ----------------------------------------------------------- simulation plant
     def add_to_builder(
         self, builder: DiagramBuilder, time_step: float, motor_pd: bool = False,
-        payload: Payload | None = None,
+        payload: Payload | None = None, terrain: Terrain | None = None,
     ) -> tuple[MultibodyPlant, SceneGraph]:
-        """Adds the simulation plant (SAP, sole contact points, flat ground, loop constraints).
+        """Adds the simulation plant (SAP, sole contact points, ``terrain``, loop constraints).
 
         ``motor_pd`` gives every actuator an implicit PD loop with the YAML gains, solved inside
         the SAP step as a position-controlled motor's own loop would run; the plant then takes
         a desired state [q_d; v_d] (actuator order) besides the feedforward torque. ``payload``
         welds an extra body to the base of this plant only (a model error: ``self.plant``, the
-        controllers' model, stays without it).
+        controllers' model, stays without it). ``terrain`` (default: flat ground at z = 0) is
+        collision and illustration geometry (:mod:`~romoco_drake.robots.terrain_geometry`).
         """
         plant_config = MultibodyPlantConfig(
             time_step=time_step,
@@ -284,7 +287,7 @@ class RobotModel:
             for i, index in enumerate(plant.GetJointActuatorIndices()):
                 gains = PdControllerGains(p=self.kp[i], d=self.kd[i])
                 plant.get_mutable_joint_actuator(index).set_controller_gains(gains)
-        self._add_contact_geometry(plant)
+        self._add_contact_geometry(plant, terrain or Terrain())
         self._add_sim_constraints(plant)
         if payload is not None and payload.mass_fraction > 0.0:
             mass = payload.mass_fraction * self.total_mass
@@ -295,15 +298,11 @@ class RobotModel:
         plant.Finalize()
         return plant, scene_graph
 
-    def _add_contact_geometry(self, plant: MultibodyPlant) -> None:
+    def _add_contact_geometry(self, plant: MultibodyPlant, terrain: Terrain) -> None:
         mu = self.config.feet.friction
         friction = CoulombFriction(mu, mu)
-        ground = ProximityProperties()
-        ground.AddProperty("material", "coulomb_friction", friction)
-        # A large box rather than a HalfSpace: same contact, no deformable-contact warning.
-        plant.RegisterCollisionGeometry(
-            plant.world_body(), RigidTransform([0.0, 0.0, -0.5]), Box(200.0, 200.0, 1.0), "ground", ground
-        )
+        add_terrain_collision(plant, terrain, mu)
+        add_terrain_illustration(plant, terrain)
         for side, foot in self.feet.items():
             body = plant.GetBodyByName(foot.body_name, self.model_instance)
             for k, p in enumerate(foot.sim_points.T):

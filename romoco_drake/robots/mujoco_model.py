@@ -9,9 +9,10 @@ so every robot the plant can hold works.
 
 What the simulation plant adds (:meth:`RobotModel.add_to_builder`) is added here too:
 
-- the sole contact spheres (radius ``SOLE_SPHERE_RADIUS``, lowest point on each sole point) and a
-  ground plane at z = 0; the spheres collide with the ground only, as in Drake. Friction is the
-  YAML's μ (elliptic cones, condim 3).
+- the sole contact spheres (radius ``SOLE_SPHERE_RADIUS``, lowest point on each sole point), a
+  ground plane at the terrain's floor and a box geom per terrain solid; the spheres collide with
+  the ground and the terrain only, as in Drake. Friction is the solid's μ, else the YAML's
+  (elliptic cones, condim 3).
 - the effort limits: one general actuator per Drake actuator, force ``ctrl − K_p q − K_d q̇``
   (the gains are set per step by the station) clipped at ± the effort limit.
 - the internal loops as stiff equality constraints (solref ``EQUALITY_TIME_CONSTANTS`` plant
@@ -37,7 +38,6 @@ second floating body) raises a one-line :class:`~romoco_drake.errors.RomocoError
 
 from __future__ import annotations
 
-import functools
 import logging
 from dataclasses import dataclass
 
@@ -47,6 +47,7 @@ from pydrake.multibody.tree import BodyIndex, ForceElementIndex, RevoluteJoint
 
 from romoco_drake.errors import RomocoError
 from romoco_drake.robots.model import SOLE_SPHERE_RADIUS, RobotModel
+from romoco_drake.rom.terrain import Terrain
 
 INSTALL_HINT = "pip install 'romoco-drake[mujoco]'"
 EQUALITY_TIME_CONSTANTS = 2.0  # plant steps: the stiffest solref MuJoCo integrates stably
@@ -145,8 +146,9 @@ def quaternion_rotation(wxyz: np.ndarray) -> np.ndarray:
                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
-def build_mujoco_model(robot: RobotModel, time_step: float) -> MujocoModel:
-    """The compiled MuJoCo model of ``robot`` for a plant step of ``time_step`` s (module docstring)."""
+def build_mujoco_model(robot: RobotModel, time_step: float, terrain: Terrain | None = None) -> MujocoModel:
+    """The compiled MuJoCo model of ``robot`` on ``terrain`` (default: flat ground at z = 0) for a
+    plant step of ``time_step`` s (module docstring)."""
     mujoco = import_mujoco()
     spec = mujoco.MjSpec()
     spec.modelname = robot.name
@@ -157,7 +159,7 @@ def build_mujoco_model(robot: RobotModel, time_step: float) -> MujocoModel:
     spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
     _check_supported(robot)
     _add_tree(mujoco, spec, robot, time_step)
-    _add_contact(mujoco, spec, robot, time_step)
+    _add_contact(mujoco, spec, robot, time_step, terrain or Terrain())
     _add_actuators(mujoco, spec, robot)
     _add_loops(mujoco, spec, robot, time_step)
     try:
@@ -171,11 +173,23 @@ def build_mujoco_model(robot: RobotModel, time_step: float) -> MujocoModel:
     return _maps(mujoco, robot, model, time_step)
 
 
-@functools.cache
-def mujoco_model(robot: RobotModel, time_step: float) -> MujocoModel:
-    """:func:`build_mujoco_model`, once per robot and step in a process (stations copy the MjModel
-    they change)."""
-    return build_mujoco_model(robot, time_step)
+def mujoco_model(robot: RobotModel, time_step: float, terrain: Terrain | None = None) -> MujocoModel:
+    """:func:`build_mujoco_model`, once per robot, step and terrain geometry in a process (stations
+    copy the MjModel they change)."""
+    terrain = terrain or Terrain()
+    key = (robot, time_step, _terrain_key(terrain))
+    if key not in _MODELS:
+        _MODELS[key] = build_mujoco_model(robot, time_step, terrain)
+    return _MODELS[key]
+
+
+_MODELS: dict[tuple, MujocoModel] = {}
+
+
+def _terrain_key(terrain: Terrain) -> tuple:
+    """The terrain's geometry as a hashable value: equal terrains share one compiled model."""
+    return (terrain.floor, tuple((tuple(s.p_WB), tuple(s.R_WB.ravel()), tuple(s.size), s.friction)
+                                 for s in terrain.solids))
 
 
 def _check_supported(robot: RobotModel) -> None:
@@ -279,11 +293,18 @@ def contact_time_constant(time_step: float) -> float:
     return CONTACT_TIME_STEPS * time_step
 
 
-def _add_contact(mujoco, spec, robot: RobotModel, time_step: float) -> None:
+def _add_contact(mujoco, spec, robot: RobotModel, time_step: float, terrain: Terrain) -> None:
     mu = robot.config.feet.friction
     solref = [contact_time_constant(time_step), 1.0]
     spec.worldbody.add_geom(name="ground", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0.0, 0.0, 1.0],
-                            contype=2, conaffinity=1, friction=[mu, 0.0, 0.0], condim=3, solref=solref)
+                            pos=[0.0, 0.0, terrain.floor], contype=2, conaffinity=1, friction=[mu, 0.0, 0.0],
+                            condim=3, solref=solref)
+    for k, solid in enumerate(terrain.solids):
+        friction = mu if solid.friction is None else solid.friction
+        spec.worldbody.add_geom(name=f"terrain_{k}", type=mujoco.mjtGeom.mjGEOM_BOX, size=solid.size / 2,
+                                pos=solid.p_WB, quat=RotationMatrix(solid.R_WB).ToQuaternion().wxyz(),
+                                contype=2, conaffinity=1, friction=[friction, 0.0, 0.0], condim=3,
+                                solref=solref)
     for side, foot in robot.feet.items():
         body = spec.body(foot.body_name)
         for k, p in enumerate(foot.sim_points.T):
