@@ -305,7 +305,8 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     builder.Connect(limiter.command_port, heading.command_in_port)
     builder.Connect(state, heading.state_port)
     machine = builder.AddNamedSystem("state_machine", GaitStateMachine(
-        robot, period, planner_system.t_ds, step_in_place=scenario.planner.step_in_place, offset=offset))
+        robot, period, planner_system.t_ds, step_in_place=scenario.planner.step_in_place, offset=offset,
+        terrain=Terrain(scenario.terrain)))
     builder.Connect(kin, machine.kinematics_port)
     builder.Connect(limiter.command_port, machine.command_port)
     builder.Connect(machine.stop_port, limiter.stop_port)

@@ -14,6 +14,7 @@ from romoco_drake.modes import LinkStage, Mode
 from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_value
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.robots.posture import base_fault
+from romoco_drake.rom.terrain import Terrain
 from romoco_drake.rom.types import (
     COMMAND_SIZE,
     GAIT_PHASE_SIZE,
@@ -103,6 +104,9 @@ class GaitStateMachine(LeafSystem):
       any robot.
     - any mode → damping (latched) on a non-finite state, the base below ``fall_height`` of its
       nominal height, or a base tilt above ``fall_tilt`` rad; counted in ``safe_mode_entries``.
+    - on ``terrain`` (:class:`~romoco_drake.rom.terrain.Terrain`, not the flat floor) heights are
+      above the ground under each point: the base's for a fall, each sole point's for a foot
+      still in the air and for soles flat on the ground (a sole on a ramp, feet on two treads).
 
     | port | kind | size | meaning |
     |---|---|---|---|
@@ -121,9 +125,11 @@ class GaitStateMachine(LeafSystem):
                  stop_steps: int = 2, fall_height: float = 0.5, fall_tilt: float = math.pi / 4,
                  touchdown_height: float = 0.01, settle_time: float = 0.2, lift_time: float = 0.01,
                  early_touchdown: float = 0.6, touchdown_timeout: float = 0.1, air_height: float = 0.03,
-                 landing_radius: float = 0.05, step_in_place: bool = False, offset: float = 0.0):
+                 landing_radius: float = 0.05, step_in_place: bool = False, offset: float = 0.0,
+                 terrain: Terrain | None = None):
         super().__init__()
         self.robot, self.t_ds, self.period = robot, t_ds, period
+        self.terrain = None if terrain is None or terrain.is_flat else terrain
         self.balance_speed, self.stop_steps = balance_speed, stop_steps
         self.touchdown_height, self.settle_time, self.lift_time = touchdown_height, settle_time, lift_time
         self.early_touchdown, self.touchdown_timeout = early_touchdown, touchdown_timeout
@@ -180,7 +186,7 @@ class GaitStateMachine(LeafSystem):
         if cmd.problem() is not None:
             cmd = WalkCommand(step_width=cmd.step_width, com_height=cmd.com_height, step_time=s.t_ss)
         if s.mode != Mode.DAMPING:
-            reason, _ = base_fault(self.robot, kin.x, self._min_base_z, self._cos_tilt)
+            reason, _ = base_fault(self.robot, kin.x, self._min_base_z + self._ground(kin), self._cos_tilt)
             if reason:
                 s = replace(s, mode=Mode.DAMPING, fall_reason=reason,
                             safe_mode_entries=s.safe_mode_entries + 1)
@@ -257,9 +263,24 @@ class GaitStateMachine(LeafSystem):
         overdue = t - s.step_start - (s.t_ss + self.t_ds)
         if overdue >= self.touchdown_timeout - 1e-9 or not s.lifted:
             return False
+        if self.terrain is not None:
+            return bool(self._sole_heights(kin, swing).min() > self.air_height)
         z_swing = self.robot.sole_points_in_world(kin.context, swing)[2].min()
         z_stance = self.robot.sole_points_in_world(kin.context, stance)[2].min()
         return bool(z_swing - z_stance > self.air_height)
+
+    def _ground(self, kin: RobotKinematics) -> float:
+        """The terrain's height under the base (0 on the flat floor, as the estimators' start)."""
+        if self.terrain is None or not np.all(np.isfinite(kin.p_base[:2])):
+            return 0.0
+        return self.terrain.height(kin.p_base[:2])
+
+    def _sole_heights(self, kin: RobotKinematics, side: str) -> np.ndarray:
+        """The sole points' heights: above the terrain under each on terrain, else world z."""
+        points = self.robot.sole_points_in_world(kin.context, side)
+        if self.terrain is None:
+            return points[2]
+        return np.array([z - self.terrain.height((x, y)) for x, y, z in points.T])
 
     @staticmethod
     def _retime(s: GaitSchedule, t: float, plan: PlannerOutput | None) -> bool:
@@ -285,7 +306,7 @@ class GaitStateMachine(LeafSystem):
         reads load, and a foot that has just landed flat carries almost none until the stance
         shifts onto it, which is standing's job (XO's landing sole, 0.5 mm up and unloaded, held
         the stop in single support while the CoM ran off sideways at 0.4 m/s)."""
-        points = [self.robot.sole_points_in_world(kin.context, side)[2] for side in ("left", "right")]
+        points = [self._sole_heights(kin, side) for side in ("left", "right")]
         if max(float(np.ptp(z)) for z in points) >= self.touchdown_height:
             return False
         return bool(on.all() or abs(points[0].min() - points[1].min()) < self.touchdown_height)
