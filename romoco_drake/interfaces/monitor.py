@@ -6,10 +6,10 @@ touching the ground; a non-finite state (the simulation diverged). Only the sole
 collision geometry in simulation, so "touching" is judged by body frame origins: a
 non-foot body origin below ``body_clearance`` (m).
 
-Heights are above the terrain's ground (:meth:`Terrain.height <romoco_drake.rom.terrain.Terrain.height>`)
-under the base or the body, not above z = 0: a robot standing on a landing has not fallen, one in
-a stepping-stone pit has (over a gap the ground is the pit's floor). The recorded heights are the
-base's above the ground under it; on the default flat ground at z = 0, its world z.
+Heights are above the terrain's ground under the base or the body, not above z = 0: a robot
+standing on a landing has not fallen. Over a floor the feet may not step on (a stepping-stone
+pit) the ground is the lowest surface's top, so a robot down in the pit has fallen. The recorded
+heights are the base's above the ground under it; on the default flat ground, its world z.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from pydrake.systems.framework import LeafSystem
 from romoco_drake.robots.kinematics import RobotKinematics, declare_kinematics_cache
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.robots.posture import base_fault
-from romoco_drake.rom.terrain import Terrain
+from romoco_drake.rom.terrain import EDGE_TOLERANCE, Terrain
 
 FALL_REASONS = ("", "base_low", "base_tilt", "body_contact", "invalid_state")
 
@@ -41,7 +41,10 @@ class FallMonitor(LeafSystem):
                  terrain: Terrain | None = None):
         super().__init__()
         self._robot = robot
-        self._terrain = terrain or Terrain()
+        self._terrain = terrain = terrain or Terrain()
+        tops = [s.height(v) for s in terrain.surfaces for v in s.polygon]
+        # The ground where no surface is: the floor, or over a pit the lowest surface's top.
+        self._off_surface = terrain.floor if terrain.floor_steppable or not tops else min(tops)
         self._nominal_height = robot.nominal.base_height
         self._height_fraction = height_fraction
         self._cos_max_tilt = np.cos(max_tilt)
@@ -63,23 +66,30 @@ class FallMonitor(LeafSystem):
         """(fall reason or "", base height above the ground under it) for state ``x``."""
         return self._check(RobotKinematics(self._robot, x))
 
-    def _ground(self, p_W: np.ndarray) -> float:
-        """The ground's z under ``p_W`` (the floor where ``p_W`` is not finite)."""
-        return self._terrain.height(p_W[:2]) if np.all(np.isfinite(p_W[:2])) else self._terrain.floor
+    def _grounds(self, xy: np.ndarray) -> np.ndarray:
+        """The ground's z (module docstring) under each row of ``xy`` (n, 2): the highest surface
+        holding the point, else the floor (over a pit, the lowest surface top); vectorised
+        :meth:`Terrain.height` for the bodies checked every period."""
+        best = np.full(len(xy), -np.inf)
+        for s in self._terrain.surfaces:
+            A, b = s.halfplanes()
+            inside = np.all(xy @ A.T <= b + EDGE_TOLERANCE, axis=1)
+            h = (s.offset - xy @ s.normal[:2]) / s.normal[2]
+            best = np.where(inside & (h > best), h, best)
+        return np.where(np.isfinite(best), best, self._off_surface)
 
     def _check(self, kin: RobotKinematics) -> tuple[str, float]:
         r = self._robot
         i = r.base_q_start
-        ground = self._ground(kin.x[i + 4:i + 6])
+        ground = float(self._grounds(kin.x[None, i + 4:i + 6])[0])
         reason, height = base_fault(r, kin.x, ground + self._height_fraction * self._nominal_height,
                                     self._cos_max_tilt)
         height -= ground
         if reason:
             return reason, height
-        for body in self._bodies:
-            p_WB = r.plant.EvalBodyPoseInWorld(kin.context, body).translation()
-            if p_WB[2] < self._ground(p_WB) + self._clearance:
-                return "body_contact", height
+        p = np.array([r.plant.EvalBodyPoseInWorld(kin.context, body).translation() for body in self._bodies])
+        if np.any(p[:, 2] < self._grounds(p[:, :2]) + self._clearance):
+            return "body_contact", height
         return "", height
 
     def _update(self, context, discrete_state) -> None:

@@ -9,7 +9,7 @@ from z = 0, where Meshcat's own grid already draws it (flat ground looks as it a
 
 from __future__ import annotations
 
-from pydrake.geometry import Box, IllustrationProperties, ProximityProperties, Rgba
+from pydrake.geometry import Box, GeometryInstance, IllustrationProperties, ProximityProperties, Rgba
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
 
@@ -49,11 +49,11 @@ def add_terrain_illustration(plant: MultibodyPlant, terrain: Terrain) -> None:
     as illustration geometry on ``plant``'s world body."""
     world = plant.world_body()
     if terrain.floor != 0.0:
-        plant.RegisterVisualGeometry(world, floor_pose(terrain), Box(FLOOR_SIZE, FLOOR_SIZE, FLOOR_DEPTH),
-                                     "floor", _illustration(FLOOR_COLOR))
+        floor = Box(FLOOR_SIZE, FLOOR_SIZE, FLOOR_DEPTH)
+        plant.RegisterVisualGeometry(world, _drawn(floor_pose(terrain), floor, "floor", FLOOR_COLOR))
     for k, solid in enumerate(terrain.solids):
-        plant.RegisterVisualGeometry(world, solid_pose(solid), Box(*solid.size), f"terrain_{k}",
-                                     _illustration(SOLID_COLOR))
+        plant.RegisterVisualGeometry(world, _drawn(solid_pose(solid), Box(*solid.size), f"terrain_{k}",
+                                                   SOLID_COLOR))
 
 
 def _proximity(mu: float) -> ProximityProperties:
@@ -62,7 +62,10 @@ def _proximity(mu: float) -> ProximityProperties:
     return props
 
 
-def _illustration(color: Rgba) -> IllustrationProperties:
+def _drawn(X_WG: RigidTransform, shape: Box, name: str, color: Rgba) -> GeometryInstance:
+    """A geometry with the illustration role only (Meshcat draws it; no camera renders it)."""
+    geometry = GeometryInstance(X_WG, shape, name)
     props = IllustrationProperties()
     props.AddProperty("phong", "diffuse", color)
-    return props
+    geometry.set_illustration_properties(props)
+    return geometry
