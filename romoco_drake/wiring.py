@@ -298,6 +298,10 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     :class:`EstopGate`."""
     period, offset, kin = 1.0 / scenario.controller.rate_hz, LINK_TICK_OFFSET, kinematics.kinematics_port
     planner_system = _planner_system(scenario, robot, law)
+    terrain = Terrain(scenario.terrain)
+    steps = None if terrain.is_flat else TerrainSteps(robot, terrain, scenario.terrain.overhang)
+    if steps is not None and isinstance(planner_system, FootPlacementPlanner):
+        planner_system.plan_on(steps)
     limiter = builder.AddNamedSystem("command_limiter", CommandLimiter(
         robot.config.walking.command_limits, period, offset))
     builder.Connect(command.command_port, limiter.command_in_port)
@@ -306,7 +310,7 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     builder.Connect(state, heading.state_port)
     machine = builder.AddNamedSystem("state_machine", GaitStateMachine(
         robot, period, planner_system.t_ds, step_in_place=scenario.planner.step_in_place, offset=offset,
-        terrain=Terrain(scenario.terrain)))
+        terrain=terrain))
     builder.Connect(kin, machine.kinematics_port)
     builder.Connect(limiter.command_port, machine.command_port)
     builder.Connect(machine.stop_port, limiter.stop_port)
@@ -318,14 +322,15 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     planner = builder.AddNamedSystem("planner", planner_system)
     signals = {"rom_state": rom_state.rom_state_port, "swing_foot": rom_state.swing_foot_port,
                "gait_phase": machine.gait_phase_port, "command": heading.command_port,
-               "kinematics": kin, "mode": machine.mode_port, "schedule": machine.schedule_port}
+               "kinematics": kin, "mode": machine.mode_port, "schedule": machine.schedule_port,
+               "stance_frame": rom_state.stance_frame_port}
     for name in planner.loop_inputs:
         if name != "swing_reference":  # the embedding's, connected below once it exists
             builder.Connect(signals[name], planner.GetInputPort(name))
     if planner.adapts_timing:
         builder.Connect(planner.planner_output_port, machine.planner_output_port)
     embedding, controller, gate = _add_tracking(builder, scenario, robot, kin, machine, planner, station,
-                                                estop)
+                                                estop, steps)
     if "swing_reference" in planner.loop_inputs:
         builder.Connect(embedding.swing_reference_port, planner.GetInputPort("swing_reference"))
     momentum_log = None
@@ -347,12 +352,11 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
 
 
 def _add_tracking(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, kin, machine, planner,
-                  station, estop):
-    """The output embedding and the whole-body controller (behind an E-stop gate with ``estop``),
-    its command to the station. Returns (embedding, controller, gate or None)."""
+                  station, estop, steps: TerrainSteps | None):
+    """The output embedding (placing steps on ``steps``' terrain, if any) and the whole-body
+    controller (behind an E-stop gate with ``estop``), its command to the station. Returns
+    (embedding, controller, gate or None)."""
     period, offset = 1.0 / scenario.controller.rate_hz, LINK_TICK_OFFSET
-    terrain = Terrain(scenario.terrain)
-    steps = None if terrain.is_flat else TerrainSteps(robot, terrain, scenario.terrain.overhang)
     embedding = builder.AddNamedSystem("embedding", OutputEmbedding(
         robot, period, EmbeddingCore(robot, contact_model(robot), steps), offset))
     solver = CONTROLLERS[scenario.controller.name].factory(robot, scenario.controller)

@@ -127,3 +127,61 @@ class TerrainSteps:
         highest = self.terrain.highest_along(ground.origin[:2] + R @ (a - reach * u),
                                              ground.origin[:2] + R @ (b + reach * u)) - ground.origin[2]
         return max(0.0, highest - max(float(start[2]), float(ground.target[2])))
+
+    def region(self, origin: np.ndarray, heading: float, target, swing_yaw: float, swing_side: str
+               ) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        """The box ((x_lo, x_hi), (y_lo, y_hi)) in the stance yaw frame, relative to ``origin``,
+        of supported footholds around the one nearest the plan's ``target`` (None: none in reach):
+        what the planner's step adaptation keeps the step in, choosing its timing to match (a step
+        over a riser is longer, and later). Only the edges within 30° of the stance frame's axes
+        bound it; the embedding's own check (:meth:`place`) covers the rest."""
+        c, s = math.cos(heading), math.sin(heading)
+        R = np.array([[c, -s], [s, c]])
+        yaw = heading + swing_yaw
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        footprint = self.footprint[swing_side] @ np.array([[cy, sy], [-sy, cy]])
+        foothold = self.terrain.foothold(origin[:2] + R @ np.asarray(target, dtype=float)[:2], footprint,
+                                         FOOTHOLD_REACH)
+        if foothold is None:
+            return None
+        q = R.T @ (foothold.position[:2] - origin[:2])
+        lo, hi = np.full(2, -np.inf), np.full(2, np.inf)
+        surfaces = self.terrain.surfaces
+        if foothold.surface >= 0:
+            A, b = surfaces[foothold.surface].halfplanes()
+            _bound_inside(A @ R, b - A @ origin[:2] - np.max(footprint @ A.T, axis=0), lo, hi)
+        else:
+            for other in surfaces:
+                A, b = other.halfplanes()
+                _bound_outside(A @ R, b - A @ origin[:2] - np.min(footprint @ A.T, axis=0), q, lo, hi)
+        return (float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1]))
+
+
+# cos 30°: an edge within 30° of an axis bounds that axis.
+_ALIGNED = math.cos(math.radians(30.0))
+
+
+def _bound_inside(A: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+    """Tightens (lo, hi) to the aligned half-planes A q ≤ b of a convex region containing q."""
+    for row, limit in zip(A, b, strict=True):
+        axis = int(np.argmax(np.abs(row)))
+        if abs(row[axis]) >= _ALIGNED:
+            if row[axis] > 0:
+                hi[axis] = min(hi[axis], limit / row[axis])
+            else:
+                lo[axis] = max(lo[axis], limit / row[axis])
+
+
+def _bound_outside(A: np.ndarray, b: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+    """Tightens (lo, hi) about ``q`` (outside the convex region A q ≤ b, a patch grown by the sole)
+    so the box stays clear of the region along the axis that separates them."""
+    box_lo, box_hi = np.full(2, -np.inf), np.full(2, np.inf)
+    _bound_inside(A, b, box_lo, box_hi)
+    for axis in (0, 1):
+        other = 1 - axis
+        if not box_lo[other] < q[other] < box_hi[other]:
+            continue
+        if box_hi[axis] <= q[axis] + 1e-9:
+            lo[axis] = max(lo[axis], box_hi[axis])
+        elif box_lo[axis] >= q[axis] - 1e-9:
+            hi[axis] = min(hi[axis], box_lo[axis])

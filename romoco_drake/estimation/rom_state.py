@@ -28,6 +28,7 @@ class RomStateFromRobot(LeafSystem):
     | ``gait_phase`` | in | 2 | stance (+1 left, −1 right), time in step [s] |
     | ``rom_state`` | out | 6 | [p (m), L (kg·m²/s)] in {c} |
     | ``swing_foot`` | out | 2 | the other sole's centre (x, y) in {c} [m] (step adaptation's swing reach) |
+    | ``stance_frame`` | out | 4 | {c}'s origin (x, y, z; world, m) and heading (rad): footholds on terrain |
     """
 
     def __init__(self, robot: RobotModel):
@@ -40,6 +41,8 @@ class RomStateFromRobot(LeafSystem):
             "rom_state", ROM_STATE_SIZE, self._calc, prerequisites_of_calc={self.all_input_ports_ticket()})
         self.swing_foot_port = self.DeclareVectorOutputPort(
             "swing_foot", 2, self._calc_swing_foot, prerequisites_of_calc={self.all_input_ports_ticket()})
+        self.stance_frame_port = self.DeclareVectorOutputPort(
+            "stance_frame", 4, self._calc_stance_frame, prerequisites_of_calc={self.all_input_ports_ticket()})
 
     def compute(self, kin: RobotKinematics, side: str) -> np.ndarray:
         """The ROM state for ``side`` stance; NaN on a non-finite state (planners fall back)."""
@@ -57,6 +60,15 @@ class RomStateFromRobot(LeafSystem):
         dx, dy = (swing_origin - origin)[:2].tolist()
         c, s = math.cos(heading), math.sin(heading)
         return np.array([c * dx + s * dy, c * dy - s * dx])
+
+    def _calc_stance_frame(self, context, out) -> None:
+        kin = self.kinematics_port.Eval(context)
+        if not kin.finite:
+            out.SetFromVector(np.full(4, np.nan))
+            return
+        side = side_from_sign(self.gait_phase_port.Eval(context)[0])
+        origin, heading = contact_frame(self.robot, kin, side)
+        out.SetFromVector([*origin, heading])
 
     def _calc_swing_foot(self, context, out) -> None:
         out.SetFromVector(self._outputs(context)[1])

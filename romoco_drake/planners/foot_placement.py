@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
+from romoco_drake.embedding.terrain import TerrainSteps
 from romoco_drake.modes import Mode
 from romoco_drake.planners.state_machine import GaitSchedule
 from romoco_drake.rom.planners import FootPlacementLaw
@@ -17,6 +19,7 @@ from romoco_drake.rom.types import (
     ROM_STATE_SIZE,
     PlannerOutput,
     WalkCommand,
+    other_side,
     side_from_sign,
 )
 
@@ -30,7 +33,10 @@ class FootPlacementPlanner(LeafSystem):
     to the robot's reach and its step time adapted to the current swing (push recovery); with
     ``swing_foot`` connected, also to where the swing foot can still land in the time left: from
     ``swing_reference`` (the swing being tracked) when that is for this step, else from the measured
-    foot at rest (a step's first tick, before its swing is latched).
+    foot at rest (a step's first tick, before its swing is latched). With ``terrain``
+    (:class:`~romoco_drake.embedding.terrain.TerrainSteps`) and an adapter, the step is also kept
+    where the ground supports the sole, its timing adapted to match (a step over a riser lands
+    later, so the CoM arrives over it).
 
     | port | kind | size | meaning |
     |---|---|---|---|
@@ -40,12 +46,14 @@ class FootPlacementPlanner(LeafSystem):
     | ``swing_foot`` | in | 2 | optional: swing sole (x, y) rel. stance contact [m]; stance yaw frame |
     | ``swing_reference`` | in | 6 | optional: the embedding's swing (x, y, velocity, acceleration); same |
     | ``schedule`` | in | abstract | optional: the state machine's :class:`GaitSchedule` (its T_SS) |
+    | ``stance_frame`` | in | 4 | with ``terrain``: the stance contact's origin (world, m) and heading |
     | ``planner_output`` | out | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` |
     """
 
     def __init__(self, law: FootPlacementLaw, adapter: StepAdapter | None = None):
         super().__init__()
         self.law, self.adapter = law, adapter
+        self.terrain: TerrainSteps | None = None
         # What the loop wires (planners/registry.py): the swing foot and the adapted step times
         # only with an adapter.
         self.t_ds = law.t_ds
@@ -60,6 +68,7 @@ class FootPlacementPlanner(LeafSystem):
         # The step's own (adapted) T_SS: the adapter's commit point is the state machine's.
         placeholder = GaitSchedule(Mode.STANDING, "left", 0.0, WalkCommand().step_time, 0, 0, 0, "")
         self.schedule_port = self.DeclareAbstractInputPort("schedule", AbstractValue.Make(placeholder))
+        self.stance_frame_port = self.DeclareVectorInputPort("stance_frame", 4)
         # The last plan and the input values it was made from. A tick's state machine update
         # invalidates the output (Drake cannot tell that a rewritten schedule is unchanged), so
         # the same inputs arrive twice a tick; the plan is a pure function of their values.
@@ -67,6 +76,14 @@ class FootPlacementPlanner(LeafSystem):
         self.planner_output_port = self.DeclareAbstractOutputPort(
             "planner_output", lambda: AbstractValue.Make(self._plan_default()), self._calc_plan
         )
+
+    def plan_on(self, terrain: TerrainSteps) -> None:
+        """Keeps the adapted steps on ``terrain``'s supported ground (class docstring); call before
+        the diagram is built, which then connects ``stance_frame``. Without an adapter, nothing to
+        do: the output embedding still moves each foothold onto supported ground."""
+        if self.adapter is not None:
+            self.terrain = terrain
+            self.loop_inputs += ("stance_frame",)
 
     def summary(self, context) -> dict:
         """The run summary's planner keys: the law's name."""
@@ -81,7 +98,9 @@ class FootPlacementPlanner(LeafSystem):
         phase = self.gait_phase_port.Eval(context).tolist()
         command = self.command_port.Eval(context).tolist()
         rom_state = self.rom_state_port.Eval(context).tolist()
-        swing = step_t_ss = None
+        swing = step_t_ss = frame = None
+        if self.terrain is not None:
+            frame = self.stance_frame_port.Eval(context).tolist()
         if self.adapter is not None:
             if self.swing_foot_port.HasValue(context):
                 swing = self.swing_foot_port.Eval(context).tolist() + [0.0] * 4
@@ -91,15 +110,19 @@ class FootPlacementPlanner(LeafSystem):
                     swing = reference
             if self.schedule_port.HasValue(context):
                 step_t_ss = self.schedule_port.Eval(context).t_ss
-        key = (phase, command, rom_state, swing, step_t_ss)
+        key = (phase, command, rom_state, swing, step_t_ss, frame)
         if key != self._last[0]:
-            self._last = (key, self._plan(phase, command, rom_state, swing, step_t_ss))
+            self._last = (key, self._plan(phase, command, rom_state, swing, step_t_ss, frame))
         value.set_value(self._last[1])
 
     def _plan(self, phase: list[float], command: list[float], rom_state: list[float],
-              swing: list[float] | None, step_t_ss: float | None) -> PlannerOutput:
+              swing: list[float] | None, step_t_ss: float | None, frame: list[float] | None) -> PlannerOutput:
         sign, t_in_step = phase
         plan = self.law.plan(rom_state, side_from_sign(sign), t_in_step, WalkCommand(*command))
         if self.adapter is not None:
-            plan = self.adapter.adapt(plan, rom_state, t_in_step, swing, step_t_ss)
+            region = None
+            if frame is not None and plan.valid and all(map(math.isfinite, frame)):
+                region = self.terrain.region(np.array(frame[:3]), frame[3], plan.swing_target, plan.swing_yaw,
+                                             other_side(plan.stance_side))
+            plan = self.adapter.adapt(plan, rom_state, t_in_step, swing, step_t_ss, region)
         return plan

@@ -114,7 +114,8 @@ class StepAdapter:
         self.bounds, self.mass, self.weights, self.g = bounds, mass, weights, g
 
     def adapt(self, plan: PlannerOutput, rom_state: Sequence[float], t_in_step: float,
-              swing_foot: Sequence[float] | None = None, step_t_ss: float | None = None) -> PlannerOutput:
+              swing_foot: Sequence[float] | None = None, step_t_ss: float | None = None,
+              region: tuple[tuple[float, float], tuple[float, float]] | None = None) -> PlannerOutput:
         """``plan`` with its foothold and single-support time adapted; ``rom_state`` is the six numbers
         of the ``rom_state`` port (stance yaw frame, momentum about the stance contact);
         ``swing_foot`` the swing sole's (x, y) relative to the stance contact, its velocity and its
@@ -124,7 +125,10 @@ class StepAdapter:
         whose ``SWING_COMMIT_FRACTION`` is the commit point. An adapted step longer than the law's
         is still being adapted after the law's own commit point: with the law's, the adapter
         handed the state machine and the swing the law's unbounded step (G1, pushed forward:
-        0.5 m asked 0.04 s before touchdown, the foot swung at 5-8 m/s and slid on landing)."""
+        0.5 m asked 0.04 s before touchdown, the foot swung at 5-8 m/s and slid on landing).
+        ``region`` (same frame): where the ground supports the sole (terrain, from
+        :meth:`~romoco_drake.embedding.terrain.TerrainSteps.region`); the first step stays in it
+        and in reach (where they do not meet, in reach), and the timing follows."""
         if not plan.valid or not math.isfinite(t_in_step):
             return plan
         b = self.bounds
@@ -147,16 +151,21 @@ class StepAdapter:
         implied = tuple(d * sigma_n - u for d, u in zip(dcm0, u_n, strict=True))
         offset_n = self.viable_offset(implied, plan.stance_side, sigma_n)
         box = b.box(plan.stance_side)
+        reach_ok = all(lo <= u <= hi for u, (lo, hi) in zip(u_n, box, strict=True))
+        if region is not None:
+            both = tuple((max(lo, r_lo), min(hi, r_hi))
+                         for (lo, hi), (r_lo, r_hi) in zip(box, region, strict=True))
+            box = both if all(lo <= hi for lo, hi in both) else box
         t_commit = SWING_COMMIT_FRACTION * (plan.t_ss if step_t_ss is None or not math.isfinite(step_t_ss)
                                             else step_t_ss)
         # A push: the law's step is out of reach or leaves an offset the next steps cannot catch.
-        pushed = not (offset_n == implied and b.t_ss_min <= plan.t_ss <= b.t_ss_max
-                      and all(lo <= u <= hi for u, (lo, hi) in zip(u_n, box, strict=True)))
+        pushed = not (offset_n == implied and b.t_ss_min <= plan.t_ss <= b.t_ss_max and reach_ok)
+        unsupported = not all(lo <= u <= hi for u, (lo, hi) in zip(u_n, box, strict=True))
         if t_in_step >= t_commit:
             # Committed: the state machine and the swing no longer follow the plan's time or target;
             # the push (the hip strategy's cue) lasts to the touchdown.
             return replace(plan, timing_adapted=True, step_bounded=pushed)
-        if not pushed and (window is None or window.contains(u_n, plan.t_ss)):
+        if not pushed and not unsupported and (window is None or window.contains(u_n, plan.t_ss)):
             # The law's own step is reachable and viable: the QP's minimum (zero), at any phase.
             return replace(plan, timing_adapted=True)
         nxt = self.next_step(plan, lam, sigma_n)
