@@ -2,6 +2,8 @@
 pose on the terrain, standing on a block, and the fall monitor's ground."""
 
 import dataclasses
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -143,3 +145,23 @@ def test_down_in_a_stepping_stone_pit_is_a_fall(name):
     assert reason == "base_low" and height == pytest.approx(load_robot(name).nominal.base_height - 0.5)
     on_floor = dataclasses.replace(stones, floor_steppable=True)
     assert _monitor_check(name, on_floor, -0.5)[0] == ""  # a floor the feet may step on is ground
+
+
+@pytest.mark.parametrize("terrain, words", [
+    ("{pieces: [{box: {center: [1, 0], size: [1, 1], top: 0.1}, ramp: {start: [2, 0], length: 1, width: 1, "
+     "slope_deg: 5}}]}", "terrain.pieces[0]: a terrain piece needs exactly one of box, ramp, stairs, got 2"),
+    ("{pieces: [{box: {center: [1, 0], size: [-1, 1], top: 0.1}}]}",
+     "terrain.pieces[0].box.size[0]: must be in [0.01, 1000] m, got -1"),
+    ("{pieces: [{ramp: {start: [1, 0], length: 1, width: 1, slope_deg: 40}}]}",
+     "terrain.pieces[0].ramp.slope_deg: must be in [-30, 30] deg, got 40"),
+    ("{pieces: [{box: {center: [1, 0], size: [1, 1], height: 0.1}}]}",
+     "terrain.pieces[0].box.height: unknown key"),
+])
+def test_bad_terrain_is_one_line_exit_2(tmp_path, terrain, words):
+    path = tmp_path / "bad_terrain.yaml"
+    path.write_text(f"robot: g1\ncontroller: {{name: standing}}\nterrain: {terrain}\n")
+    out = subprocess.run([sys.executable, "-m", "romoco_drake.cli", "run", str(path), "--duration", "0.01"],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and f"{path}: {words}" in lines[0]
