@@ -8,11 +8,9 @@ import sys
 import numpy as np
 import pytest
 from pydrake.geometry import Role
-from pydrake.lcm import DrakeLcm
 from pydrake.systems.framework import DiagramBuilder
 
 from romoco_drake.interfaces.monitor import FallMonitor
-from romoco_drake.interfaces.robot_sim import make_robot_sim
 from romoco_drake.robots.model import load_robot
 from romoco_drake.rom.terrain import BoxPiece, RampPiece, Terrain, TerrainConfig, TerrainPiece
 from romoco_drake.runner import run_scenario
@@ -81,10 +79,23 @@ def test_mujoco_model_has_the_same_solids():
     assert mujoco_model(robot, 0.001).model.ngeom == model.ngeom - len(terrain.solids)
 
 
-def test_lcm_robot_stands_on_the_terrain():
-    sim = make_robot_sim(load_robot("g1"), DrakeLcm("memq://"), terrain=Terrain(BLOCK))
-    plant = sim.GetSubsystemByName("station").GetSubsystemByName("plant")
-    assert plant.GetCollisionGeometriesForBody(plant.world_body())[1:]  # the block besides the ground
+@pytest.mark.parametrize("engine", ["drake", "mujoco"])
+def test_meshcat_draws_the_terrain(engine):
+    """Each solid, and the floor away from z = 0, under the robot's ``robot`` prefix (so recorded
+    replays hold them too)."""
+    if engine == "mujoco":
+        pytest.importorskip("mujoco")
+    from pydrake.geometry import Meshcat
+
+    from romoco_drake.interfaces.engines import make_engine_station
+
+    robot, meshcat, terrain = load_robot("bolt"), Meshcat(), Terrain(COURSE)
+    station = make_engine_station(engine, robot, 0.001, meshcat=meshcat, terrain=terrain)
+    context = station.CreateDefaultContext()
+    station.GetInputPort("actuation").FixValue(context, np.zeros(robot.nu))
+    station.ForcedPublish(context)
+    for name in ["floor", *(f"terrain_{k}" for k in range(len(terrain.solids)))]:
+        assert meshcat.HasPath(f"/drake/robot/{name}"), name
 
 
 def test_start_pose_stands_on_the_terrain():
@@ -116,6 +127,20 @@ def test_g1_stands_on_a_block(engine):
     summary = run_scenario(scenario, duration=1.0, inspect=inspect)
     assert not summary["fell"]
     assert np.abs(np.array(heights) - 0.1 - robot.nominal.base_height).max() < 0.01
+
+
+def test_the_lcm_robot_stands_on_the_block():
+    """Over LCM (``--via-lcm``: robot-sim's diagram in the loop) G1 stands on the block too."""
+    scenario = dataclasses.replace(load_scenario("g1_stand"), terrain=BLOCK)
+    z = load_robot("g1").base_q_start + 6
+    heights = []
+
+    def inspect(built, context):
+        heights.extend(built.logs.find(built.state_log, context).data()[z])
+
+    summary = run_scenario(scenario, duration=0.5, link="via_lcm", inspect=inspect)
+    assert not summary["fell"] and summary["robot_link"]["damping_events"] == 0
+    assert np.abs(np.array(heights) - 0.1 - load_robot("g1").nominal.base_height).max() < 0.01
 
 
 def _monitor_check(name: str, terrain: TerrainConfig, dz: float) -> tuple[str, float]:
