@@ -2,15 +2,15 @@
 pose on the terrain, standing on a block, and the fall monitor's ground."""
 
 import dataclasses
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 from pydrake.geometry import Role
-from pydrake.lcm import DrakeLcm
 from pydrake.systems.framework import DiagramBuilder
 
 from romoco_drake.interfaces.monitor import FallMonitor
-from romoco_drake.interfaces.robot_sim import make_robot_sim
 from romoco_drake.robots.model import load_robot
 from romoco_drake.rom.terrain import BoxPiece, RampPiece, Terrain, TerrainConfig, TerrainPiece
 from romoco_drake.runner import run_scenario
@@ -79,10 +79,23 @@ def test_mujoco_model_has_the_same_solids():
     assert mujoco_model(robot, 0.001).model.ngeom == model.ngeom - len(terrain.solids)
 
 
-def test_lcm_robot_stands_on_the_terrain():
-    sim = make_robot_sim(load_robot("g1"), DrakeLcm("memq://"), terrain=Terrain(BLOCK))
-    plant = sim.GetSubsystemByName("station").GetSubsystemByName("plant")
-    assert plant.GetCollisionGeometriesForBody(plant.world_body())[1:]  # the block besides the ground
+@pytest.mark.parametrize("engine", ["drake", "mujoco"])
+def test_meshcat_draws_the_terrain(engine):
+    """Each solid, and the floor away from z = 0, under the robot's ``robot`` prefix (so recorded
+    replays hold them too)."""
+    if engine == "mujoco":
+        pytest.importorskip("mujoco")
+    from pydrake.geometry import Meshcat
+
+    from romoco_drake.interfaces.engines import make_engine_station
+
+    robot, meshcat, terrain = load_robot("bolt"), Meshcat(), Terrain(COURSE)
+    station = make_engine_station(engine, robot, 0.001, meshcat=meshcat, terrain=terrain)
+    context = station.CreateDefaultContext()
+    station.GetInputPort("actuation").FixValue(context, np.zeros(robot.nu))
+    station.ForcedPublish(context)
+    for name in ["floor", *(f"terrain_{k}" for k in range(len(terrain.solids)))]:
+        assert meshcat.HasPath(f"/drake/robot/{name}"), name
 
 
 def test_start_pose_stands_on_the_terrain():
@@ -116,6 +129,20 @@ def test_g1_stands_on_a_block(engine):
     assert np.abs(np.array(heights) - 0.1 - robot.nominal.base_height).max() < 0.01
 
 
+def test_the_lcm_robot_stands_on_the_block():
+    """Over LCM (``--via-lcm``: robot-sim's diagram in the loop) G1 stands on the block too."""
+    scenario = dataclasses.replace(load_scenario("g1_stand"), terrain=BLOCK)
+    z = load_robot("g1").base_q_start + 6
+    heights = []
+
+    def inspect(built, context):
+        heights.extend(built.logs.find(built.state_log, context).data()[z])
+
+    summary = run_scenario(scenario, duration=0.5, link="via_lcm", inspect=inspect)
+    assert not summary["fell"] and summary["robot_link"]["damping_events"] == 0
+    assert np.abs(np.array(heights) - 0.1 - load_robot("g1").nominal.base_height).max() < 0.01
+
+
 def _monitor_check(name: str, terrain: TerrainConfig, dz: float) -> tuple[str, float]:
     """The fall monitor's verdict on ``name``'s nominal pose moved up by ``dz`` on ``terrain``."""
     robot = load_robot(name)
@@ -143,3 +170,23 @@ def test_down_in_a_stepping_stone_pit_is_a_fall(name):
     assert reason == "base_low" and height == pytest.approx(load_robot(name).nominal.base_height - 0.5)
     on_floor = dataclasses.replace(stones, floor_steppable=True)
     assert _monitor_check(name, on_floor, -0.5)[0] == ""  # a floor the feet may step on is ground
+
+
+@pytest.mark.parametrize("terrain, words", [
+    ("{pieces: [{box: {center: [1, 0], size: [1, 1], top: 0.1}, ramp: {start: [2, 0], length: 1, width: 1, "
+     "slope_deg: 5}}]}", "terrain.pieces[0]: a terrain piece needs exactly one of box, ramp, stairs, got 2"),
+    ("{pieces: [{box: {center: [1, 0], size: [-1, 1], top: 0.1}}]}",
+     "terrain.pieces[0].box.size[0]: must be in [0.01, 1000] m, got -1"),
+    ("{pieces: [{ramp: {start: [1, 0], length: 1, width: 1, slope_deg: 40}}]}",
+     "terrain.pieces[0].ramp.slope_deg: must be in [-30, 30] deg, got 40"),
+    ("{pieces: [{box: {center: [1, 0], size: [1, 1], height: 0.1}}]}",
+     "terrain.pieces[0].box.height: unknown key"),
+])
+def test_bad_terrain_is_one_line_exit_2(tmp_path, terrain, words):
+    path = tmp_path / "bad_terrain.yaml"
+    path.write_text(f"robot: g1\ncontroller: {{name: standing}}\nterrain: {terrain}\n")
+    out = subprocess.run([sys.executable, "-m", "romoco_drake.cli", "run", str(path), "--duration", "0.01"],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and f"{path}: {words}" in lines[0]

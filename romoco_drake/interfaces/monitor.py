@@ -81,16 +81,20 @@ class FallMonitor(LeafSystem):
     def _check(self, kin: RobotKinematics) -> tuple[str, float]:
         r = self._robot
         i = r.base_q_start
-        ground = float(self._grounds(kin.x[None, i + 4:i + 6])[0])
+        flat = not self._terrain.surfaces  # the floor alone: no per-point lookups
+        ground = self._off_surface if flat else float(self._grounds(kin.x[None, i + 4:i + 6])[0])
         reason, height = base_fault(r, kin.x, ground + self._height_fraction * self._nominal_height,
                                     self._cos_max_tilt)
         height -= ground
         if reason:
             return reason, height
-        p = np.array([r.plant.EvalBodyPoseInWorld(kin.context, body).translation() for body in self._bodies])
-        if np.any(p[:, 2] < self._grounds(p[:, :2]) + self._clearance):
-            return "body_contact", height
-        return "", height
+        poses = (r.plant.EvalBodyPoseInWorld(kin.context, body).translation() for body in self._bodies)
+        if flat:
+            low = any(p_WB[2] < ground + self._clearance for p_WB in poses)
+        else:
+            p = np.array(list(poses))
+            low = bool(np.any(p[:, 2] < self._grounds(p[:, :2]) + self._clearance))
+        return ("body_contact" if low else ""), height
 
     def _update(self, context, discrete_state) -> None:
         s = discrete_state.get_mutable_vector(self._state_index).get_mutable_value()
