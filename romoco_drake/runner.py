@@ -31,6 +31,7 @@ from romoco_drake.metrics import estimator_summary, log_samples, tracking_summar
 from romoco_drake.modes import LinkCounters
 from romoco_drake.planners.command import CommandSource, segments_from_log
 from romoco_drake.robots.model import load_robot
+from romoco_drake.rom.terrain import Terrain
 from romoco_drake.scenario import MAX_DURATION_S, Scenario, check_duration, load_scenario, with_overrides
 from romoco_drake.simulation import RunEnd, make_lcm, simulate, stderr_progress
 from romoco_drake.wiring import build_diagram, initial_positions, uses_motor_command
@@ -188,7 +189,8 @@ def run_robot_sim(scenario: Scenario, duration: float | None = None, lcm_url: st
     robot = load_robot(scenario.robot)
     robot_sim = make_robot_sim(robot, lcm, scenario.time_step, scenario.sensors, meshcat, scenario.link,
                                wait_for_commands_s=wait_s, motor_pd=uses_motor_command(scenario),
-                               disturbances=scenario.disturbances, engine=scenario.station.engine)
+                               disturbances=scenario.disturbances, engine=scenario.station.engine,
+                               terrain=Terrain(scenario.terrain))
     simulator = Simulator(robot_sim)
     context = simulator.get_mutable_context()
     station = robot_sim.GetSubsystemByName("station")

@@ -173,6 +173,10 @@ def build_mujoco_model(robot: RobotModel, time_step: float, terrain: Terrain | N
     return _maps(mujoco, robot, model, time_step)
 
 
+# The compiled models by (robot, step, terrain geometry): see mujoco_model.
+_MODELS: dict[tuple, MujocoModel] = {}
+
+
 def mujoco_model(robot: RobotModel, time_step: float, terrain: Terrain | None = None) -> MujocoModel:
     """:func:`build_mujoco_model`, once per robot, step and terrain geometry in a process (stations
     copy the MjModel they change)."""
@@ -181,9 +185,6 @@ def mujoco_model(robot: RobotModel, time_step: float, terrain: Terrain | None = 
     if key not in _MODELS:
         _MODELS[key] = build_mujoco_model(robot, time_step, terrain)
     return _MODELS[key]
-
-
-_MODELS: dict[tuple, MujocoModel] = {}
 
 
 def _terrain_key(terrain: Terrain) -> tuple:
