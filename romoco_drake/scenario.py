@@ -118,7 +118,7 @@ declare_ranges(Disturbance, t=Range(0.0, MAX_DURATION_S, "s"), duration=positive
 _PLACE, _SIZE = Range(-1000.0, 1000.0, "m", size=2), Range(0.01, 1000.0, "m")
 _HEIGHT, _YAW = Range(-100.0, 100.0, "m"), Range(-10.0, 10.0, "rad")
 _FRICTION = Range(0.0, 2.0, "", lo_open=True)
-declare_ranges(TerrainConfig, floor=_HEIGHT, overhang=Range(0.0, 0.1, "m"))
+declare_ranges(TerrainConfig, floor=_HEIGHT, edge_margin=Range(-0.1, 0.1, "m"))
 declare_ranges(BoxPiece, center=_PLACE, size=Range(0.01, 1000.0, "m", size=2), top=_HEIGHT, yaw=_YAW,
                friction=_FRICTION)
 declare_ranges(RampPiece, start=_PLACE, length=_SIZE, width=_SIZE, slope_deg=Range(-30.0, 30.0, "deg"),

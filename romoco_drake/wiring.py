@@ -299,7 +299,7 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     period, offset, kin = 1.0 / scenario.controller.rate_hz, LINK_TICK_OFFSET, kinematics.kinematics_port
     planner_system = _planner_system(scenario, robot, law)
     terrain = Terrain(scenario.terrain)
-    steps = None if terrain.is_flat else TerrainSteps(robot, terrain, scenario.terrain.overhang)
+    steps = None if terrain.is_flat else TerrainSteps(robot, terrain, scenario.terrain.edge_margin)
     if steps is not None and isinstance(planner_system, FootPlacementPlanner):
         planner_system.plan_on(steps)
     limiter = builder.AddNamedSystem("command_limiter", CommandLimiter(

@@ -285,7 +285,8 @@ class EmbeddingCore:
         c, s = math.cos(g.heading), math.sin(g.heading)
         d = kin.p_com - g.origin
         p_x, v_x = c * d[0] + s * d[1], c * kin.v_com[0] + s * kin.v_com[1]
-        base = _blend(swing.liftoff_com_height - k * swing.com_start[4], plan.com_height, tau, HEIGHT_BLEND_S)
+        base = _blend(swing.liftoff_com_height - k * swing.com_start[4], plan.com_height - g.dip, tau,
+                      min(HEIGHT_BLEND_S, t_ss))
         y_d[0] = base[0] + k * p_x
         yd_d[0] = base[1] + k * v_x
         ydd_d[0] = base[2] + k * GRAVITY / plan.com_height * p_x

@@ -16,7 +16,11 @@ when the ground is not the flat floor (:mod:`romoco_drake.rom.terrain`).
   = m z0 ṗ about the contact, so L̇ = m g p holds with the planner's own z0 (the virtual-slope
   constraint of Gibson, Dosunmu-Ogunbanjo, Gong and Grizzle, "Terrain-adaptive, ALIP-based
   bipedal locomotion controller via model predictive control and virtual constraints", IROS
-  2022). On stairs it is the line between treads; on a ramp, the ramp's slope.
+  2022). On stairs it is the line between treads; on a ramp, the ramp's slope. A step that
+  changes height by Δz also lowers it by ``STEP_DIP`` |Δz| (reached within the step): at
+  touchdown the CoM is then z0 above the lower foot, not z0 + |Δz|/2, which a leg straight at
+  z0 cannot reach (G1: hip 0.63 m above the sole, leg 0.69 m; the trailing foot 0.1 m lower and
+  0.35 m behind is out of reach, and lifting it off a straight knee threw it 0.26 m back).
 """
 
 from __future__ import annotations
@@ -38,6 +42,8 @@ FOOTHOLD_REACH = 0.2
 SLOPE_MIN_STEP = 0.05
 # The steepest virtual slope the CoM follows (Δz/Δx): a 0.1 m riser over a 0.1 m step.
 SLOPE_MAX = 1.0
+# The CoM runs this fraction of a step's height change below the virtual slope (module docstring).
+STEP_DIP = 0.5
 # Each sample of the path's clearance reaches this far past the sole's centre (m) beyond half its length.
 PATH_MARGIN = 0.02
 
@@ -48,7 +54,8 @@ class StepGround:
     (rad); the swing ``target`` and the swing sole's ``liftoff`` point relative to it (3,, stance
     yaw frame); the swing sole's (roll, pitch) on the ground it lifted off and on the ground it
     lands on; the virtual ``slope`` k; and ``status``: ``planned`` (the plan's foothold is
-    supported), ``adjusted`` (moved to supported ground) or ``in_place`` (none in reach)."""
+    supported), ``adjusted`` (moved to supported ground) or ``in_place`` (none in reach); ``dip``
+    (m): how far the CoM runs below the virtual slope in this step (module docstring)."""
 
     origin: np.ndarray
     heading: float
@@ -58,6 +65,7 @@ class StepGround:
     landing_tilt: tuple[float, float]
     slope: float
     status: str
+    dip: float = 0.0
 
 
 def sole_tilt(normal: np.ndarray, yaw: float) -> tuple[float, float]:
@@ -73,17 +81,17 @@ def sole_tilt(normal: np.ndarray, yaw: float) -> tuple[float, float]:
 class TerrainSteps:
     """Places a robot's steps on a :class:`~romoco_drake.rom.terrain.Terrain` (module docstring).
 
-    ``overhang`` (m): how far a sole may reach past a patch's edge and still count as supported
-    (the terrain's setting; 0 asks for the whole sole on the patch)."""
+    ``edge_margin`` (m): how far inside a patch's edges the sole must land (the terrain's
+    setting; negative: how far it may reach past them)."""
 
-    def __init__(self, robot: RobotModel, terrain: Terrain, overhang: float = 0.0):
+    def __init__(self, robot: RobotModel, terrain: Terrain, edge_margin: float = 0.0):
         self.terrain = terrain
+        self.reach = robot.config.walking.step_reach
         self.footprint, self.half_length = {}, {}
         for side in ("left", "right"):
             R_FS, p_FS = sole_frame(robot, side)
             corners = (R_FS.T @ (robot.feet[side].points - p_FS[:, None]))[:2].T
-            shrunk = np.sign(corners) * np.maximum(np.abs(corners) - overhang, 0.0)
-            self.footprint[side] = shrunk
+            self.footprint[side] = np.sign(corners) * np.maximum(np.abs(corners) + edge_margin, 0.0)
             self.half_length[side] = float(np.max(np.abs(corners[:, 0])))
 
     def place(self, origin: np.ndarray, heading: float, target, swing_yaw: float, swing_side: str,
@@ -97,7 +105,8 @@ class TerrainSteps:
         cy, sy = math.cos(yaw), math.sin(yaw)
         footprint = self.footprint[swing_side] @ np.array([[cy, sy], [-sy, cy]])
         planned = origin[:2] + R @ np.asarray(target, dtype=float)[:2]
-        foothold = self.terrain.foothold(planned, footprint, FOOTHOLD_REACH)
+        reachable = self._reachable(origin, R, swing_side)
+        foothold = self.terrain.foothold(planned, footprint, FOOTHOLD_REACH, reachable)
         lift_W = origin[:2] + R @ liftoff[:2]
         lift_tilt = sole_tilt(self.terrain.normal(lift_W), heading)
         if foothold is None:
@@ -110,7 +119,24 @@ class TerrainSteps:
             slope = float(np.clip(rel[2] / rel[0], -SLOPE_MAX, SLOPE_MAX))
         status = "planned" if foothold.shift < 1e-9 else "adjusted"
         return StepGround(origin, heading, rel, liftoff, lift_tilt, sole_tilt(foothold.normal, yaw), slope,
-                          status)
+                          status, STEP_DIP * abs(float(rel[2])))
+
+    def _reachable(self, origin: np.ndarray, R: np.ndarray, swing_side: str):
+        """Whether a foothold (world x, y) is one the swing leg can take from the stance ``origin``
+        (``R``: its yaw): in the robot's ``step_reach`` box, or without one on the swing foot's own
+        side of the stance foot (a foothold across it would cross the legs)."""
+        stance = "left" if swing_side == "right" else "right"
+        side = -1.0 if swing_side == "right" else 1.0
+        box = self.reach.box(stance) if self.reach is not None else None
+
+        def allowed(c: np.ndarray) -> bool:
+            q = R.T @ (c - origin[:2])
+            if box is None:
+                return side * q[1] > 0.0
+            (x_lo, x_hi), (y_lo, y_hi) = box
+            return x_lo <= q[0] <= x_hi and y_lo <= q[1] <= y_hi
+
+        return allowed
 
     def apex_raise(self, ground: StepGround, swing_side: str) -> float:
         """How far (m) the swing's apex must rise above the higher of its lift-off and touchdown
@@ -141,7 +167,7 @@ class TerrainSteps:
         cy, sy = math.cos(yaw), math.sin(yaw)
         footprint = self.footprint[swing_side] @ np.array([[cy, sy], [-sy, cy]])
         foothold = self.terrain.foothold(origin[:2] + R @ np.asarray(target, dtype=float)[:2], footprint,
-                                         FOOTHOLD_REACH)
+                                         FOOTHOLD_REACH, self._reachable(origin, R, swing_side))
         if foothold is None:
             return None
         q = R.T @ (foothold.position[:2] - origin[:2])

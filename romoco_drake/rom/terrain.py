@@ -16,6 +16,7 @@ foothold to the nearest supported one.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -90,12 +91,12 @@ class TerrainPiece:
 class TerrainConfig:
     """The scenario's terrain: an infinite floor at ``floor`` (m), which the feet may step on
     unless ``floor_steppable`` is false (stepping stones over a pit), and the ``pieces`` on it.
-    ``overhang`` (m): how far a sole may reach past a patch's edge and still count as supported
-    (0: the whole sole on the patch; a stone no longer than the sole needs some)."""
+    ``edge_margin`` (m): how far inside a patch's edges the controller lands a sole (room for
+    its landing error; negative: how far a sole may reach past them)."""
 
     floor: float = 0.0
     floor_steppable: bool = True
-    overhang: float = 0.0
+    edge_margin: float = 0.03
     pieces: list[TerrainPiece] = field(default_factory=list)
 
 
@@ -287,9 +288,11 @@ class Terrain:
                 return None
         return index
 
-    def foothold(self, xy, footprint: np.ndarray, max_shift: float = math.inf) -> Foothold | None:
+    def foothold(self, xy, footprint: np.ndarray, max_shift: float = math.inf,
+                 allowed: Callable[[np.ndarray], bool] | None = None) -> Foothold | None:
         """The supported foothold nearest the planned ``xy`` (horizontal distance), at most
-        ``max_shift`` (m) away, or None when there is none in that reach (see :meth:`supports`).
+        ``max_shift`` (m) away and where ``allowed`` (a predicate on the horizontal point: the
+        leg's reach) holds, or None when there is none (see :meth:`supports`).
 
         The candidates are ``xy`` itself, its projection into each patch's outline shrunk by the
         footprint, and, on the floor, the nearest points just clear of each patch's outline grown
@@ -307,6 +310,8 @@ class Terrain:
         for c in candidates:
             shift = float(np.linalg.norm(c - xy))
             if shift > max_shift or (best is not None and shift >= best.shift):
+                continue
+            if allowed is not None and not allowed(c):
                 continue
             index = self.supports(c, footprint)
             if index is not None:
