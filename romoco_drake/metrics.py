@@ -97,7 +97,7 @@ def estimator_summary(built, context, until: float | None) -> dict:
     per minute, from the first to the last sample) and horizontal position drift per metre
     walked (the error's change over the run over the true path length, in the frame the estimate
     started in: a start off in yaw or position is not drift; None when the robot walked under
-    0.1 m)."""
+    0.1 m), and the base height and tilt errors (:func:`height_tilt_errors`)."""
     if not hasattr(built.estimator, "rejected_updates"):
         return {}
     out = {"estimator_rejected_updates": built.estimator.rejected_updates(
@@ -123,7 +123,8 @@ def _heading_frame_velocity(robot, states: np.ndarray) -> np.ndarray:
 def estimate_errors(robot, times: np.ndarray, truth: np.ndarray, estimate: np.ndarray) -> dict:
     """Estimator errors against the truth, state samples one per column (see estimator_summary)."""
     if len(times) < 2:
-        return dict.fromkeys(("velocity_estimate_rms_error", "yaw_drift_rad_per_min", "position_drift_per_m"))
+        return dict.fromkeys(("velocity_estimate_rms_error", "yaw_drift_rad_per_min", "position_drift_per_m",
+                              "height_error_end", "tilt_error_max", "tilt_error_end"))
     error = np.linalg.norm(_heading_frame_velocity(robot, estimate) - _heading_frame_velocity(robot, truth),
                            axis=0)
     yaw_error = np.unwrap(base_yaw(robot, estimate) - base_yaw(robot, truth))
@@ -140,4 +141,23 @@ def estimate_errors(robot, times: np.ndarray, truth: np.ndarray, estimate: np.nd
         "velocity_estimate_rms_error": finite_or_none([round(float(np.sqrt(np.mean(error**2))), 4)])[0],
         "yaw_drift_rad_per_min": finite_or_none([round(float(yaw_error[-1] - yaw_error[0]) / minutes, 5)])[0],
         "position_drift_per_m": finite_or_none([round(float(drift), 4)])[0],
-    }
+    } | height_tilt_errors(robot, truth, estimate)
+
+
+def height_tilt_errors(robot, truth: np.ndarray, estimate: np.ndarray) -> dict:
+    """The base height's error at the last sample (estimate − truth, m: on stairs and slopes the
+    height comes from the legs alone) and the tilt error's largest and last values (rad: the
+    angle between the world's vertical in the estimated and the true base axes)."""
+    b = robot.base_q_start
+    up = [_up_in_base(x[b:b + 4]) for x in (truth, estimate)]
+    tilt = np.arccos(np.clip(np.einsum("in,in->n", *up), -1.0, 1.0))
+    values = [float(estimate[b + 6, -1] - truth[b + 6, -1]), float(np.max(tilt)), float(tilt[-1])]
+    return dict(zip(("height_error_end", "tilt_error_max", "tilt_error_end"),
+                    finite_or_none([round(v, 4) for v in values]), strict=True))
+
+
+def _up_in_base(quaternion: np.ndarray) -> np.ndarray:
+    """(3, N) the world's z axis in base axes, the third row of R_WB, from (4, N) quaternions [w, x, y, z]
+    (normalised here: a logged estimate need not be unit)."""
+    w, x, y, z = quaternion / np.linalg.norm(quaternion, axis=0)
+    return np.array([2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)])

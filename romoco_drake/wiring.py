@@ -164,7 +164,8 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
         walking = _add_walking_loop(builder, scenario, robot, estimator.state_output, kinematics, command,
                                     station, law, command.estop_port if teleop else None)
         if meshcat is not None:
-            _add_page_display(builder, meshcat, robot, walking, estimator.state_output, kinematics)
+            _add_page_display(builder, meshcat, robot, walking, estimator.state_output, kinematics,
+                              Terrain(scenario.terrain))
         if link != "sim":
             _add_status(builder, robot, lcm, estimator.state_output, command, walking, kinematics, deadline)
     estimate_log = LogVectorOutput(estimator.state_output, builder, STATE_LOG_PERIOD)
@@ -255,9 +256,10 @@ def _add_status(builder: DiagramBuilder, robot: RobotModel, lcm: DrakeLcmInterfa
 
 
 def _add_page_display(builder: DiagramBuilder, meshcat: Meshcat, robot: RobotModel, walking: WalkingLoop,
-                      state, kinematics: RobotKinematicsSystem) -> None:
-    """Shows the walking loop's mode, command, measured velocity and foothold on the page."""
-    page = builder.AddNamedSystem("page", PageDisplay(meshcat, robot, offset=LINK_TICK_OFFSET))
+                      state, kinematics: RobotKinematicsSystem, terrain: Terrain) -> None:
+    """Shows the walking loop's mode, command, measured velocity and foothold (on ``terrain``) on the page."""
+    page = builder.AddNamedSystem("page", PageDisplay(meshcat, robot, offset=LINK_TICK_OFFSET,
+                                                      terrain=terrain))
     builder.Connect(walking.limiter.command_port, page.command_port)
     builder.Connect(state, page.state_port)
     mode = walking.estop_gate.mode_port if walking.estop_gate else walking.state_machine.mode_port

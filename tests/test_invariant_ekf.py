@@ -221,3 +221,31 @@ def test_run_summary_errors_against_the_truth():
     assert errors["yaw_drift_rad_per_min"] == pytest.approx(0.0, abs=1e-9)
     assert errors["position_drift_per_m"] == pytest.approx(0.0, abs=1e-9)
     assert errors["velocity_estimate_rms_error"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_run_summary_height_and_tilt_errors():
+    """The base height's error at the end and the tilt error (the angle between the world's
+    vertical in both base frames; a yaw error is no tilt), against rotations built by pydrake."""
+    from pydrake.math import RollPitchYaw
+
+    from romoco_drake.metrics import estimate_errors
+    from romoco_drake.robots.model import load_robot
+
+    robot = load_robot("g1")
+    times = np.linspace(0.0, 2.0, 5)
+    truth = np.tile(np.concatenate([robot.nominal.q, np.zeros(robot.nv)])[:, None], (1, times.size))
+    b = robot.base_q_start
+    estimate = truth.copy()
+    rolls, pitches = [0.0, 0.02, 0.05, -0.03, 0.01], [0.0, -0.01, 0.04, 0.0, 0.02]
+    for k, (roll, pitch) in enumerate(zip(rolls, pitches, strict=True)):
+        truth[b:b + 4, k] = RollPitchYaw(0.0, 0.1, 0.3).ToQuaternion().wxyz()
+        estimate[b:b + 4, k] = RollPitchYaw(roll, 0.1 + pitch, 0.3 + 0.2 * k).ToQuaternion().wxyz()
+    estimate[b + 6] = truth[b + 6] + np.linspace(0.0, -0.04, times.size)
+    expected = [np.arccos(np.clip(RollPitchYaw(0.0, 0.1, 0.3).ToRotationMatrix().matrix()[2]
+                                  @ RollPitchYaw(r, 0.1 + p, 0.3).ToRotationMatrix().matrix()[2], -1, 1))
+                for r, p in zip(rolls, pitches, strict=True)]
+    errors = estimate_errors(robot, times, truth, estimate)
+    assert errors["height_error_end"] == pytest.approx(-0.04)
+    assert errors["tilt_error_max"] == pytest.approx(max(expected), abs=1e-4)
+    assert errors["tilt_error_end"] == pytest.approx(expected[-1], abs=1e-4)
+    assert estimate_errors(robot, times, truth, truth)["tilt_error_max"] == pytest.approx(0.0, abs=1e-6)

@@ -69,3 +69,30 @@ def test_teleop_runs_on_the_lcm_link(meshcat):
                            teleop=True)
     assert summary["link"] == "via_lcm" and summary["teleop_estop"] is False and not summary["fell"]
     assert summary["estop"] == 0 and summary["robot_link"]["estop"] == 0
+
+
+def test_foothold_disc_sits_on_the_ground():
+    """The disc is at the plan's target relative to the stance sole, 3 mm above the floor on flat
+    ground and above the tread under it on stairs."""
+    import dataclasses
+
+    from romoco_drake.embedding.contact import contact_frame
+    from romoco_drake.interfaces.teleop import FOOTHOLD_LIFT, foothold_pose
+    from romoco_drake.robots.kinematics import RobotKinematics
+    from romoco_drake.rom.terrain import StairsPiece, Terrain, TerrainConfig, TerrainPiece
+    from romoco_drake.rom.types import PlannerOutput
+
+    robot = load_robot("g1")
+    kin = RobotKinematics(robot)
+    plan = dataclasses.replace(PlannerOutput.placeholder(), stance_side="left",
+                               swing_target=np.array([0.3, -0.2, 0.0]))
+    origin, heading = contact_frame(robot, kin, "left")
+    c, s = np.cos(heading), np.sin(heading)
+    xy = origin[:2] + np.array([[c, -s], [s, c]]) @ [0.3, -0.2]
+    flat = foothold_pose(robot, kin, plan)
+    assert flat.translation() == pytest.approx([*xy, 0.003])
+    assert FOOTHOLD_LIFT == 0.003
+    stairs = Terrain(TerrainConfig(pieces=[TerrainPiece(stairs=StairsPiece(
+        start=[xy[0] - 0.1, 0.0], steps=2, rise=0.15, run=0.3, width=2.0))]))
+    assert foothold_pose(robot, kin, plan, stairs).translation() == pytest.approx([*xy, 0.153])
+    assert foothold_pose(robot, kin, plan, Terrain()).translation() == pytest.approx(flat.translation())

@@ -34,6 +34,7 @@ from romoco_drake.modes import Mode
 from romoco_drake.planners.heading import heading_velocity
 from romoco_drake.robots.kinematics import kinematics_model_value
 from romoco_drake.robots.model import RobotModel
+from romoco_drake.rom.terrain import Terrain
 from romoco_drake.rom.types import COMMAND_SIZE, PlannerOutput
 
 VELOCITIES = ("vx", "vy", "wz")  # slider names, in WalkCommand order
@@ -52,6 +53,7 @@ MODE_PREFIX = "mode: "  # the read-only button that names the mode
 SCENE = "/drake"
 GRID, GRID_CELL = "/Grid", 0.5
 FOOTHOLD = "/drake/teleop/foothold"
+FOOTHOLD_LIFT = 0.003  # m: the foothold disc's centre above the ground (half its 5 mm thickness, and a hair)
 MODE_LAMP = "/drake/teleop/mode"
 MODE_COLORS = {Mode.IN_AIR: Rgba(0.9, 0.7, 0.1, 1.0), Mode.STANDING: Rgba(0.2, 0.4, 0.9, 1.0),
                Mode.WALKING: Rgba(0.1, 0.7, 0.2, 1.0), Mode.DAMPING: Rgba(0.9, 0.1, 0.1, 1.0)}
@@ -182,13 +184,14 @@ class PageDisplay(LeafSystem):
     constant ``MEASURED_TAU``), and a publish shows it beside the command as read-out sliders
     (``measured vx`` ...; ``commanded vx`` ...), names the mode on a read-only button
     (``mode: walking``) and colours a lamp above the robot by it, draws the planned foothold as a
-    disc, and keeps the robot in view (see ``SCENE``). The scene changes carry the simulation
-    time, so a ``--record`` replay shows them too.
+    disc on the ground (``terrain``'s, if given), and keeps the robot in view (see ``SCENE``). The
+    scene changes carry the simulation time, so a ``--record`` replay shows them too.
     """
 
-    def __init__(self, meshcat: Meshcat, robot: RobotModel, period: float = PAGE_PERIOD, offset: float = 0.0):
+    def __init__(self, meshcat: Meshcat, robot: RobotModel, period: float = PAGE_PERIOD, offset: float = 0.0,
+                 terrain: Terrain | None = None):
         super().__init__()
-        self.meshcat, self.robot = meshcat, robot
+        self.meshcat, self.robot, self.terrain = meshcat, robot, terrain
         w = robot.config.walking
         limits = [w.command_limits.vx, w.command_limits.vy, w.command_limits.wz]
         for kind in ("commanded", "measured"):
@@ -249,7 +252,15 @@ class PageDisplay(LeafSystem):
         walking = mode == Mode.WALKING and plan.valid
         m.SetProperty(FOOTHOLD, "visible", walking, t)
         if walking:
-            origin, heading = contact_frame(self.robot, kin, plan.stance_side)
-            R = RotationMatrix.MakeZRotation(heading)
-            p = origin + R.matrix() @ np.array([plan.swing_target[0], plan.swing_target[1], 0.0])
-            m.SetTransform(FOOTHOLD, RigidTransform(R, [p[0], p[1], 0.003]), t)
+            m.SetTransform(FOOTHOLD, foothold_pose(self.robot, kin, plan, self.terrain), t)
+
+
+def foothold_pose(robot: RobotModel, kin, plan: PlannerOutput, terrain: Terrain | None = None
+                  ) -> RigidTransform:
+    """The planned foothold's disc: at the plan's target turned to the stance heading, ``FOOTHOLD_LIFT``
+    above the ground there (``terrain``'s height, else z = 0), so it shows on stairs and ramps too."""
+    origin, heading = contact_frame(robot, kin, plan.stance_side)
+    R = RotationMatrix.MakeZRotation(heading)
+    p = origin + R.matrix() @ np.array([plan.swing_target[0], plan.swing_target[1], 0.0])
+    ground = 0.0 if terrain is None else terrain.height(p[:2])
+    return RigidTransform(R, [p[0], p[1], ground + FOOTHOLD_LIFT])
