@@ -161,10 +161,11 @@ def test_an_unreachable_target_is_stepped_in_place(g1):
 def test_apex_clears_a_riser_between_liftoff_and_target(g1, top):
     """A block 0.1 m deep between a lift-off and a target both on the floor: the apex rises by at
     least the block's height above the higher of the two ends (exactly that, its top being flat)."""
-    terrain = _terrain(TerrainPiece(box=BoxPiece(center=[0.5, 0.0], size=[0.1, 1.0], top=top)))
+    terrain = _terrain(TerrainPiece(box=BoxPiece(center=[0.45, 0.0], size=[0.1, 1.0], top=top)))
     steps = TerrainSteps(g1, terrain)
     origin = np.array([0.2, 0.1, 0.0])
-    ground = steps.place(origin, 0.0, (0.55, -0.2), 0.0, "right", np.array([0.0, -0.2, 0.0]))
+    # 0.39 m ahead: within G1's 0.4 m forward reach, the heel just past the block.
+    ground = steps.place(origin, 0.0, (0.39, -0.2), 0.0, "right", np.array([-0.05, -0.2, 0.0]))
     assert ground.status == "planned"
     raise_ = steps.apex_raise(ground, "right")
     assert raise_ >= top - max(ground.liftoff[2], ground.target[2]) - 1e-12
@@ -175,8 +176,8 @@ def test_apex_raise_onto_a_tread_and_on_flat_ground(g1):
     """Up onto the middle of tread 1 the highest ground is the target itself: no raise above it.
     On flat ground: none."""
     steps = TerrainSteps(g1, _stairs())
-    origin = np.array([0.7, 0.1, 0.0])
-    up = steps.place(origin, 0.0, (0.45, -0.2), 0.0, "right", np.array([-0.2, -0.2, 0.0]))
+    origin = np.array([0.8, 0.1, 0.0])
+    up = steps.place(origin, 0.0, (0.35, -0.2), 0.0, "right", np.array([-0.2, -0.2, 0.0]))
     assert up.status == "planned" and up.target[2] == pytest.approx(RISE)
     assert steps.apex_raise(up, "right") == pytest.approx(0.0)
     flat = TerrainSteps(g1, _terrain(TerrainPiece(box=BoxPiece(center=[5.0, 5.0], size=[0.2, 0.2], top=0.1))))

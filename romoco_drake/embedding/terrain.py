@@ -113,7 +113,9 @@ class TerrainSteps:
             rel = np.asarray(liftoff, dtype=float).copy()
             return StepGround(origin, heading, rel, liftoff, lift_tilt, lift_tilt, 0.0, "in_place")
         xy = R.T @ (foothold.position[:2] - origin[:2])
-        rel = np.array([xy[0], xy[1], foothold.position[2] - origin[2]])
+        # Heights from the terrain under the stance sole, not its estimated z: an estimator's height
+        # drifts, and the swing would aim that far into (or above) the real ground.
+        rel = np.array([xy[0], xy[1], foothold.position[2] - self.terrain.height(origin[:2])])
         slope = 0.0
         if abs(rel[0]) >= SLOPE_MIN_STEP:
             slope = float(np.clip(rel[2] / rel[0], -SLOPE_MAX, SLOPE_MAX))
@@ -121,22 +123,19 @@ class TerrainSteps:
         return StepGround(origin, heading, rel, liftoff, lift_tilt, sole_tilt(foothold.normal, yaw), slope,
                           status, STEP_DIP * abs(float(rel[2])))
 
-    def _reachable(self, origin: np.ndarray, R: np.ndarray, swing_side: str):
-        """Whether a foothold (world x, y) is one the swing leg can take from the stance ``origin``
-        (``R``: its yaw): in the robot's ``step_reach`` box, or without one on the swing foot's own
-        side of the stance foot (a foothold across it would cross the legs)."""
+    def _reachable(self, origin: np.ndarray, R: np.ndarray, swing_side: str) -> tuple[np.ndarray, np.ndarray]:
+        """(A, b): the footholds (world x, y; A p ≤ b) the swing leg can take from the stance
+        ``origin`` (``R``: its yaw): the robot's ``step_reach`` box, or without one the swing
+        foot's own side of the stance foot (a foothold across it would cross the legs)."""
         stance = "left" if swing_side == "right" else "right"
-        side = -1.0 if swing_side == "right" else 1.0
-        box = self.reach.box(stance) if self.reach is not None else None
-
-        def allowed(c: np.ndarray) -> bool:
-            q = R.T @ (c - origin[:2])
-            if box is None:
-                return side * q[1] > 0.0
-            (x_lo, x_hi), (y_lo, y_hi) = box
-            return x_lo <= q[0] <= x_hi and y_lo <= q[1] <= y_hi
-
-        return allowed
+        if self.reach is not None:
+            (x_lo, x_hi), (y_lo, y_hi) = self.reach.box(stance)
+            rows = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+            limits = [x_hi, -x_lo, y_hi, -y_lo]
+        else:
+            rows, limits = np.array([[0.0, 1.0 if swing_side == "right" else -1.0]]), [0.0]
+        A = rows @ R.T  # rows on q = Rᵀ (p − o)
+        return A, np.asarray(limits, dtype=float) + A @ origin[:2]
 
     def apex_raise(self, ground: StepGround, swing_side: str) -> float:
         """How far (m) the swing's apex must rise above the higher of its lift-off and touchdown
@@ -151,7 +150,8 @@ class TerrainSteps:
         reach = self.half_length[swing_side] + PATH_MARGIN
         u = d / norm if norm > 1e-9 else np.zeros(2)
         highest = self.terrain.highest_along(ground.origin[:2] + R @ (a - reach * u),
-                                             ground.origin[:2] + R @ (b + reach * u)) - ground.origin[2]
+                                             ground.origin[:2] + R @ (b + reach * u)) - self.terrain.height(
+                                                 ground.origin[:2])
         return max(0.0, highest - max(float(start[2]), float(ground.target[2])))
 
     def region(self, origin: np.ndarray, heading: float, target, swing_yaw: float, swing_side: str

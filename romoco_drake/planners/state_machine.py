@@ -263,8 +263,9 @@ class GaitStateMachine(LeafSystem):
         overdue = t - s.step_start - (s.t_ss + self.t_ds)
         if overdue >= self.touchdown_timeout - 1e-9 or not s.lifted:
             return False
-        if self.terrain is not None:
-            return bool(self._sole_heights(kin, swing).min() > self.air_height)
+        if self.terrain is not None:  # each above its own ground: a tread up or down is no air
+            lift = self._sole_heights(kin, swing).min() - self._sole_heights(kin, stance).min()
+            return bool(lift > self.air_height)
         z_swing = self.robot.sole_points_in_world(kin.context, swing)[2].min()
         z_stance = self.robot.sole_points_in_world(kin.context, stance)[2].min()
         return bool(z_swing - z_stance > self.air_height)

@@ -141,21 +141,14 @@ class StepAdapter:
         dcm0 = ((p_x + l_y / mk) * decay, (p_y - l_x / mk) * decay)
         if not all(map(math.isfinite, dcm0)):
             return plan
-        window = None
-        if swing_foot is not None and b.swing_speed > 0.0:
-            s = tuple(float(a) for a in swing_foot)
-            if all(map(math.isfinite, s)):
-                window = SwingWindow(s[:2], s[2:4], s[4:], b.swing_speed, t_in_step, lam)
+        window = self._window(swing_foot, t_in_step, lam)
         sigma_n = math.exp(lam * plan.t_ss)
         u_n = (float(plan.swing_target[0]), float(plan.swing_target[1]))
         implied = tuple(d * sigma_n - u for d, u in zip(dcm0, u_n, strict=True))
         offset_n = self.viable_offset(implied, plan.stance_side, sigma_n)
-        box = b.box(plan.stance_side)
-        reach_ok = all(lo <= u <= hi for u, (lo, hi) in zip(u_n, box, strict=True))
-        if region is not None:
-            both = tuple((max(lo, r_lo), min(hi, r_hi))
-                         for (lo, hi), (r_lo, r_hi) in zip(box, region, strict=True))
-            box = both if all(lo <= hi for lo, hi in both) else box
+        reach = b.box(plan.stance_side)
+        reach_ok = all(lo <= u <= hi for u, (lo, hi) in zip(u_n, reach, strict=True))
+        box = _within(reach, region)
         t_commit = SWING_COMMIT_FRACTION * (plan.t_ss if step_t_ss is None or not math.isfinite(step_t_ss)
                                             else step_t_ss)
         # A push: the law's step is out of reach or leaves an offset the next steps cannot catch.
@@ -180,6 +173,15 @@ class StepAdapter:
         target = np.array([u[0], u[1], float(plan.swing_target[2])])
         return replace(plan, swing_target=target, t_ss=t_ss, time_to_touchdown=max(t_ss - t_in_step, 0.0),
                        timing_adapted=True, step_bounded=pushed)
+
+    def _window(self, swing_foot: Sequence[float] | None, t_in_step: float, lam: float) -> SwingWindow | None:
+        """Where the swing can still land (None: no swing state, or no speed limit)."""
+        if swing_foot is None or self.bounds.swing_speed <= 0.0:
+            return None
+        s = tuple(float(a) for a in swing_foot)
+        if not all(map(math.isfinite, s)):
+            return None
+        return SwingWindow(s[:2], s[2:4], s[4:], self.bounds.swing_speed, t_in_step, lam)
 
     def next_step(self, plan: PlannerOutput, lam: float, sigma_n: float) -> NextStep | None:
         """The lookahead's second step from the law's orbit (None: the orbit is not finite).
@@ -217,6 +219,15 @@ class StepAdapter:
         inward = 1.0 if stance_side == "left" else -1.0  # the right foot lands: inward is +y
         b_y = inward * min(max(inward * offset[1], 0.0), b.lateral_max * scale)
         return b_x, b_y
+
+
+def _within(reach, region):
+    """The reach box cut to the terrain's ``region`` (both per axis (lo, hi)); the reach alone
+    where there is no region or the two do not meet."""
+    if region is None:
+        return reach
+    both = tuple((max(lo, r_lo), min(hi, r_hi)) for (lo, hi), (r_lo, r_hi) in zip(reach, region, strict=True))
+    return both if all(lo <= hi for lo, hi in both) else reach
 
 
 # A quintic swing over D from (0, v, a) to (d, 0, 0) has velocity v h(r) + a D k(r) + (d / D) g(r) at

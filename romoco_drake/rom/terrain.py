@@ -16,7 +16,6 @@ foothold to the nearest supported one.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -289,21 +288,22 @@ class Terrain:
         return index
 
     def foothold(self, xy, footprint: np.ndarray, max_shift: float = math.inf,
-                 allowed: Callable[[np.ndarray], bool] | None = None) -> Foothold | None:
+                 within: tuple[np.ndarray, np.ndarray] | None = None) -> Foothold | None:
         """The supported foothold nearest the planned ``xy`` (horizontal distance), at most
-        ``max_shift`` (m) away and where ``allowed`` (a predicate on the horizontal point: the
-        leg's reach) holds, or None when there is none (see :meth:`supports`).
+        ``max_shift`` (m) away and inside ``within`` (A p ≤ b, unit rows: the leg's reach), or None
+        when there is none (see :meth:`supports`).
 
         The candidates are ``xy`` itself, its projection into each patch's outline shrunk by the
-        footprint, and, on the floor, the nearest points just clear of each patch's outline grown
-        by it."""
+        footprint (and cut by ``within``), and, on the floor, the nearest points just clear of each
+        patch's outline grown by it, and ``xy`` projected into ``within``."""
         xy = np.asarray(xy, dtype=float)[:2]
         footprint = np.asarray(footprint, dtype=float)
-        candidates = [xy]
+        W_A, W_b = within if within is not None else (np.zeros((0, 2)), np.zeros(0))
+        candidates = [xy, _project_inside(xy, W_A, W_b)]
         for s in self.surfaces:
             A, b = s.halfplanes()
             reach = np.max(footprint @ A.T, axis=0)
-            candidates.append(_project_inside(xy, A, b - reach))
+            candidates.append(_project_inside(xy, np.vstack([A, W_A]), np.concatenate([b - reach, W_b])))
             if self.floor_steppable:
                 candidates.extend(_push_outside(xy, A, b - np.min(footprint @ A.T, axis=0)))
         best: Foothold | None = None
@@ -311,7 +311,7 @@ class Terrain:
             shift = float(np.linalg.norm(c - xy))
             if shift > max_shift or (best is not None and shift >= best.shift):
                 continue
-            if allowed is not None and not allowed(c):
+            if np.any(W_A @ c > W_b + 1e-7):
                 continue
             index = self.supports(c, footprint)
             if index is not None:
