@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
-from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.multibody.tree import JacobianWrtVariable, MultibodyForces
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.control.gravity import contact_gravity_compensation
@@ -68,6 +68,23 @@ def test_kinematics_system_matches_drake(name):
     x2[robot.nq:] = 0.0
     system.state_port.FixValue(context, x2)
     assert np.all(system.kinematics_port.Eval(context).v == 0.0)
+
+
+@pytest.mark.parametrize(("name", "damped"), [("icub", True), ("cassie", False)])
+def test_controllers_model_the_joint_damping_their_yaml_asks_for(name, damped):
+    """C = C v − τ_g − (Drake's joint damping forces, −D v) where the robot's YAML says the
+    controllers model damping (iCub), C v − τ_g where it does not (Cassie's model damps too)."""
+    robot = load_robot(name)
+    x, plant_context = _random_state(robot)
+    plant = robot.plant
+    plant.SetVelocities(plant_context, x[robot.nq:])
+    forces = MultibodyForces(plant)
+    plant.CalcForceElementsContribution(plant_context, forces)
+    damping = forces.generalized_forces()
+    assert np.abs(damping).max() > 0.1
+    expected = plant.CalcBiasTerm(plant_context) - plant.CalcGravityGeneralizedForces(plant_context)
+    np.testing.assert_allclose(RobotKinematics(robot, x).C, expected - damping if damped else expected,
+                               atol=1e-9)
 
 
 def test_kinematics_of_a_non_finite_state_is_flagged_and_nan():

@@ -51,16 +51,8 @@ def test_path_radius_of_a_swaying_arc():
     assert path_radius(t, np.tile([0.3, 0.1], (len(t), 1))) == math.inf
 
 
-# iCub does not turn while walking: on the 0.28 m/s, 0.28 rad/s arc its yaw rate reaches 0.17 rad/s
-# and its heading falls 0.45 rad behind the command (measured; a defect of its shipped settings,
-# not of this test). Strict: the test says when it is fixed.
-ICUB_TURNS_SLOWLY = pytest.mark.xfail(strict=True, raises=AssertionError,
-                                      reason="iCub turns at 60 % of a walking arc's yaw rate")
-
-
 @pytest.mark.slow
-@pytest.mark.parametrize("scenario", [pytest.param(n, marks=ICUB_TURNS_SLOWLY) if n == "icub_walk" else n
-                                      for n in sorted(ARCS)])
+@pytest.mark.parametrize("scenario", sorted(ARCS))
 def test_walks_an_arc_then_stops_and_stands(scenario):
     """Stays up with no QP failure; over the arc's scored window the mean speed and yaw rate and
     the path's radius are within 10 % of the command (and of vx/wz), the 1 s averaged speed and

@@ -15,7 +15,8 @@ from romoco_drake.planners.heading import base_yaw
 from romoco_drake.scenario import load_scenario, with_overrides
 
 # Forward, sideways, turn in place, 2.2 s each: the limiter's ramp (0.6 s at 0.5 m/s²) and the
-# 1 s settling leave each segment's last 0.6 s (three strides) scored.
+# 1 s settling leave each segment's last 0.6 s scored, less than two strides (H1's stride 0.6 s,
+# Cassie's 0.7 s), so each segment's mean is over its last stride (walk_support.segments).
 COMMAND = "0:0,0,0;0.5:0.3,0,0;2.7:0,0.2,0;4.9:0,0,0.3"
 DURATION = 7.1
 

@@ -221,6 +221,10 @@ class RobotConfig:
     effort_limits: dict[str, float] = dataclasses.field(default_factory=dict)
     # Default effort limit for joints whose model file gives none.
     default_effort_limit: float | None = None
+    # The controllers add the model file's joint damping D v to their equations of motion, as the
+    # simulation applies it. Off, they assume none: Cassie's and TALOS's files damp too (0.1 to
+    # 1 N·m·s/rad) and their settings were measured without it.
+    controllers_model_damping: bool = False
 
 
 # Motor torque limits: Drake rejects a negative one; 1e4 N·m is beyond any humanoid's joint.

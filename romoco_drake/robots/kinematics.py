@@ -123,9 +123,10 @@ class RobotKinematics:
 
     @property
     def C(self) -> np.ndarray:
-        """C v − τ_g: what the equations of motion M v̇ + C = B τ + J_hᵀ λ call C."""
+        """C v + D v − τ_g: what the equations of motion M v̇ + C = B τ + J_hᵀ λ call C (D: the
+        joint damping the controllers model, :attr:`RobotModel.joint_damping`)."""
         if self._C is None:
-            self._C = self.bias - self.tau_g
+            self._C = self.bias + self.robot.joint_damping * self.v - self.tau_g
         return self._C
 
     def frame_pose(self, frame) -> tuple[np.ndarray, np.ndarray]:

@@ -233,6 +233,11 @@ class RobotModel:
         }
         self.foot_frames = {s: plant.GetBodyByName(f.body_name).body_frame() for s, f in self.feet.items()}
         self.kp, self.kd = self._actuator_gains()
+        # Joint damping per velocity (N·m·s/rad), zero unless the controllers model it.
+        self.joint_damping = np.zeros(self.nv)
+        if cfg.controllers_model_damping:
+            for j in self._revolute_joints(plant):
+                self.joint_damping[j.velocity_start()] = j.default_damping()
         self.locked_actuator_mask = np.array([n in cfg.locked_joints for n in self.actuator_names])
 
     def _actuator_gains(self) -> tuple[np.ndarray, np.ndarray]:
