@@ -35,8 +35,9 @@ from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.terrain import Terrain
 
 # How far (m) a planned foothold may move to reach supported ground: beyond it, the step is taken
-# in place. A tread's depth: a foothold on a riser's edge moves at most half a sole's length.
-FOOTHOLD_REACH = 0.2
+# in place. About a stride: a robot whose steps ran ahead of the next stone still lands on the
+# nearest one (H1 at a platform's edge: 0.2 m put its steps in place while its CoM ran on).
+FOOTHOLD_REACH = 0.3
 # A step shorter than this (m) along the heading has no virtual slope (stepping in place up a
 # riser would give an unbounded k).
 SLOPE_MIN_STEP = 0.05
@@ -87,10 +88,11 @@ class TerrainSteps:
     def __init__(self, robot: RobotModel, terrain: Terrain, edge_margin: float = 0.0):
         self.terrain = terrain
         self.reach = robot.config.walking.step_reach
-        self.footprint, self.half_length = {}, {}
+        self.footprint, self.half_length, self.sole = {}, {}, {}
         for side in ("left", "right"):
             R_FS, p_FS = sole_frame(robot, side)
             corners = (R_FS.T @ (robot.feet[side].points - p_FS[:, None]))[:2].T
+            self.sole[side] = corners
             self.footprint[side] = np.sign(corners) * np.maximum(np.abs(corners) + edge_margin, 0.0)
             self.half_length[side] = float(np.max(np.abs(corners[:, 0])))
 
@@ -113,15 +115,25 @@ class TerrainSteps:
             rel = np.asarray(liftoff, dtype=float).copy()
             return StepGround(origin, heading, rel, liftoff, lift_tilt, lift_tilt, 0.0, "in_place")
         xy = R.T @ (foothold.position[:2] - origin[:2])
-        # Heights from the terrain under the stance sole, not its estimated z: an estimator's height
-        # drifts, and the swing would aim that far into (or above) the real ground.
-        rel = np.array([xy[0], xy[1], foothold.position[2] - self.terrain.height(origin[:2])])
+        stance = "left" if swing_side == "right" else "right"
+        rel = np.array([xy[0], xy[1], foothold.position[2] - self.ground_under(origin, heading, stance)])
         slope = 0.0
         if abs(rel[0]) >= SLOPE_MIN_STEP:
             slope = float(np.clip(rel[2] / rel[0], -SLOPE_MAX, SLOPE_MAX))
         status = "planned" if foothold.shift < 1e-9 else "adjusted"
         return StepGround(origin, heading, rel, liftoff, lift_tilt, sole_tilt(foothold.normal, yaw), slope,
                           status, STEP_DIP * abs(float(rel[2])))
+
+    def ground_under(self, origin: np.ndarray, heading: float, side: str) -> float:
+        """The ground's z under the ``side`` sole centred at ``origin`` with ``heading``: the
+        terrain's under its centre, or where the sole is not all on one surface the highest under
+        its corners (a sole caught on an edge rests on the higher side); not the sole's estimated z
+        (an estimator's height drifts, and the swing would aim that far into the real ground)."""
+        c, s = math.cos(heading), math.sin(heading)
+        corners = self.sole[side] @ np.array([[c, s], [-s, c]])
+        if self.terrain.supports(origin[:2], corners) is not None:
+            return self.terrain.height(origin[:2])
+        return max(self.terrain.height(origin[:2] + p) for p in corners)
 
     def _reachable(self, origin: np.ndarray, R: np.ndarray, swing_side: str) -> tuple[np.ndarray, np.ndarray]:
         """(A, b): the footholds (world x, y; A p ≤ b) the swing leg can take from the stance
@@ -150,8 +162,9 @@ class TerrainSteps:
         reach = self.half_length[swing_side] + PATH_MARGIN
         u = d / norm if norm > 1e-9 else np.zeros(2)
         highest = self.terrain.highest_along(ground.origin[:2] + R @ (a - reach * u),
-                                             ground.origin[:2] + R @ (b + reach * u)) - self.terrain.height(
-                                                 ground.origin[:2])
+                                             ground.origin[:2] + R @ (b + reach * u))
+        stance = "left" if swing_side == "right" else "right"
+        highest -= self.ground_under(ground.origin, ground.heading, stance)
         return max(0.0, highest - max(float(start[2]), float(ground.target[2])))
 
     def region(self, origin: np.ndarray, heading: float, target, swing_yaw: float, swing_side: str

@@ -344,22 +344,24 @@ def _higher(other: Surface, mine: Surface, corners: np.ndarray) -> bool:
 
 
 def _project_inside(xy: np.ndarray, A: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The nearest point to ``xy`` with A p ≤ b (a convex polygon of unit-row half-planes),
-    by alternating projections onto the violated half-planes (Dykstra's corrections keep it the
-    nearest point); ``xy`` itself when the set is empty."""
-    p, corrections = xy.copy(), np.zeros((len(b), 2))
-    for _ in range(50):
-        moved = 0.0
-        for i in range(len(b)):
-            q = p + corrections[i]
-            excess = A[i] @ q - b[i]
-            new = q - max(excess, 0.0) * A[i]
-            corrections[i] = q - new
-            moved = max(moved, float(np.linalg.norm(new - p)))
-            p = new
-        if moved < 1e-10:
-            break
-    return p if np.all(A @ p <= b + 1e-7) else xy
+    """The nearest point to ``xy`` with A p ≤ b (a convex polygon of unit-row half-planes), or
+    ``xy`` itself when the set is empty. Exact: the nearest point of a polygon is ``xy``, its foot
+    on an edge's line, or a vertex (two lines' intersection), whichever feasible one is nearest."""
+    if len(b) == 0 or np.all(A @ xy <= b + 1e-12):
+        return xy
+    candidates = [xy - (A @ xy - b)[:, None] * A]
+    i, j = np.triu_indices(len(b), 1)
+    pairs = np.stack([A[i], A[j]], axis=1)
+    det = pairs[:, 0, 0] * pairs[:, 1, 1] - pairs[:, 0, 1] * pairs[:, 1, 0]
+    ok = np.abs(det) > 1e-12
+    if ok.any():
+        rhs = np.stack([b[i][ok], b[j][ok]], axis=1)[..., None]
+        candidates.append(np.linalg.solve(pairs[ok], rhs)[..., 0])
+    points = np.vstack(candidates)
+    points = points[np.all(points @ A.T <= b + 1e-9, axis=1)]
+    if len(points) == 0:
+        return xy
+    return points[np.argmin(np.sum((points - xy) ** 2, axis=1))]
 
 
 def _push_outside(xy: np.ndarray, A: np.ndarray, b: np.ndarray) -> list[np.ndarray]:
