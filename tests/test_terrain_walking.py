@@ -1,0 +1,38 @@
+"""Walking on terrain in closed loop (issue 37): G1 on diagrams/g1_slope.yaml up its 10° ramp,
+over the plateau and onto the ramp down; the feet land where the ground holds them."""
+
+import numpy as np
+import pytest
+from closed_loop_bounds import check
+from walk_support import walk
+
+from romoco_drake.rom.terrain import Terrain
+from romoco_drake.scenario import load_scenario
+
+# 16 s of g1_slope: up the 2 m ramp from x = 1 m, over the 1 m plateau at 0.353 m and about
+# halfway down the ramp beyond it (x ≈ 4.7 m).
+DURATION_S = 16.0
+
+
+@pytest.mark.slow
+def test_g1_walks_up_a_ten_degree_slope_and_down_onto_the_next():
+    """No fall, no QP failure; past the plateau, on the ramp down, by the end; the commanded
+    0.3 m/s tracked; every step counted as planned or adjusted onto supported ground, none taken
+    in place; the base at its nominal height above the ground under it."""
+    run = walk(load_scenario("g1_slope"), duration=DURATION_S)
+    s = run.summary
+    assert not s["fell"] and s["qp_failures"] == 0
+    x = run.states[run.robot.base_q_start + 4]
+    assert x[-1] > 4.2
+    footholds = s["footholds"]
+    assert footholds["in_place"] == 0 and footholds["planned"] + footholds["adjusted"] >= s["steps"] - 2
+    check("terrain.g1_slope.vx_rms", s["velocity_rms_error"][0])
+    assert abs(s["mean_velocity"][0] - 0.3) <= 0.1 * 0.3
+    assert s["final_base_height_m"] == pytest.approx(run.robot.nominal.base_height, abs=0.05)
+
+
+def test_terrain_overlay_is_a_ramp_pair():
+    """The overlay's course rises to its plateau and comes back to the floor."""
+    terrain = Terrain(load_scenario("g1_walk", ["terrain"]).terrain)
+    assert terrain.height([3.0, 0.0]) == pytest.approx(1.5 * np.tan(np.radians(5.0)), abs=1e-5)
+    assert terrain.height([5.5, 0.0]) == 0.0
