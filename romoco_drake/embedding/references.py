@@ -40,7 +40,7 @@ from romoco_drake.embedding.terrain import StepGround, TerrainSteps
 from romoco_drake.modes import Domain, Mode
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
-from romoco_drake.rom.types import MpcReference, PlannerOutput
+from romoco_drake.rom.types import MpcReference, PlannerOutput, other_side
 from romoco_drake.spatial import GRAVITY
 from romoco_drake.values import SharedValue
 
@@ -190,7 +190,7 @@ class EmbeddingCore:
         if self.terrain is None:
             trajectory = plan_swing(start, self._target(plan), plan.t_ss, self.swing_height)
         else:
-            side = _OTHER_SIDE[stance_side]
+            side = other_side(stance_side)
             ground = self.terrain.place(origin, heading, plan.swing_target, plan.swing_yaw, side, start)
             trajectory = plan_swing(start, ground.target, plan.t_ss,
                                     self.swing_height + self.terrain.apex_raise(ground, side))
@@ -209,7 +209,7 @@ class EmbeddingCore:
         duration = plan.t_ss if plan.timing_adapted and plan.t_ss > tau else swing.trajectory.duration
         if swing.ground is None:
             return replace(swing, trajectory=swing.trajectory.replan(tau, self._target(plan), duration))
-        g, side = swing.ground, _OTHER_SIDE[swing.stance_side]
+        g, side = swing.ground, other_side(swing.stance_side)
         ground = self.terrain.place(g.origin, g.heading, plan.swing_target, plan.swing_yaw, side, g.liftoff)
         apex = self.swing_height + self.terrain.apex_raise(ground, side)
         trajectory = swing.trajectory.replan(tau, ground.target, duration, apex)
@@ -341,9 +341,6 @@ class EmbeddingCore:
         n_f = A_f.shape[1]
         return TaskReferences(mode, domain, stance, out.names, out.y, out.J, out.Jdot_v, y_d, yd_d, ydd_d,
                               active, holonomic, n_f, A_f, b_f, com_flow, mpc, recovering)
-
-
-_OTHER_SIDE = {"left": "right", "right": "left"}
 
 
 def alip_com_flow(start: tuple[float, ...], tau: float, height: float, mass: float) -> np.ndarray:

@@ -33,6 +33,7 @@ import numpy as np
 from romoco_drake.embedding.outputs import sole_frame
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.terrain import Terrain
+from romoco_drake.rom.types import other_side
 
 # How far (m) a planned foothold may move to reach supported ground: beyond it, the step is taken
 # in place. About a stride: a robot whose steps ran ahead of the next stone still lands on the
@@ -115,7 +116,7 @@ class TerrainSteps:
             rel = np.asarray(liftoff, dtype=float).copy()
             return StepGround(origin, heading, rel, liftoff, lift_tilt, lift_tilt, 0.0, "in_place")
         xy = R.T @ (foothold.position[:2] - origin[:2])
-        stance = "left" if swing_side == "right" else "right"
+        stance = other_side(swing_side)
         rel = np.array([xy[0], xy[1], foothold.position[2] - self.ground_under(origin, heading, stance)])
         slope = 0.0
         if abs(rel[0]) >= SLOPE_MIN_STEP:
@@ -139,7 +140,7 @@ class TerrainSteps:
         """(A, b): the footholds (world x, y; A p ≤ b) the swing leg can take from the stance
         ``origin`` (``R``: its yaw): the robot's ``step_reach`` box, or without one the swing
         foot's own side of the stance foot (a foothold across it would cross the legs)."""
-        stance = "left" if swing_side == "right" else "right"
+        stance = other_side(swing_side)
         if self.reach is not None:
             (x_lo, x_hi), (y_lo, y_hi) = self.reach.box(stance)
             rows = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
@@ -163,7 +164,7 @@ class TerrainSteps:
         u = d / norm if norm > 1e-9 else np.zeros(2)
         highest = self.terrain.highest_along(ground.origin[:2] + R @ (a - reach * u),
                                              ground.origin[:2] + R @ (b + reach * u))
-        stance = "left" if swing_side == "right" else "right"
+        stance = other_side(swing_side)
         highest -= self.ground_under(ground.origin, ground.heading, stance)
         return max(0.0, highest - max(float(start[2]), float(ground.target[2])))
 
