@@ -243,6 +243,7 @@ def _walking_summary(built, context, scenario: Scenario, plot_dir: Path | None, 
            | loop.state_machine.summary(own(loop.state_machine)) | loop.limiter.summary(command.segments)
            | loop.controller.summary(own(loop.controller), ticks) | planner
            | loop.embedding.summary(own(loop.embedding)))
+    out |= loop.velocity_trim.summary(own(loop.velocity_trim)) if loop.velocity_trim else {}
     momentum = (None if loop.momentum_log is None
                 else log_samples(built.logs.find(loop.momentum_log, context), until))
     if momentum is not None:

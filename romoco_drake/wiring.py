@@ -50,6 +50,7 @@ from romoco_drake.planners.heading import HeadingHold
 from romoco_drake.planners.registry import PLANNERS, step_adapter
 from romoco_drake.planners.settings import FootPlacementConfig
 from romoco_drake.planners.state_machine import GaitStateMachine
+from romoco_drake.planners.velocity_trim import VelocityTrim
 from romoco_drake.planners.vimpc import VimpcPlanner
 from romoco_drake.robots.kinematics import RobotKinematicsSystem
 from romoco_drake.robots.model import RobotModel, load_robot
@@ -104,6 +105,7 @@ class WalkingLoop:
     momentum_log: VectorLogSink | None = None  # MomentumLog records, for controllers that regulate momentum
     inertia_horizon_log: VectorLogSink | None = None  # the VI-MPC's per-knot inertia, every MPC update
     estop_gate: EstopGate | None = None  # the controller's mode, damping after a page E-stop (teleop)
+    velocity_trim: VelocityTrim | None = None  # the planner's command trim, when its settings turn it on
 
 
 def command_segments(scenario: Scenario, robot: RobotModel) -> list[CommandSegment]:
@@ -322,8 +324,10 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     builder.Connect(kin, rom_state.kinematics_port)
     builder.Connect(machine.gait_phase_port, rom_state.gait_phase_port)
     planner = builder.AddNamedSystem("planner", planner_system)
+    trim = _add_velocity_trim(builder, scenario, robot, state, heading, machine)
     signals = {"rom_state": rom_state.rom_state_port, "swing_foot": rom_state.swing_foot_port,
-               "gait_phase": machine.gait_phase_port, "command": heading.command_port,
+               "gait_phase": machine.gait_phase_port,
+               "command": trim.command_port if trim else heading.command_port,
                "kinematics": kin, "mode": machine.mode_port, "schedule": machine.schedule_port,
                "stance_frame": rom_state.stance_frame_port}
     for name in planner.loop_inputs:
@@ -335,9 +339,36 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
                                                 estop, steps)
     if "swing_reference" in planner.loop_inputs:
         builder.Connect(embedding.swing_reference_port, planner.GetInputPort("swing_reference"))
+    momentum_log, horizon_log = _add_loop_logs(builder, scenario, robot, kin, embedding, planner, heading,
+                                               rom_state)
+    return WalkingLoop(machine, planner, embedding, controller,
+                       LogVectorOutput(controller.tick_ms_port, builder, period),
+                       LogVectorOutput(embedding.tracking_error_port, builder, STATE_LOG_PERIOD),
+                       limiter, momentum_log, horizon_log, gate, trim)
+
+
+def _add_velocity_trim(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, state, heading,
+                       machine) -> VelocityTrim | None:
+    """The planner's velocity trim between the heading hold and the planner, when its settings
+    turn it on (foot-placement planners only)."""
+    config = getattr(scenario.planner, "velocity_trim", None)
+    if config is None or not config.enabled:
+        return None
+    trim = builder.AddNamedSystem("velocity_trim", VelocityTrim(
+        robot, config, 1.0 / scenario.controller.rate_hz, LINK_TICK_OFFSET))
+    for source, port in ((heading.command_port, trim.command_in_port), (state, trim.state_port),
+                         (machine.schedule_port, trim.schedule_port)):
+        builder.Connect(source, port)
+    return trim
+
+
+def _add_loop_logs(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, kin, embedding, planner,
+                   heading, rom_state) -> tuple[VectorLogSink | None, VectorLogSink | None]:
+    """The momentum record (controllers that regulate momentum) and the VI-MPC's inertia horizon."""
+    period = 1.0 / scenario.controller.rate_hz
     momentum_log = None
     if traits(scenario.controller.name).momentum_log:
-        recorder = builder.AddNamedSystem("momentum_log", MomentumLog(robot, period, offset))
+        recorder = builder.AddNamedSystem("momentum_log", MomentumLog(robot, period, LINK_TICK_OFFSET))
         for source, port in ((kin, recorder.kinematics_port),
                              (embedding.task_references_port, recorder.task_references_port),
                              (planner.planner_output_port, recorder.planner_output_port),
@@ -347,10 +378,7 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
         momentum_log = LogVectorOutput(recorder.record_port, builder, period)
     horizon_log = (LogVectorOutput(planner.inertia_horizon_port, builder, 1.0 / planner.config.rate_hz)
                    if isinstance(planner, VimpcPlanner) else None)
-    return WalkingLoop(machine, planner, embedding, controller,
-                       LogVectorOutput(controller.tick_ms_port, builder, period),
-                       LogVectorOutput(embedding.tracking_error_port, builder, STATE_LOG_PERIOD),
-                       limiter, momentum_log, horizon_log, gate)
+    return momentum_log, horizon_log
 
 
 def _add_tracking(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, kin, machine, planner,

@@ -45,16 +45,36 @@ declare_ranges(StepAdaptationConfig, step_weight=Range(1e-6, 1e6),
 
 
 @dataclass
+class VelocityTrimConfig:
+    """A foot-placement planner's ``velocity_trim:`` section, integral action on the walking
+    speed (:mod:`~romoco_drake.planners.velocity_trim`). Off by default: each robot's scenarios
+    turn it on where it was measured to help. ``gain``: the share of a stride's relative
+    error corrected per stride; ``limit``: the largest trim, relative to the command; ``gate``: the
+    largest relative stride error learned from; ``min_speed``: m/s."""
+
+    enabled: bool = False
+    gain: float = 0.5
+    limit: float = 0.3
+    gate: float = 0.5
+    min_speed: float = 0.05
+
+
+declare_ranges(VelocityTrimConfig, gain=Range(0.0, 1.0, lo_open=True), limit=Range(0.0, 0.5),
+               gate=Range(0.0, 1.0, lo_open=True), min_speed=Range(0.0, 1.0, "m/s"))
+
+
+@dataclass
 class FootPlacementConfig(PlannerSettings):
-    """A foot-placement law (alip, hlip, mlip, dcm, alip_general), its feedback gain and step
-    adaptation. ``t_ds``: double-support time (s) of the laws whose ROM has one; None: the
-    robot's ``walking.t_ds`` (the RoMoCo paper's planner comparison, Fig. 8, runs every law at
-    0, ALIP's only gait)."""
+    """A foot-placement law (alip, hlip, mlip, dcm, alip_general), its feedback gain, step
+    adaptation and velocity trim. ``t_ds``: double-support time (s) of the laws whose ROM has
+    one; None: the robot's ``walking.t_ds`` (the RoMoCo paper's planner comparison, Fig. 8, runs
+    every law at 0, ALIP's only gait)."""
 
     gain: Literal["deadbeat", "converging", "lqr"] = "deadbeat"
     alpha: float = 0.5
     t_ds: float | None = None
     step_adaptation: StepAdaptationConfig = dataclasses.field(default_factory=StepAdaptationConfig)
+    velocity_trim: VelocityTrimConfig = dataclasses.field(default_factory=VelocityTrimConfig)
 
 
 # The converging gain's contraction factor per step (0: deadbeat; 1 would never converge).
