@@ -70,10 +70,10 @@ def test_kinematics_system_matches_drake(name):
     assert np.all(system.kinematics_port.Eval(context).v == 0.0)
 
 
-@pytest.mark.parametrize(("name", "damped"), [("icub", True), ("cassie", False)])
+@pytest.mark.parametrize(("name", "damped"), [("icub", True), ("cassie", True), ("talos", False)])
 def test_controllers_model_the_joint_damping_their_yaml_asks_for(name, damped):
     """C = C v − τ_g − (Drake's joint damping forces, −D v) where the robot's YAML says the
-    controllers model damping (iCub), C v − τ_g where it does not (Cassie's model damps too)."""
+    controllers model damping (iCub, Cassie), C v − τ_g where it does not (TALOS's model damps too)."""
     robot = load_robot(name)
     x, plant_context = _random_state(robot)
     plant = robot.plant

@@ -222,8 +222,8 @@ class RobotConfig:
     # Default effort limit for joints whose model file gives none.
     default_effort_limit: float | None = None
     # The controllers add the model file's joint damping D v to their equations of motion, as the
-    # simulation applies it. Off, they assume none: Cassie's and TALOS's files damp too (0.1 to
-    # 1 N·m·s/rad) and their settings were measured without it.
+    # simulation applies it. Off, they assume none: TALOS's file damps too (0.5 to 1 N·m·s/rad)
+    # and its settings were measured without it.
     controllers_model_damping: bool = False
 
 
