@@ -36,6 +36,9 @@ from romoco_drake.robots.terrain_geometry import add_terrain_collision, add_terr
 from romoco_drake.rom.terrain import Terrain
 
 SOLE_SPHERE_RADIUS = 0.005
+# s: the fastest control tick here (1 kHz); joints whose damping acts faster are not compensated
+# (RobotModel._modelled_damping).
+FAST_DAMPING_S = 1e-3
 
 
 def robot_dirs() -> list[Path]:
@@ -233,12 +236,25 @@ class RobotModel:
         }
         self.foot_frames = {s: plant.GetBodyByName(f.body_name).body_frame() for s, f in self.feet.items()}
         self.kp, self.kd = self._actuator_gains()
-        # Joint damping per velocity (N·m·s/rad), zero unless the controllers model it.
-        self.joint_damping = np.zeros(self.nv)
-        if cfg.controllers_model_damping:
-            for j in self._revolute_joints(plant):
-                self.joint_damping[j.velocity_start()] = j.default_damping()
+        self.joint_damping = (self._modelled_damping(plant) if cfg.controllers_model_damping
+                              else np.zeros(self.nv))
         self.locked_actuator_mask = np.array([n in cfg.locked_joints for n in self.actuator_names])
+
+    def _modelled_damping(self, plant: MultibodyPlant) -> np.ndarray:
+        """Joint damping per velocity (N·m·s/rad) for the controllers' equations of motion: the model
+        file's, except on a joint whose damping acts within a control tick (M_jj / D_j below
+        :data:`FAST_DAMPING_S` at the zero configuration). The controllers hold D v for a whole
+        tick while the simulator damps continuously, so on such a joint the held term keeps its
+        velocity up instead of cancelling the damping: Cassie's foot joints (0.45 ms) spun to
+        29 rad/s in the air and the robot fell after a drop. There the damping is left to the
+        joint's own feedback."""
+        damping = np.zeros(self.nv)
+        diagonal = np.diag(plant.CalcMassMatrix(plant.CreateDefaultContext()))
+        for j in self._revolute_joints(plant):
+            k, d = j.velocity_start(), j.default_damping()
+            if d > 0.0 and diagonal[k] / d >= FAST_DAMPING_S:
+                damping[k] = d
+        return damping
 
     def _actuator_gains(self) -> tuple[np.ndarray, np.ndarray]:
         kp, kd = np.zeros(self.nu), np.zeros(self.nu)
