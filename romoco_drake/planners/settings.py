@@ -55,7 +55,7 @@ class VelocityTrimConfig:
     enabled: bool = False
     gain: float = 0.5
     limit: float = 0.3
-    gate: float = 0.5
+    gate: float = 0.3
     min_speed: float = 0.05
 
 
