@@ -76,7 +76,8 @@ def _consistent_velocity(name, mode, scale=0.05, seed=3):
 def _dynamics(robot, kin):
     plant, context = robot.plant, kin.context
     M = plant.CalcMassMatrix(context)
-    return M, plant.CalcBiasTerm(context) - plant.CalcGravityGeneralizedForces(context)
+    return M, (plant.CalcBiasTerm(context) - plant.CalcGravityGeneralizedForces(context)
+               + robot.joint_damping * plant.GetVelocities(context))
 
 
 # --------------------------------------------------------------------------- inverse dynamics

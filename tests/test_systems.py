@@ -53,7 +53,8 @@ def test_kinematics_system_matches_drake(name):
     W, kV = plant.world_frame(), JacobianWrtVariable.kV
     np.testing.assert_allclose(kin.M, plant.CalcMassMatrix(plant_context), atol=1e-10)
     np.testing.assert_allclose(kin.C, plant.CalcBiasTerm(plant_context)
-                               - plant.CalcGravityGeneralizedForces(plant_context), atol=1e-9)
+                               - plant.CalcGravityGeneralizedForces(plant_context)
+                               + robot.joint_damping * x[robot.nq:], atol=1e-9)
     np.testing.assert_allclose(kin.p_com, plant.CalcCenterOfMassPositionInWorld(plant_context), atol=1e-12)
     np.testing.assert_allclose(kin.J_com, plant.CalcJacobianCenterOfMassTranslationalVelocity(
         plant_context, kV, W, W), atol=1e-10)

@@ -118,6 +118,7 @@ def _physics(robot, core, kin, refs):
     plant.SetVelocities(context, kin.v)
     M = plant.CalcMassMatrix(context)
     bias = plant.CalcBiasTerm(context) - plant.CalcGravityGeneralizedForces(context)
+    bias = bias + robot.joint_damping * plant.GetVelocities(context)
     feet = []
     for side in refs.domain.feet:
         foot = core.contact.feet[side]

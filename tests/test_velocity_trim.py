@@ -81,10 +81,10 @@ def test_the_trim_learns_a_steady_shortfall_and_walks_the_command(bolt):
 def test_the_trim_is_limited_and_a_disturbed_stride_is_not_learned(bolt):
     """``limit`` caps the trim (a robot that cannot follow does not wind it up); a stride whose
     error is beyond ``gate`` of the command (a push) is counted as skipped, not learned."""
-    walker = Walker(bolt, VelocityTrimConfig(enabled=True, gain=0.5, limit=0.2), response=0.5)
+    walker = Walker(bolt, VelocityTrimConfig(enabled=True, gain=0.5, limit=0.2), response=0.75)
     walker.walk((0.3, 0.0), 20 * 2 * STEP)
-    assert walker.trims()[0] == pytest.approx(0.2)
-    pushed = Walker(bolt, VelocityTrimConfig(enabled=True, gate=0.5))
+    assert walker.trims()[0] == pytest.approx(0.2)  # 0.75 × 1.2 = 0.9 of the command: still short
+    pushed = Walker(bolt, VelocityTrimConfig(enabled=True, gate=0.3))
     pushed.velocity = (0.9, 0.0)  # three times the command
     pushed.walk((0.3, 0.0), 6 * 2 * STEP)
     assert pushed.trims()[0] == 0.0 and pushed.summary()["strides_skipped"] >= 3
