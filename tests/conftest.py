@@ -1,4 +1,9 @@
-"""Shared test facts: the numbers from ../shared/robot-facts.md each robot must match."""
+"""Shared test facts: the numbers from ../shared/robot-facts.md each robot must match; the lock
+that keeps tests starting a local Ray apart when the suite runs on several workers."""
+
+import fcntl
+import tempfile
+from pathlib import Path
 
 import pytest
 
@@ -25,3 +30,12 @@ ROBOTS = list(ROBOT_FACTS)
 @pytest.fixture(params=ROBOTS)
 def robot_name(request):
     return request.param
+
+
+@pytest.fixture
+def ray_alone():
+    """An exclusive lock, across the ``pytest -n`` workers, for a test that starts a local Ray: two
+    at once would start two Ray instances on the same two cores."""
+    with open(Path(tempfile.gettempdir()) / "romoco-ray-tests.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        yield

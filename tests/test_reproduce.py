@@ -294,7 +294,7 @@ WALL_CLOCK_CLAIM = "MPC solve time mostly below 2 ms (our median < 2 ms)"
 
 
 @pytest.mark.slow
-def test_reproduce_all_quick_on_two_workers(tmp_path, capsys):
+def test_reproduce_all_quick_on_two_workers(tmp_path, capsys, ray_alone):
     """The issue's CI run: every paper at --quick on local Ray; the report states each claim, and
     each verdict is the one measured (``QUICK_VERDICTS``)."""
     ray = pytest.importorskip("ray")

@@ -60,7 +60,7 @@ def test_cli_sweep_errors_exit_2_in_one_line(args):
 
 
 @pytest.fixture
-def local_ray():
+def local_ray(ray_alone):
     ray = pytest.importorskip("ray")
     yield ray
     ray.shutdown()

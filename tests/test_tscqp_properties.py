@@ -41,7 +41,10 @@ from romoco_drake.rom.types import WalkCommand
 
 ROBOTS = ("g1", "cassie", "bolt")
 SOLVERS = {"daqp": 1e-9, "clarabel": 1e-6}  # relative tolerance of the equalities each solver meets
-FRICTION_TOL = 1e-6  # N per N of normal force, and N absolute (round-off of an active pyramid face)
+# N per N of normal force, and N absolute: round-off of an active pyramid face (DAQP), and the
+# interior-point method's stopping distance from an active bound (Clarabel: −1.03e-6 N on an
+# unloaded G1 foot).
+FRICTION_TOL = {"daqp": 1e-6, "clarabel": 1e-5}
 PROPERTY = settings(derandomize=True, deadline=None, database=None, max_examples=100,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
@@ -189,7 +192,7 @@ def _check(robot, core, kin, refs, gains, solver):
         i += 3 * len(points)
         R_WS, polygon, centre = _sole(robot, side, X_WF, R_WB)
         fx, fy, fz = R_WS.T @ forces.sum(axis=0)
-        tol = FRICTION_TOL * (1.0 + abs(fz))
+        tol = FRICTION_TOL[solver] * (1.0 + abs(fz))
         assert fz >= -tol, f"{side} foot pulls on the ground: f_z = {fz:.3g} N"
         assert abs(fx) <= mu * fz + tol and abs(fy) <= mu * fz + tol, (
             f"{side} foot slips: |f_t| = ({fx:.3g}, {fy:.3g}) N > μ f_z = {mu * fz:.3g} N")
@@ -197,7 +200,7 @@ def _check(robot, core, kin, refs, gains, solver):
             mx, my, _ = R_WS.T @ np.cross(points - centre, forces).sum(axis=0)
             A, b = polygon
             # CoP c = (−m_y, m_x)/f_z inside: A c ≤ b, times f_z ≥ 0.
-            assert np.all(A @ [-my, mx] <= b * fz + 1e-6 * (1.0 + abs(fz))), f"{side} CoP off the sole"
+            assert np.all(A @ [-my, mx] <= b * fz + tol), f"{side} CoP off the sole"
 
     # Torque limits.
     limits = _effort_limits(robot)
