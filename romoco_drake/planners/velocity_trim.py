@@ -63,7 +63,9 @@ class VelocityTrim(LeafSystem):
 
     def __init__(self, robot: RobotModel, config: VelocityTrimConfig, period: float, offset: float = 0.0):
         super().__init__()
-        self.robot, self.config, self.period = robot, config, period
+        self.robot, self.period = robot, period
+        self.gain, self.limit = config.gain, config.limit
+        self.gate, self.min_speed = config.gate, config.min_speed
         self._v = robot.nq + robot.base_v_start + 3  # world vx, vy of the base
         self._q = robot.base_q_start
         self.command_in_port = self.DeclareVectorInputPort("command_in", COMMAND_SIZE)
@@ -118,16 +120,16 @@ class VelocityTrim(LeafSystem):
         """One stride's update of the trims (module docstring), in place on the state ``s``."""
         if not math.isfinite(s[_T]):
             return
-        c, limit = self.config, self.config.limit
+        limit = self.limit
         mean_v, mean_cmd = s[_VEL] / s[_T], s[_CMD] / s[_T]
         for axis in (0, 1):
-            if abs(mean_cmd[axis]) < c.min_speed:
+            if abs(mean_cmd[axis]) < self.min_speed:
                 continue
             error = (mean_cmd[axis] - mean_v[axis]) / mean_cmd[axis]
-            if abs(error) > c.gate:
+            if abs(error) > self.gate:
                 s[_SKIPPED] += 1
                 continue
-            s[axis] = min(max(s[axis] + c.gain * error, -limit), limit)
+            s[axis] = min(max(s[axis] + self.gain * error, -limit), limit)
             s[_SIGN.start + axis] = math.copysign(1.0, mean_cmd[axis])
             s[_STRIDES] += 1
 
