@@ -2,8 +2,6 @@
 that keeps tests starting a local Ray apart when the suite runs on several workers."""
 
 import fcntl
-import tempfile
-from pathlib import Path
 
 import pytest
 
@@ -33,9 +31,10 @@ def robot_name(request):
 
 
 @pytest.fixture
-def ray_alone():
+def ray_alone(tmp_path_factory):
     """An exclusive lock, across the ``pytest -n`` workers, for a test that starts a local Ray: two
-    at once would start two Ray instances on the same two cores."""
-    with open(Path(tempfile.gettempdir()) / "romoco-ray-tests.lock", "w") as lock:
+    at once would start two Ray instances on the same two cores. The lock file is in this run's
+    own temporary folder, which the workers share."""
+    with open(tmp_path_factory.getbasetemp().parent / "ray-tests.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         yield

@@ -200,6 +200,7 @@ def _check(robot, core, kin, refs, gains, solver):
             mx, my, _ = R_WS.T @ np.cross(points - centre, forces).sum(axis=0)
             A, b = polygon
             # CoP c = (−m_y, m_x)/f_z inside: A c ≤ b, times f_z ≥ 0.
+            # The sole's edges are inequalities of the same solver: the same tolerance.
             assert np.all(A @ [-my, mx] <= b * fz + tol), f"{side} CoP off the sole"
 
     # Torque limits.

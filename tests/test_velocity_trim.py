@@ -75,7 +75,7 @@ def test_the_trim_learns_a_steady_shortfall_and_walks_the_command(bolt):
     walked = 0.8 * 0.3 * (1.0 + walker.trims()[0])
     assert walked == pytest.approx(0.3, rel=1e-3)
     assert walker.trims()[1] == 0.0  # no lateral command: no lateral trim
-    assert walker.summary()["strides_learned"] >= 30
+    assert walker.summary()["updates"] >= 30
 
 
 def test_the_trim_is_limited_and_a_disturbed_stride_is_not_learned(bolt):
@@ -87,21 +87,26 @@ def test_the_trim_is_limited_and_a_disturbed_stride_is_not_learned(bolt):
     pushed = Walker(bolt, VelocityTrimConfig(enabled=True, gate=0.3))
     pushed.velocity = (0.9, 0.0)  # three times the command
     pushed.walk((0.3, 0.0), 6 * 2 * STEP)
-    assert pushed.trims()[0] == 0.0 and pushed.summary()["strides_skipped"] >= 3
+    assert pushed.trims()[0] == 0.0 and pushed.summary()["gated"] >= 3
 
 
 def test_the_trim_starts_over_when_the_command_stops_or_reverses_and_is_heading_relative(bolt):
-    """Sideways at 0.2 m/s, yawed by 1 rad: the lateral trim learns in the heading frame; a stop
+    """Sideways at 0.1 m/s, yawed by 1 rad: the lateral trim learns in the heading frame, and
+    carries over a faster command only up to the robot's envelope (Bolt: |vy| ≤ 0.2 m/s); a stop
     clears it, and so does walking the other way; the command's other entries pass through."""
     walker = Walker(bolt, VelocityTrimConfig(enabled=True))
-    walker.walk((0.0, 0.2), 8 * 2 * STEP, yaw=1.0)
-    assert walker.trims()[1] > 0.1 and walker.trims()[0] == 0.0
+    walker.walk((0.0, 0.1), 8 * 2 * STEP, yaw=1.0)
+    r = walker.trims()[1]
+    assert r > 0.1 and walker.trims()[0] == 0.0
     out = walker.trim.command_port.Eval(walker.context)
-    assert out[1] == pytest.approx(0.2 * (1.0 + walker.trims()[1]))
+    assert out[1] == pytest.approx(0.1 * (1.0 + r))
     np.testing.assert_array_equal(out[2:], [0.0, 0.2, 0.6, STEP])
-    walker.walk((0.0, -0.2), PERIOD)
+    walker.walk((0.0, 0.2), PERIOD, yaw=1.0)
+    assert walker.trims()[1] >= r  # carried over (this tick also closes a stride)
+    assert walker.trim.command_port.Eval(walker.context)[1] == 0.2
+    walker.walk((0.0, -0.1), PERIOD)
     assert walker.trims()[1] == 0.0
-    walker.walk((0.0, -0.2), 8 * 2 * STEP)
+    walker.walk((0.0, -0.1), 8 * 2 * STEP)
     assert walker.trims()[1] > 0.1
     walker.walk((0.0, 0.0), PERIOD)
     assert walker.trims()[1] == 0.0
@@ -113,7 +118,7 @@ def test_a_ramping_command_and_standing_teach_nothing(bolt):
     walker = Walker(bolt, VelocityTrimConfig(enabled=True))
     for i in range(200):
         walker.walk((0.1 + 0.001 * i, 0.0), 5 * PERIOD)
-    assert walker.trims()[0] == 0.0 and walker.summary()["strides_learned"] == 0
+    assert walker.trims()[0] == 0.0 and walker.summary()["updates"] == 0
     walker.mode = Mode.STANDING
     walker.walk((0.3, 0.0), 10 * 2 * STEP)
     assert walker.trims()[0] == 0.0
@@ -140,4 +145,4 @@ def test_the_shipped_trims_are_reported_in_the_run_summary():
     assert scenario.planner.velocity_trim.enabled
     summary = run_scenario(scenario, duration=2.5)
     trim = summary["velocity_trim"]
-    assert not summary["fell"] and trim["strides_learned"] >= 1 and trim["vx"] != 0.0 and trim["vy"] == 0.0
+    assert not summary["fell"] and trim["updates"] >= 1 and trim["vx"] != 0.0 and trim["vy"] == 0.0

@@ -78,7 +78,7 @@ class MomentumLog(LeafSystem):
     | ``kinematics`` | in | abstract | :class:`~romoco_drake.robots.kinematics.RobotKinematics` of the state |
     | ``task_references`` | in | abstract | :class:`~romoco_drake.embedding.references.TaskReferences` |
     | ``planner_output`` | in | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` |
-    | ``command`` | in | 6 | the walking command the planner follows |
+    | ``command`` | in | 6 | the walking command from the heading hold (before a velocity trim) |
     | ``rom_state`` | in | 6 | [p, L_c] about the stance contact frame {c} (the planner's input) |
     | ``record`` | out | 26 | the tick's packed :class:`MomentumRecord`, held |
 

@@ -60,7 +60,7 @@ class VelocityTrimConfig:
 
 
 declare_ranges(VelocityTrimConfig, gain=Range(0.0, 1.0, lo_open=True), limit=Range(0.0, 0.5),
-               gate=Range(0.0, 1.0, lo_open=True), min_speed=Range(0.0, 1.0, "m/s"))
+               gate=Range(0.0, 1.0, lo_open=True), min_speed=Range(0.0, 1.0, "m/s", lo_open=True))
 
 
 @dataclass

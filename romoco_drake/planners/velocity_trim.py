@@ -15,10 +15,11 @@ v_planned = v (1 + r), learned once per stride (two steps, a whole lateral sway)
 with v̄ the stride's mean heading-frame base velocity from the estimated state and v̄_cmd its mean
 command. Relative, so a zero command gets no trim (stepping in place and standing are untouched)
 and a trim carries over a change of speed; an axis's trim starts over when its command stops or
-reverses. Not learned from: a stride over which the command moved (the limiter's ramp), the first
-stride at a new command or from rest (H1's first stride at 0.4 m/s after 0.2 averages 0.33, the
-law's own transient), an axis below ``min_speed``, and a stride whose error exceeds ``gate`` of
-the command: a push or a stumble is a disturbance for the planner's feedback, not a model error.
+reverses. Not learned from: a stride over which vx or vy moved (the limiter's ramp), the first
+whole stride at a new command (H1's first stride at 0.4 m/s after 0.2 averages 0.33, the law's
+own transient), the two strides that start a walk from rest, an axis below ``min_speed``, and a
+stride whose error exceeds ``gate`` of the command: a push or a stumble is a disturbance for the
+planner's feedback, not a model error. A change of wz alone does not count as a new command.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.modes import Mode
+from romoco_drake.planners.heading import base_yaw
 from romoco_drake.planners.settings import VelocityTrimConfig
 from romoco_drake.planners.state_machine import GaitSchedule
 from romoco_drake.robots.model import RobotModel
@@ -40,7 +42,7 @@ _TRIM = slice(0, 2)  # r_x, r_y
 _VEL = slice(2, 4)  # ∫ v dt over the stride (heading frame)
 _CMD = slice(4, 6)  # ∫ command dt over the stride
 _SIGN = slice(6, 8)  # the sign of the command each trim was learned on
-_T, _START, _STRIDES, _SKIPPED = 8, 9, 10, 11  # stride duration, step count at its start, counts
+_T, _START, _UPDATES, _GATED = 8, 9, 10, 11  # stride duration, step count at its start, counts
 _SETTLED = 12  # 1 once a whole stride has been walked at the current command
 _STATE_SIZE = 13
 # A stride's command counts as steady when it stayed within this of its mean (m/s).
@@ -55,10 +57,12 @@ class VelocityTrim(LeafSystem):
     | ``command_in`` | in | 6 | :class:`WalkCommand` vector (after the heading hold) |
     | ``state`` | in | nq+nv | estimated robot state |
     | ``schedule`` | in | abstract | the state machine's :class:`GaitSchedule` (mode, step count) |
-    | ``command`` | out | 6 | the command with vx, vy scaled by (1 + r) |
+    | ``command`` | out | 6 | the command with vx, vy scaled by (1 + r), within the robot's envelope |
 
-    Discrete state, updated every ``period``: the trims, the running stride's integrals and the
-    counts of strides learned from and skipped (the run summary's ``velocity_trim``).
+    Discrete state, updated every ``period``: the trims, the running stride's integrals, and the
+    counts of axis updates and of axis strides gated out as disturbances (the run summary's
+    ``velocity_trim``). The trimmed vx, vy stay within ``walking.command_limits``; a trim update
+    moves them at once, by at most ``gain`` × ``gate`` × the command (0.09 m/s for H1 at 0.6).
     """
 
     def __init__(self, robot: RobotModel, config: VelocityTrimConfig, period: float, offset: float = 0.0):
@@ -66,8 +70,9 @@ class VelocityTrim(LeafSystem):
         self.robot, self.period = robot, period
         self.gain, self.limit = config.gain, config.limit
         self.gate, self.min_speed = config.gate, config.min_speed
+        limits = robot.config.walking.command_limits
+        self._envelope = np.array([limits.vx, limits.vy])
         self._v = robot.nq + robot.base_v_start + 3  # world vx, vy of the base
-        self._q = robot.base_q_start
         self.command_in_port = self.DeclareVectorInputPort("command_in", COMMAND_SIZE)
         self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
         placeholder = GaitSchedule(Mode.STANDING, "left", 0.0, WalkCommand().step_time, 0, 0, 0, "")
@@ -80,15 +85,17 @@ class VelocityTrim(LeafSystem):
         self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
 
     def summary(self, context) -> dict:
-        """The run summary's ``velocity_trim``: the final relative trims and the stride counts."""
+        """The run summary's ``velocity_trim``: the final relative trims (zero once a stop reset
+        them), the trim updates made (one per axis and stride learned from) and the axis strides
+        gated out as disturbances."""
         s = context.get_discrete_state(self._state).value()
         return {"velocity_trim": {"vx": round(float(s[0]), 4), "vy": round(float(s[1]), 4),
-                                  "strides_learned": int(s[_STRIDES]), "strides_skipped": int(s[_SKIPPED])}}
+                                  "updates": int(s[_UPDATES]), "gated": int(s[_GATED])}}
 
     def _calc(self, context, out) -> None:
         cmd = self.command_in_port.Eval(context).copy()
         r = context.get_discrete_state(self._state).value()[_TRIM]
-        cmd[0:2] *= 1.0 + r
+        cmd[0:2] = np.clip(cmd[0:2] * (1.0 + r), -self._envelope, self._envelope)
         out.SetFromVector(cmd)
 
     def _update(self, context, discrete_state) -> None:
@@ -97,7 +104,8 @@ class VelocityTrim(LeafSystem):
         schedule = self.schedule_port.Eval(context)
         velocity = self._heading_velocity(self.state_port.Eval(context))
         if schedule.mode != Mode.WALKING or velocity is None:
-            # The stride that starts the walk accelerates from rest: nothing to learn from it.
+            # Standing, damping, in the air or a non-finite estimate: the stride starts over, and
+            # the one that starts the walk (from rest) is not learned from.
             s[_VEL], s[_CMD], s[_T], s[_START], s[_SETTLED] = 0.0, 0.0, -math.inf, schedule.steps, 0.0
         else:
             if schedule.steps - s[_START] >= 2:
@@ -127,16 +135,15 @@ class VelocityTrim(LeafSystem):
                 continue
             error = (mean_cmd[axis] - mean_v[axis]) / mean_cmd[axis]
             if abs(error) > self.gate:
-                s[_SKIPPED] += 1
+                s[_GATED] += 1
                 continue
             s[axis] = min(max(s[axis] + self.gain * error, -limit), limit)
             s[_SIGN.start + axis] = math.copysign(1.0, mean_cmd[axis])
-            s[_STRIDES] += 1
+            s[_UPDATES] += 1
 
     def _heading_velocity(self, x: np.ndarray) -> np.ndarray | None:
         """The base's (vx, vy) in its heading frame, None when not finite."""
-        w, qx, qy, qz = x[self._q:self._q + 4]
-        yaw = math.atan2(2.0 * (w * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+        yaw = float(base_yaw(self.robot, x))
         vx, vy = x[self._v], x[self._v + 1]
         c, s = math.cos(yaw), math.sin(yaw)
         out = np.array([c * vx + s * vy, -s * vx + c * vy])

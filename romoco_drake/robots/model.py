@@ -36,8 +36,8 @@ from romoco_drake.robots.terrain_geometry import add_terrain_collision, add_terr
 from romoco_drake.rom.terrain import Terrain
 
 SOLE_SPHERE_RADIUS = 0.005
-# s: the fastest control tick here (1 kHz); joints whose damping acts faster are not compensated
-# (RobotModel._modelled_damping).
+# s: a 1 kHz tick, the fastest control rate here; the controllers do not model the damping of a
+# joint whose damping acts faster (RobotModel._modelled_damping).
 FAST_DAMPING_S = 1e-3
 
 
@@ -242,17 +242,19 @@ class RobotModel:
 
     def _modelled_damping(self, plant: MultibodyPlant) -> np.ndarray:
         """Joint damping per velocity (N·m·s/rad) for the controllers' equations of motion: the model
-        file's, except on a joint whose damping acts within a control tick (M_jj / D_j below
-        :data:`FAST_DAMPING_S` at the zero configuration). The controllers hold D v for a whole
-        tick while the simulator damps continuously, so on such a joint the held term keeps its
-        velocity up instead of cancelling the damping: Cassie's foot joints (0.45 ms) spun to
-        29 rad/s in the air and the robot fell after a drop. There the damping is left to the
-        joint's own feedback."""
+        file's, except on a joint whose damping acts faster than :data:`FAST_DAMPING_S`, its time
+        constant I_j / D_j with I_j = 1 / (M⁻¹)_jj the joint's effective inertia (the other joints
+        free) at the zero configuration. The controllers hold D v for a whole tick while the
+        simulator damps continuously, so on such a joint the held term keeps its velocity up
+        instead of cancelling the damping: Cassie's foot joints (0.43 ms) spun to 29 rad/s in the
+        air and the robot fell after a drop. There the damping is left to the joint's own
+        feedback. Those left out today are Cassie's feet and iCub's locked neck, forearm and
+        shoulder-yaw joints; iCub's hip yaw (1.5 ms) is modelled, and is what lets it turn."""
         damping = np.zeros(self.nv)
-        diagonal = np.diag(plant.CalcMassMatrix(plant.CreateDefaultContext()))
+        inertia = 1.0 / np.diag(np.linalg.inv(plant.CalcMassMatrix(plant.CreateDefaultContext())))
         for j in self._revolute_joints(plant):
             k, d = j.velocity_start(), j.default_damping()
-            if d > 0.0 and diagonal[k] / d >= FAST_DAMPING_S:
+            if d > 0.0 and inertia[k] / d >= FAST_DAMPING_S:
                 damping[k] = d
         return damping
 
