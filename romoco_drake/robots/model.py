@@ -243,15 +243,19 @@ class RobotModel:
     def _modelled_damping(self, plant: MultibodyPlant) -> np.ndarray:
         """Joint damping per velocity (N·m·s/rad) for the controllers' equations of motion: the model
         file's, except on a joint whose damping acts faster than :data:`FAST_DAMPING_S`, its time
-        constant I_j / D_j with I_j = 1 / (M⁻¹)_jj the joint's effective inertia (the other joints
-        free) at the zero configuration. The controllers hold D v for a whole tick while the
+        constant M_jj / D_j at the zero configuration (M_jj, the inertia with the other joints
+        held, is an upper bound on the joint's effective inertia: iCub's locked neck pitch has
+        19.8 ms against 0.07 ms effective). The controllers hold D v for a whole tick while the
         simulator damps continuously, so on such a joint the held term keeps its velocity up
         instead of cancelling the damping: Cassie's foot joints (0.43 ms) spun to 29 rad/s in the
         air and the robot fell after a drop. There the damping is left to the joint's own
-        feedback. Those left out today are Cassie's feet and iCub's locked neck, forearm and
-        shoulder-yaw joints; iCub's hip yaw (1.5 ms) is modelled, and is what lets it turn."""
+        feedback. Those left out today are Cassie's feet and iCub's locked neck yaw, forearm roll
+        and shoulder yaw. The bound on the effective inertia would leave out six more of iCub's
+        locked joints, and then iCub fell from a 7.5 N·s push to its left at phase 0
+        (``romoco bench push --robot icub``). iCub's hip yaw (2.4 ms) is modelled, and is what
+        lets it turn."""
         damping = np.zeros(self.nv)
-        inertia = 1.0 / np.diag(np.linalg.inv(plant.CalcMassMatrix(plant.CreateDefaultContext())))
+        inertia = np.diag(plant.CalcMassMatrix(plant.CreateDefaultContext()))
         for j in self._revolute_joints(plant):
             k, d = j.velocity_start(), j.default_damping()
             if d > 0.0 and inertia[k] / d >= FAST_DAMPING_S:
