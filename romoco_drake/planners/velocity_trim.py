@@ -31,7 +31,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.modes import Mode
-from romoco_drake.planners.heading import base_yaw
+from romoco_drake.planners.heading import heading_velocity
 from romoco_drake.planners.settings import VelocityTrimConfig
 from romoco_drake.planners.state_machine import GaitSchedule
 from romoco_drake.robots.model import RobotModel
@@ -72,7 +72,6 @@ class VelocityTrim(LeafSystem):
         self.gate, self.min_speed = config.gate, config.min_speed
         limits = robot.config.walking.command_limits
         self._envelope = np.array([limits.vx, limits.vy])
-        self._v = robot.nq + robot.base_v_start + 3  # world vx, vy of the base
         self.command_in_port = self.DeclareVectorInputPort("command_in", COMMAND_SIZE)
         self.state_port = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
         placeholder = GaitSchedule(Mode.STANDING, "left", 0.0, WalkCommand().step_time, 0, 0, 0, "")
@@ -143,8 +142,5 @@ class VelocityTrim(LeafSystem):
 
     def _heading_velocity(self, x: np.ndarray) -> np.ndarray | None:
         """The base's (vx, vy) in its heading frame, None when not finite."""
-        yaw = float(base_yaw(self.robot, x))
-        vx, vy = x[self._v], x[self._v + 1]
-        c, s = math.cos(yaw), math.sin(yaw)
-        out = np.array([c * vx + s * vy, -s * vx + c * vy])
+        out = heading_velocity(self.robot, np.zeros(1), x[:, None])[0, :2]
         return out if np.all(np.isfinite(out)) else None
