@@ -175,6 +175,7 @@ BOUNDS: dict[str, Bound] = {
     "turning.draco.vy_rms": ceiling(0.028, 0.01931),
     "turning.draco.wz_rms": ceiling(0.02, 0.01385),
     "terrain.g1_slope.vx_rms": ceiling(0.055, 0.0368),
+    "terrain.cassie_slope.vx_rms": ceiling(0.0125, 0.0086),
     "turning.g1.heading_lag": ceiling(0.17, 0.1185),
     "turning.g1.rest_speed": ceiling(0.00075, 0.0005048),
     "turning.g1.vx_rms": ceiling(0.017, 0.01193),

@@ -109,6 +109,31 @@ def test_stepping_stones_over_a_pit():
     assert t.foothold([0.15, 0.0], FOOT * 1.5) is None  # a sole larger than a stone
 
 
+# A 0.2 m line foot (Cassie's kind: toe and heel).
+LINE_FOOT = np.array([[0.1, 0.0], [-0.1, 0.0]])
+
+
+def test_a_seam_holds_a_line_foot_where_surfaces_meet_without_a_step():
+    """At a 10° ramp's foot and top the ground under a 0.2 m sole leaves the plane by
+    0.1 tan 10° = 1.8 cm: within a 2 cm seam, not without one; a 5 cm riser or a gap is no seam."""
+    ramp = RampPiece(start=[1.0, 0.0], length=2.0, width=1.0, slope_deg=10.0)
+    top = 2.0 * math.tan(math.radians(10.0))
+    plateau = BoxPiece(center=[3.5, 0.0], size=[1.0, 1.0], top=top)
+    t = Terrain(TerrainConfig(pieces=[TerrainPiece(ramp=ramp), TerrainPiece(box=plateau)]))
+    for x in (0.98, 1.02, 2.98, 3.02):  # the ramp's foot, from the floor and from the ramp; its top
+        assert t.supports(np.array([x, 0.0]), LINE_FOOT) is None
+        assert t.supports(np.array([x, 0.0]), LINE_FOOT, seam=0.02) == t.surface_index(np.array([x, 0.0]))
+        f = t.foothold([x, 0.0], LINE_FOOT, seam=0.02)
+        assert f.shift == 0.0 and f.position[2] == pytest.approx(t.height([x, 0.0]))
+    assert t.supports(np.array([1.0, 0.0]), LINE_FOOT * 2.0, seam=0.02) is None  # 3.5 cm off the plane
+    riser = Terrain(TerrainConfig(pieces=[TerrainPiece(box=BoxPiece(center=[1.5, 0.0], size=[1.0, 1.0],
+                                                                     top=0.05))]))
+    assert riser.supports(np.array([1.0, 0.0]), LINE_FOOT, seam=0.02) is None
+    stones = [TerrainPiece(box=BoxPiece(center=[0.15 * k, 0.0], size=[0.1, 0.2], top=0.0)) for k in range(3)]
+    pit = Terrain(TerrainConfig(floor=-0.5, floor_steppable=False, pieces=stones))
+    assert pit.supports(np.array([0.075, 0.0]), LINE_FOOT, seam=0.02) is None  # toe and heel over the gap
+
+
 def test_foothold_is_the_nearest_supported_point_by_brute_force():
     t = stairs()
     rng = np.random.default_rng(3)

@@ -31,6 +31,24 @@ def test_g1_walks_up_a_ten_degree_slope_and_down_onto_the_next():
     assert s["final_base_height_m"] == pytest.approx(run.robot.nominal.base_height, abs=0.05)
 
 
+@pytest.mark.slow
+def test_cassie_walks_the_ten_degree_slope_with_its_line_feet_across_the_seams():
+    """Cassie on cassie_slope, up the ramp, over the plateau and down: no fall, no QP failure,
+    0.3 m/s tracked within the issue's vx rms 0.05 (0.063 when every line-foot step was moved off
+    the ramp's seams), every step planned or adjusted onto supported ground, none in place."""
+    run = walk(load_scenario("cassie_slope"), duration=DURATION_S)
+    s = run.summary
+    assert not s["fell"] and s["qp_failures"] == 0
+    assert run.states[run.robot.base_q_start + 4][-1] > 4.2
+    footholds = s["footholds"]
+    assert footholds["in_place"] == 0 and footholds["planned"] > 10 * footholds["adjusted"]
+    check("terrain.cassie_slope.vx_rms", s["velocity_rms_error"][0])
+    x = run.states[run.robot.base_q_start + 4]
+    walking = run.times >= 3.0  # the command has ramped to 0.3 m/s and settled
+    mean = (x[walking][-1] - x[walking][0]) / (run.times[walking][-1] - run.times[walking][0])
+    assert abs(mean - 0.3) <= 0.1 * 0.3
+
+
 def test_terrain_overlay_is_a_ramp_pair():
     """The overlay's course rises to its plateau and comes back to the floor."""
     terrain = Terrain(load_scenario("g1_walk", ["terrain"]).terrain)

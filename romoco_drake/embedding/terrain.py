@@ -48,6 +48,13 @@ SLOPE_MAX = 1.0
 STEP_DIP = 0.5
 # Each sample of the path's clearance reaches this far past the sole's centre (m) beyond half its length.
 PATH_MARGIN = 0.02
+# How far (m) the ground under a line or point foot may leave its surface's plane where two
+# surfaces meet without a step (a ramp's foot or top; Terrain.supports). Such a foot has no sole
+# to rock on the kink: Cassie on cassie_slope, whose 0.3 m/s steps were otherwise moved off every
+# seam, tracked vx at rms 0.063 without it and 0.021 with it. A flat sole rocks there (G1's vx rms
+# rose 0.032 -> 0.048 with it), so flat feet keep whole-surface footholds. The step adapter's
+# region (TerrainSteps.region) keeps whole-surface footholds for every foot.
+SEAM = 0.02
 
 
 @dataclass(frozen=True)
@@ -96,6 +103,9 @@ class TerrainSteps:
             self.sole[side] = corners
             self.footprint[side] = np.sign(corners) * np.maximum(np.abs(corners) + edge_margin, 0.0)
             self.half_length[side] = float(np.max(np.abs(corners[:, 0])))
+        points = robot.feet["left"].points
+        line_foot = np.linalg.matrix_rank(points - points.mean(axis=1, keepdims=True), tol=1e-6) <= 1
+        self.seam = SEAM if line_foot else 0.0
 
     def place(self, origin: np.ndarray, heading: float, target, swing_yaw: float, swing_side: str,
               liftoff: np.ndarray) -> StepGround:
@@ -109,7 +119,7 @@ class TerrainSteps:
         footprint = self.footprint[swing_side] @ np.array([[cy, sy], [-sy, cy]])
         planned = origin[:2] + R @ np.asarray(target, dtype=float)[:2]
         reachable = self._reachable(origin, R, swing_side)
-        foothold = self.terrain.foothold(planned, footprint, FOOTHOLD_REACH, reachable)
+        foothold = self.terrain.foothold(planned, footprint, FOOTHOLD_REACH, reachable, self.seam)
         lift_W = origin[:2] + R @ liftoff[:2]
         lift_tilt = sole_tilt(self.terrain.normal(lift_W), heading)
         if foothold is None:

@@ -24,6 +24,8 @@ import numpy as np
 SOLID_DEPTH_BELOW_FLOOR = 0.5
 # Where a point lies on a patch's boundary (m): inside up to this tolerance.
 EDGE_TOLERANCE = 1e-9
+# The spacing (m) at which a sole's outline is sampled for a seam (Terrain.supports).
+SEAM_SPACING = 0.02
 
 
 @dataclass
@@ -268,30 +270,55 @@ class Terrain:
         n = max(2, int(math.ceil(np.linalg.norm(b - a) / spacing)) + 1)
         return max(self.height(a + s * (b - a)) for s in np.linspace(0.0, 1.0, n))
 
-    def supports(self, xy: np.ndarray, footprint: np.ndarray) -> int | None:
+    def supports(self, xy: np.ndarray, footprint: np.ndarray, seam: float = 0.0) -> int | None:
         """The surface (-1: the floor) that holds the whole footprint (k, 2: sole corners
         relative to ``xy``, in the world's axes) at ``xy``, or None when none does: the sole
-        hangs over an edge or a gap, or a higher patch overlaps it."""
+        hangs over an edge or a gap, or a higher patch overlaps it. With ``seam`` > 0 (m) a sole
+        may straddle the seam where steppable ground meets its own surface without a step: the
+        ground along its whole outline within ``seam`` of that surface's plane (a ramp's foot or
+        top)."""
         corners = np.asarray(xy, dtype=float)[:2] + footprint
         index = self.surface_index(np.asarray(xy, dtype=float)[:2])
         if index < 0:
             if not self.floor_steppable:
                 return None
+            if seam > 0.0:
+                return -1 if self._seamless(corners, lambda c: self.floor, seam) else None
             return None if any(_overlaps(s, corners) for s in self.surfaces) else -1
         s = self.surfaces[index]
+        if not s.steppable:
+            return None
+        if seam > 0.0:
+            return index if self._seamless(corners, s.height, seam) else None
         A, b = s.halfplanes()
-        if not s.steppable or np.any(corners @ A.T > b + EDGE_TOLERANCE):
+        if np.any(corners @ A.T > b + EDGE_TOLERANCE):
             return None
         for j, other in enumerate(self.surfaces):
             if j != index and _overlaps(other, corners) and _higher(other, s, corners):
                 return None
         return index
 
+    def _seamless(self, corners: np.ndarray, plane, seam: float) -> bool:
+        """Whether the ground all along the sole's outline (its corners and every ``SEAM_SPACING``
+        m of its edges) is steppable and within ``seam`` of ``plane``, the height function of the
+        sole's own surface: a gap or a riser between toe and heel is no seam."""
+        samples = [corners]
+        for a, b in zip(corners, np.roll(corners, -1, axis=0), strict=True):
+            n = int(np.ceil(np.linalg.norm(b - a) / SEAM_SPACING))
+            samples.append(a + np.linspace(0.0, 1.0, n + 1)[:, None] * (b - a))
+        for c in np.vstack(samples):
+            j = self.surface_index(c)
+            ground = self.floor_steppable if j < 0 else self.surfaces[j].steppable
+            z = self.floor if j < 0 else self.surfaces[j].height(c)
+            if not ground or abs(z - plane(c)) > seam:
+                return False
+        return True
+
     def foothold(self, xy, footprint: np.ndarray, max_shift: float = math.inf,
-                 within: tuple[np.ndarray, np.ndarray] | None = None) -> Foothold | None:
+                 within: tuple[np.ndarray, np.ndarray] | None = None, seam: float = 0.0) -> Foothold | None:
         """The supported foothold nearest the planned ``xy`` (horizontal distance), at most
         ``max_shift`` (m) away and inside ``within`` (A p ≤ b, unit rows: the leg's reach), or None
-        when there is none (see :meth:`supports`).
+        when there is none (see :meth:`supports`, which ``seam`` is passed to).
 
         The candidates are ``xy`` itself, its projection into each patch's outline shrunk by the
         footprint (and cut by ``within``), and, on the floor, the nearest points just clear of each
@@ -313,7 +340,7 @@ class Terrain:
                 continue
             if np.any(W_A @ c > W_b + 1e-7):
                 continue
-            index = self.supports(c, footprint)
+            index = self.supports(c, footprint, seam)
             if index is not None:
                 z = self.floor if index < 0 else self.surfaces[index].height(c)
                 n = np.array([0.0, 0.0, 1.0]) if index < 0 else self.surfaces[index].normal.copy()
