@@ -273,13 +273,16 @@ def _add_page_display(builder: DiagramBuilder, meshcat: Meshcat, robot: RobotMod
 def _add_estimator(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, station,
                    known_start: bool):
     """The scenario's estimator, fed by the station; it starts at the sim's initial base position
-    when that is known (simulation), else at its own default."""
+    when that is known (simulation), else at its own default, and is given the scenario's terrain
+    map unless that is the flat floor."""
     entry = ESTIMATORS[scenario.estimator.name]
     qb = robot.base_q_start
     start = initial_positions(robot, scenario)[qb + 4:qb + 7] if known_start else None
     config = dataclasses.replace(scenario.estimator,
                                  rate_hz=scenario.estimator.rate_hz or scenario.controller.rate_hz)
-    estimator = builder.AddNamedSystem("estimator", entry.factory(robot, config, start))
+    terrain = Terrain(scenario.terrain)
+    estimator = builder.AddNamedSystem("estimator", entry.factory(robot, config, start,
+                                                                  None if terrain.is_flat else terrain))
     for port in entry.facts["inputs"]:
         builder.Connect(station.GetOutputPort(port), estimator.GetInputPort(port))
     return estimator

@@ -33,6 +33,7 @@ a slot not in contact carries no correlation and a unit placeholder variance.
 Yaw and the absolute position are unobservable (no heading sensor, no map): they are estimated in
 the frame the filter starts in and drift with the integrated gyro bias and noise. The filter starts
 where the caller says (the estimator: the nominal pose), and finds roll and pitch from gravity.
+Given a terrain map, the estimator anchors the height to it (:meth:`InvariantEkf.raised`).
 """
 
 from __future__ import annotations
@@ -274,17 +275,35 @@ class InvariantEkf:
             var.append(np.full(3, var_v))
         if not H:
             return s
-        H, z, N = np.vstack(H), np.concatenate(z), np.diag(np.concatenate(var))
-        S = H @ s.P @ H.T + N
-        K = np.linalg.solve(S, H @ s.P).T
-        delta = K @ z  # the estimated error ξ̂
-        E_R, t = se_exp(-delta[:15], 4)
-        A = np.eye(DIM) - K @ H
-        out = InekfState(E_R @ s.R, E_R @ s.v + t[0], E_R @ s.p + t[1], (E_R @ s.d.T).T + t[2:4],
-                         s.gyro_bias - delta[GYRO_BIAS], s.accel_bias - delta[ACCEL_BIAS], s.active.copy(),
-                         _symmetric(A @ s.P @ A.T + K @ N @ K.T))
-        _clear_inactive(out)
-        return out
+        return _fused(s, np.vstack(H), np.concatenate(z), np.diag(np.concatenate(var)))
+
+    def raised(self, s: InekfState, dz: float) -> InekfState:
+        """The estimate moved up by ``dz`` (m): the base and the stance feet, as a terrain map
+        anchors the height (the estimator). Absolute position is unobservable here, so a
+        translation of the whole estimate is no information lost; P is kept (the right-invariant
+        error changes by Ad of the shift, p × ξ_R terms of order dz·ξ_R, negligible at the
+        millimetres a tick moves it). Fusing the map as a measurement instead (H = n̄ᵀ[d̂^, −I])
+        let the height residual of a foot metres from the origin pass for a tilt error, and
+        Cassie fell on cassie_slope (tilt error 0.03 rad)."""
+        s = _copy(s)
+        s.p[2] += dz
+        s.d[s.active, 2] += dz
+        return s
+
+
+def _fused(s: InekfState, H: np.ndarray, z: np.ndarray, N: np.ndarray) -> InekfState:
+    """The Kalman update of innovations z = H ξ + noise (covariance N), and the correction
+    X̂⁺ = exp(−ξ̂) X̂, θ̂⁺ = θ̂ − ξ̂_θ (module docstring)."""
+    S = H @ s.P @ H.T + N
+    K = np.linalg.solve(S, H @ s.P).T
+    delta = K @ z  # the estimated error ξ̂
+    E_R, t = se_exp(-delta[:15], 4)
+    A = np.eye(DIM) - K @ H
+    out = InekfState(E_R @ s.R, E_R @ s.v + t[0], E_R @ s.p + t[1], (E_R @ s.d.T).T + t[2:4],
+                     s.gyro_bias - delta[GYRO_BIAS], s.accel_bias - delta[ACCEL_BIAS], s.active.copy(),
+                     _symmetric(A @ s.P @ A.T + K @ N @ K.T))
+    _clear_inactive(out)
+    return out
 
 
 def _copy(s: InekfState) -> InekfState:

@@ -1,8 +1,9 @@
 """The estimator registry: every estimator a scenario can name, how to build it, what it reads.
 
-A factory takes ``(robot, config, initial_base_position)``: the scenario's ``estimator:``
-section (:class:`~romoco_drake.estimation.settings.EstimatorSettings`, its rate resolved) and
-the base position to start from when it is known (simulation) or None.
+A factory takes ``(robot, config, initial_base_position, terrain)``: the scenario's ``estimator:``
+section (:class:`~romoco_drake.estimation.settings.EstimatorSettings`, its rate resolved), the
+base position to start from when it is known (simulation) or None, and the scenario's
+:class:`~romoco_drake.rom.terrain.Terrain` map (None on the flat floor).
 ``inputs`` are the station output ports it is wired to (same names on its own input ports).
 """
 
@@ -16,17 +17,19 @@ from romoco_drake.estimation.settings import EstimatorSettings, InvariantEkfSett
 from romoco_drake.registry import Registry
 
 ESTIMATORS = Registry("estimator")
-ESTIMATORS.add("ground_truth", lambda robot, config, start: GroundTruthEstimator(robot),
+ESTIMATORS.add("ground_truth", lambda robot, config, start, terrain: GroundTruthEstimator(robot),
                "encoders plus the base pose/velocity ports (exact in simulation, motion capture on hardware)",
                config=EstimatorSettings, inputs=("joint_state", "base_pose", "base_velocity"))
-ESTIMATORS.add("kalman", lambda robot, config, start: KalmanEstimator(
+ESTIMATORS.add("kalman", lambda robot, config, start, terrain: KalmanEstimator(
     robot, 1.0 / config.rate_hz, initial_base_position=start, offset=LINK_TICK_OFFSET),
     "contact-aided linear Kalman filter on encoders, IMU (its on-board orientation as given) and contact "
     "switches; flat ground",
     config=EstimatorSettings, inputs=("joint_state", "imu", "foot_contact"))
-ESTIMATORS.add("invariant_ekf", lambda robot, config, start: InvariantEkfEstimator(
+ESTIMATORS.add("invariant_ekf", lambda robot, config, start, terrain: InvariantEkfEstimator(
     robot, 1.0 / config.rate_hz, offset=LINK_TICK_OFFSET,
-    start_offset=(config.start_offset_xyz, config.start_offset_rpy)),
+    start_offset=(config.start_offset_xyz, config.start_offset_rpy),
+    terrain=terrain, terrain_anchor_s=config.terrain_anchor_s),
     "contact-aided right-invariant EKF on encoders, IMU rates and contact switches; starts at the nominal "
-    "pose (or start_offset_xyz/rpy off it), yaw and position in its own start frame",
+    "pose (or start_offset_xyz/rpy off it), yaw and position in its own start frame; on terrain, its "
+    "height anchored to the scenario's map",
     config=InvariantEkfSettings, inputs=("joint_state", "imu", "foot_contact", "link_stage"))

@@ -32,12 +32,17 @@ class InvariantEkfSettings(EstimatorSettings):
     (zero: the filter starts at the nominal pose). Tilt converges from gravity and the stance
     feet; yaw and horizontal position are unobservable, so their offset stays as the estimate's
     frame, and what matters is their drift from it (the run summary's ``yaw_drift_rad_per_min``,
-    ``position_drift_per_m``)."""
+    ``position_drift_per_m``). ``terrain_anchor_s`` (s): on terrain (not on the flat floor, where
+    the filter stays map-free) the time constant with which the estimate's height follows the
+    scenario's ``terrain:`` map under its settled stance feet (the filter cannot observe it)."""
 
     start_offset_xyz: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     start_offset_rpy: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    terrain_anchor_s: float = 0.2
 
 
-# A start more than 1 m or half a turn off is no pose estimate to converge from.
+# A start more than 1 m or half a turn off is no pose estimate to converge from; a height anchor
+# faster than a 1 kHz tick or slower than a minute is no filter.
 declare_ranges(InvariantEkfSettings, start_offset_xyz=Range(-1.0, 1.0, "m", size=3),
-               start_offset_rpy=Range(-0.5 * math.pi, 0.5 * math.pi, "rad", size=3))
+               start_offset_rpy=Range(-0.5 * math.pi, 0.5 * math.pi, "rad", size=3),
+               terrain_anchor_s=Range(1e-3, 60.0, "s"))
