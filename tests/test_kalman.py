@@ -252,6 +252,24 @@ def test_system_standing_still_estimates_rest_on_the_ground():
     assert system.rejected_updates(context) == 0
 
 
+@pytest.mark.parametrize("mapped", [True, False])
+def test_system_on_a_block_measures_its_feet_against_the_terrain_map(mapped):
+    """G1 standing still on a 0.1 m block: with the map the estimate stays on the block; without
+    one the flat-ground measurement pulls the feet down toward z = 0."""
+    from romoco_drake.rom.terrain import BoxPiece, Terrain, TerrainConfig, TerrainPiece
+
+    block = Terrain(TerrainConfig(pieces=[TerrainPiece(box=BoxPiece(center=[0.0, 0.0], size=[1.0, 1.0],
+                                                                    top=0.1))]))
+    on_block = np.array([0.0, 0.0, load_robot("g1").nominal.base_height + 0.1])
+    robot, system, context, _ = _g1_system(initial_base_position=on_block, terrain=block if mapped else None)
+    Simulator(system, context).AdvanceTo(0.6)
+    z = _base(robot, system.state_output.Eval(context))[0][2]
+    if mapped:
+        assert z == pytest.approx(on_block[2], abs=1e-4)
+    else:
+        assert z < on_block[2] - 0.05
+
+
 def test_system_starts_from_the_first_measurement_at_the_given_base_position():
     p0 = np.array([1.0, -2.0, 0.8])
     robot, system, context, imu = _g1_system(initial_base_position=p0)

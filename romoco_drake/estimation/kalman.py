@@ -13,7 +13,8 @@ Measurements at one instant:
 
 - both feet: p_foot − p_WB = r (forward kinematics, R_WB r_B);
 - each stance foot: v_WB = −v_rel (the foot stands still; v_rel = R_WB (ω_B × r_B + J_B q̇_j));
-- each stance foot: p_foot,z = 0 (flat ground; keeps the height from drifting).
+- each stance foot: p_foot,z = h, the ground's height under it (0 on the flat floor, else from the
+  scenario's terrain map at the foot's estimated x, y; keeps the height from drifting).
 
 A foot's contact confidence w ∈ [0, 1] (0 in swing) ramps up over ``touchdown_ramp`` after
 touchdown, as Cheetah 3's contact trust does: a foot still moving through its impact, or a
@@ -29,6 +30,7 @@ The filter object holds only its parameters: (x, P) go in and come out, to live 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -57,7 +59,7 @@ class KalmanParams:
     foot_swing_walk: float = 10.0  # m/√s: a swing foot, free to follow the kinematics
     kinematic_position_noise: float = 5e-3  # m: foot position relative to the base (encoders, model)
     kinematic_velocity_noise: float = 0.05  # m/s: base velocity from a stance foot (encoders, gyro)
-    ground_height_noise: float = 0.01  # m: stance foot on z = 0; math.inf turns it off (uneven ground)
+    ground_height_noise: float = 0.01  # m: stance foot on the ground (z = 0, or the map); math.inf: off
     touchdown_ramp: float = 0.02  # s: contact confidence rises from 0 to 1 over this after touchdown
     slip_gate: float = 16.3  # χ² (3 dof, 99.9 %) above which a stance foot's velocity is a slip; inf: off
     initial_position_std: float = 0.01  # m: base and feet
@@ -120,11 +122,11 @@ class ContactAidedKalman:
         return x, _symmetric(F @ P @ F.T + Q)
 
     def correct(self, x: np.ndarray, P: np.ndarray, r_world: np.ndarray, v_rel_world: np.ndarray,
-                contact: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                contact: np.ndarray, ground: Sequence[float] = (0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
         """Fuses the kinematics: ``r_world`` (2×3, m) foot reference points relative to the base,
         ``v_rel_world`` (2×3, m/s) their velocities relative to the base, both in world axes;
         ``contact`` (2,) each foot's contact confidence w (or a flag): w > 0 stands still on the
-        ground."""
+        ground, at height ``ground`` (2,, m) under each foot."""
         p = self.params
         H, z, var = [], [], []
         for i in range(2):
@@ -149,7 +151,7 @@ class ContactAidedKalman:
                 h = np.zeros((1, STATE_SIZE))
                 h[0, FOOT[i].start + 2] = 1.0
                 H.append(h)
-                z.append([0.0])
+                z.append([float(ground[i])])
                 var.append([p.ground_height_noise**2 * suspicion])
         H, z, Rm = np.vstack(H), np.concatenate(z), np.diag(np.concatenate(var))
         S = H @ P @ H.T + Rm

@@ -10,6 +10,7 @@ from pydrake.systems.framework import BasicVector
 from romoco_drake.estimation.contact_estimator import SIDES, ContactEstimator
 from romoco_drake.estimation.ground_truth import plant_state
 from romoco_drake.estimation.kalman import (
+    FOOT,
     POSITION,
     VELOCITY,
     ContactAidedKalman,
@@ -20,6 +21,7 @@ from romoco_drake.estimation.kalman import (
 from romoco_drake.robots.kinematics import RobotKinematics, declare_kinematics_cache
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.robots.posture import DIVERGED
+from romoco_drake.rom.terrain import Terrain
 
 # An IMU quaternion further than this from unit norm is malformed (e.g. an all-zero message).
 QUATERNION_NORM_TOLERANCE = 0.1
@@ -51,8 +53,10 @@ class KalmanEstimator(ContactEstimator):
     configuration, so it agrees with the first measurement (an initialization event would read
     simulated sensors before their first sample). The base starts at ``initial_base_position``
     or, by default, at x = y = 0 and z such that the lowest sole point is at z = 0 (as the
-    flat-ground measurement assumes). Later updates predict and correct. Until the first
-    update, the state is that start for the nominal pose ``robot.nominal``.
+    flat-ground measurement assumes). Given a ``terrain`` map (not the flat floor), each stance
+    foot's height is measured against the map's ground under its estimated position, not
+    z = 0. Later updates predict and correct. Until the first update, the state is that start
+    for the nominal pose ``robot.nominal``.
 
     Malformed inputs (NaN/Inf or a value beyond ``DIVERGED`` anywhere, or a quaternion far from
     unit norm, e.g. an all-zero message): the update is skipped, the estimate kept, and the skip
@@ -60,9 +64,11 @@ class KalmanEstimator(ContactEstimator):
     """
 
     def __init__(self, robot: RobotModel, period: float = 0.002, params: KalmanParams | None = None,
-                 initial_base_position: np.ndarray | None = None, offset: float = 0.0):
+                 initial_base_position: np.ndarray | None = None, offset: float = 0.0,
+                 terrain: Terrain | None = None):
         super().__init__(robot, period)
         self._filter = ContactAidedKalman(params or KalmanParams())
+        self._terrain = terrain
         self._initial_base_position = (
             None if initial_base_position is None else np.array(initial_base_position, dtype=float))
         nj = len(robot.joint_names)
@@ -131,7 +137,9 @@ class KalmanEstimator(ContactEstimator):
         x, P = unpack(context.get_discrete_state(self._kf_index).value())
         x, P = self._filter.predict(x, P, R_WB, imu[7:10], w, self._period)
         r_world, v_rel = self._foot_points(self._legs.Eval(context))
-        x, P = self._filter.correct(x, P, r_world, v_rel, w)
+        ground = (np.zeros(2) if self._terrain is None
+                  else np.array([self._terrain.height(x[foot][:2]) for foot in FOOT]))
+        x, P = self._filter.correct(x, P, r_world, v_rel, w, ground)
         discrete_state.get_mutable_vector(self._kf_index).SetFromVector(pack(x, P))
         discrete_state.get_mutable_vector(self._contact_time_index).SetFromVector(contact_time)
 

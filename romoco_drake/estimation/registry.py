@@ -21,9 +21,9 @@ ESTIMATORS.add("ground_truth", lambda robot, config, start, terrain: GroundTruth
                "encoders plus the base pose/velocity ports (exact in simulation, motion capture on hardware)",
                config=EstimatorSettings, inputs=("joint_state", "base_pose", "base_velocity"))
 ESTIMATORS.add("kalman", lambda robot, config, start, terrain: KalmanEstimator(
-    robot, 1.0 / config.rate_hz, initial_base_position=start, offset=LINK_TICK_OFFSET),
+    robot, 1.0 / config.rate_hz, initial_base_position=start, offset=LINK_TICK_OFFSET, terrain=terrain),
     "contact-aided linear Kalman filter on encoders, IMU (its on-board orientation as given) and contact "
-    "switches; flat ground",
+    "switches; stance feet on the flat floor or the scenario's terrain map",
     config=EstimatorSettings, inputs=("joint_state", "imu", "foot_contact"))
 ESTIMATORS.add("invariant_ekf", lambda robot, config, start, terrain: InvariantEkfEstimator(
     robot, 1.0 / config.rate_hz, offset=LINK_TICK_OFFSET,
