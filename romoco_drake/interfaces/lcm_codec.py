@@ -175,12 +175,10 @@ def encode_proprioception(msg: Proprioception) -> bytes:
 
 
 def encode_motor_command(msg: MotorCommand) -> bytes:
-    lcm = biped_motor_command_t()
-    lcm.utime = int(msg.utime)
-    lcm.num_actuators = msg.q_d.size
-    lcm.q_d, lcm.v_d, lcm.tau_ff = msg.q_d.tolist(), msg.v_d.tolist(), msg.tau_ff.tolist()
-    lcm.kp, lcm.kd = msg.kp.tolist(), msg.kd.tolist()
-    return lcm.encode()
+    """The bytes ``biped_motor_command_t.encode`` gives, packed from the arrays at once (sent every tick)."""
+    values = np.concatenate([msg.q_d, msg.v_d, msg.tau_ff, msg.kp, msg.kd]).astype(">f8")
+    header = struct.pack(">qi", int(msg.utime), msg.q_d.size)
+    return biped_motor_command_t._get_packed_fingerprint() + header + values.tobytes()
 
 
 def encode_base_state(msg: BaseState) -> bytes:
@@ -291,8 +289,42 @@ def _nonnegative(name: str, field: str, values) -> np.ndarray:
     return array
 
 
+def _doubles(data: bytes, lcm_type, header: str, count: int, tail: int = 0):
+    """(header fields, ``count`` doubles) of a message of ``lcm_type`` laid out as its fingerprint,
+    ``header`` (struct format), the doubles and ``tail`` more bytes; None unless ``data`` is that
+    long and carries the fingerprint, or when a double is not finite."""
+    start = 8 + struct.calcsize(header)
+    if len(data) != start + 8 * count + tail or data[:8] != lcm_type._get_packed_fingerprint():
+        return None
+    values = np.frombuffer(data, ">f8", count, start).astype(float)
+    return (struct.unpack_from(header, data, 8), values) if np.isfinite(values).all() else None
+
+
+def _unit_or_none(quaternion: np.ndarray) -> np.ndarray | None:
+    norm = math.hypot(*quaternion)
+    return quaternion / norm if abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE else None
+
+
+def _fast_proprioception(data: bytes, n: int) -> Proprioception | None:
+    """:func:`decode_proprioception` of a good message, at numpy speed (None: not one, or not sure)."""
+    fields = _doubles(data, biped_proprioception_t, ">qi", 3 * n + 10, 2)
+    if fields is None or fields[0][0] < 0 or fields[0][1] != n:
+        return None
+    d = fields[1]
+    quaternion = _unit_or_none(d[3 * n:3 * n + 4])
+    if quaternion is None:
+        return None
+    contact = (np.frombuffer(data, np.int8, 2, len(data) - 2) != 0).astype(float)
+    return Proprioception(fields[0][0], d[:n], d[n:2 * n], d[2 * n:3 * n],
+                          np.concatenate([quaternion, d[3 * n + 4:]]), contact)
+
+
 def decode_proprioception(data: bytes, num_joints: int) -> Proprioception:
-    """The checked measurement in ``data``; MessageRejected unless it has ``num_joints`` joints."""
+    """The checked measurement in ``data``; MessageRejected unless it has ``num_joints`` joints.
+    A good message takes the fast path; anything else the generated decoder, which says why."""
+    fast = _fast_proprioception(data, num_joints)
+    if fast is not None:
+        return fast
     name = "biped_proprioception_t"
     lcm = _unpack(biped_proprioception_t, data)
     utime = _check_utime(name, lcm.utime)
@@ -321,8 +353,22 @@ def decode_motor_command(data: bytes, num_actuators: int) -> MotorCommand:
     )
 
 
+def _fast_base_state(data: bytes) -> BaseState | None:
+    """:func:`decode_base_state` of a good message, as :func:`_fast_proprioception`."""
+    fields = _doubles(data, base_state_t, ">q", 13)
+    quaternion = None if fields is None or fields[0][0] < 0 else _unit_or_none(fields[1][:4])
+    if quaternion is None:
+        return None
+    d = fields[1]
+    return BaseState(fields[0][0], quaternion, d[4:7], d[7:10], d[10:])
+
+
 def decode_base_state(data: bytes) -> BaseState:
-    """The checked base state in ``data`` (all sizes are fixed by the message)."""
+    """The checked base state in ``data`` (all sizes are fixed by the message); a good message
+    takes the fast path, as in :func:`decode_proprioception`."""
+    fast = _fast_base_state(data)
+    if fast is not None:
+        return fast
     name = "base_state_t"
     lcm = _unpack(base_state_t, data)
     quaternion, position, angular_velocity, linear_velocity = _all_finite(name, {
