@@ -162,8 +162,7 @@ class BlindPredictor:
         update = MissedUpdate(command_port.Eval(context).copy(),
                               base if self.base_state.age(context, state) < np.inf else None,
                               self.base_state.fresh(context, state, self.config.timeout_s))
-        # The outputs turn stale half an update early (MeasurementReceiver.stale_ages); the
-        # prediction is there one update before that.
+        # The prediction is there one update before the outputs turn stale (MeasurementReceiver.stale).
         h = 1.0 / self.config.receive_rate_hz
         if self.proprioception.fresh(context, state, self.config.timeout_s - 1.5 * h):
             abstract(int(self._missed)).set_value((*missed, update))
@@ -202,7 +201,7 @@ class MeasurementReceiver(LeafSystem):
     |-----------------|-----|----------|------------------------------------------------------|
     | proprioception  | in  | abstract | raw bytes of ROMOCO_PROPRIOCEPTION                    |
     | base_state      | in  | abstract | raw bytes of ROMOCO_BASE_STATE                        |
-    | command         | in  | 5·nu     | the motor command being sent (drives the prediction)  |
+    | command         | in  | 5·nu     | the motor command last sent (drives the prediction)   |
     | loop_stage      | in  | 1        | the stage the loop's missed deadlines ask for          |
     | joint_state, imu, …, base_velocity | out | as the station | newest good values, or predicted |
     | link            | out | 1        | the :class:`~romoco_drake.modes.LinkStage` (below)     |
@@ -287,10 +286,9 @@ class MeasurementReceiver(LeafSystem):
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.receive_rate_hz, 0.0, self._update)
 
     def stale(self, age: float) -> bool:
-        """Whether a stream ``age`` s old at an update is stale for the outputs until the next one:
-        its age passes ``timeout_s`` before the next update, decided half an update period early
-        against round-off (with ``timeout_s`` a multiple of the period, from the update after
-        which any later time sees the stream older than ``timeout_s``)."""
+        """Whether a stream ``age`` s old at an update is stale for the outputs until the next
+        update: older than ``timeout_s`` half a period later (the half period against round-off;
+        with ``timeout_s`` a multiple of the period, what its age at any time in between says)."""
         return np.isfinite(age) and age > self.config.timeout_s - 0.5 / self.config.receive_rate_hz
 
     def _measured(self, context, inbox: Inbox) -> np.ndarray:
