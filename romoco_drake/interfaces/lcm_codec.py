@@ -305,8 +305,9 @@ def _unit_or_none(quaternion: np.ndarray) -> np.ndarray | None:
     return quaternion / norm if abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE else None
 
 
-def _fast_proprioception(data: bytes, n: int) -> Proprioception | None:
-    """:func:`decode_proprioception` of a good message, at numpy speed (None: not one, or not sure)."""
+def _fast_proprioception(data: bytes, n: int) -> tuple[int, np.ndarray] | None:
+    """(utime, [q; v; τ; imu; foot_contact]) of a good message, at numpy speed (None: not one,
+    or not sure)."""
     fields = _doubles(data, biped_proprioception_t, ">qi", 3 * n + 10, 2)
     if fields is None or fields[0][0] < 0 or fields[0][1] != n:
         return None
@@ -314,17 +315,27 @@ def _fast_proprioception(data: bytes, n: int) -> Proprioception | None:
     quaternion = _unit_or_none(d[3 * n:3 * n + 4])
     if quaternion is None:
         return None
-    contact = (np.frombuffer(data, np.int8, 2, len(data) - 2) != 0).astype(float)
-    return Proprioception(fields[0][0], d[:n], d[n:2 * n], d[2 * n:3 * n],
-                          np.concatenate([quaternion, d[3 * n + 4:]]), contact)
+    d[3 * n:3 * n + 4] = quaternion
+    return fields[0][0], np.concatenate([d, np.frombuffer(data, np.int8, 2, len(data) - 2) != 0])
+
+
+def proprioception_vector(data: bytes, num_joints: int) -> tuple[int, np.ndarray]:
+    """(utime, [q; v; imu; foot_contact]) of :func:`decode_proprioception`: what a receiver keeps,
+    without building the dataclass for a good message."""
+    n, fast = num_joints, _fast_proprioception(data, num_joints)
+    if fast is not None:
+        return fast[0], np.concatenate([fast[1][:2 * n], fast[1][3 * n:]])
+    m = decode_proprioception(data, n)
+    return m.utime, np.concatenate([m.q, m.v, m.imu, m.foot_contact])
 
 
 def decode_proprioception(data: bytes, num_joints: int) -> Proprioception:
     """The checked measurement in ``data``; MessageRejected unless it has ``num_joints`` joints.
     A good message takes the fast path; anything else the generated decoder, which says why."""
-    fast = _fast_proprioception(data, num_joints)
+    n, fast = num_joints, _fast_proprioception(data, num_joints)
     if fast is not None:
-        return fast
+        utime, x = fast
+        return Proprioception(utime, x[:n], x[n:2 * n], x[2 * n:3 * n], x[3 * n:3 * n + 10], x[3 * n + 10:])
     name = "biped_proprioception_t"
     lcm = _unpack(biped_proprioception_t, data)
     utime = _check_utime(name, lcm.utime)
@@ -353,22 +364,29 @@ def decode_motor_command(data: bytes, num_actuators: int) -> MotorCommand:
     )
 
 
-def _fast_base_state(data: bytes) -> BaseState | None:
-    """:func:`decode_base_state` of a good message, as :func:`_fast_proprioception`."""
+def _fast_base_state(data: bytes) -> tuple[int, np.ndarray] | None:
+    """(utime, [quaternion; position; ω; v]) of a good message, as :func:`_fast_proprioception`."""
     fields = _doubles(data, base_state_t, ">q", 13)
     quaternion = None if fields is None or fields[0][0] < 0 else _unit_or_none(fields[1][:4])
     if quaternion is None:
         return None
-    d = fields[1]
-    return BaseState(fields[0][0], quaternion, d[4:7], d[7:10], d[10:])
+    fields[1][:4] = quaternion
+    return fields[0][0], fields[1]
+
+
+def base_state_vector(data: bytes) -> tuple[int, np.ndarray]:
+    """(utime, [quaternion; position; ω; v]) of :func:`decode_base_state` (as proprioception_vector)."""
+    if (fast := _fast_base_state(data)) is not None:
+        return fast
+    m = decode_base_state(data)
+    return m.utime, np.concatenate([m.quaternion, m.position, m.angular_velocity, m.linear_velocity])
 
 
 def decode_base_state(data: bytes) -> BaseState:
     """The checked base state in ``data`` (all sizes are fixed by the message); a good message
     takes the fast path, as in :func:`decode_proprioception`."""
-    fast = _fast_base_state(data)
-    if fast is not None:
-        return fast
+    if (fast := _fast_base_state(data)) is not None:
+        return BaseState(fast[0], fast[1][:4], fast[1][4:7], fast[1][7:10], fast[1][10:])
     name = "base_state_t"
     lcm = _unpack(base_state_t, data)
     quaternion, position, angular_velocity, linear_velocity = _all_finite(name, {

@@ -13,7 +13,7 @@ from pydrake.common.value import AbstractValue, Value
 from pydrake.systems.framework import InputPort, LeafSystem, ValueProducer
 
 from romoco_drake.estimation.ground_truth import plant_state
-from romoco_drake.interfaces.lcm_codec import decode_base_state, decode_proprioception
+from romoco_drake.interfaces.lcm_codec import base_state_vector, proprioception_vector
 from romoco_drake.interfaces.link import Inbox, LinkConfig, counters_port, link_stage
 from romoco_drake.interfaces.predictor import ContactPredictor, DivergedPrediction, PredictedState
 from romoco_drake.modes import LinkCounters, LinkStage
@@ -241,18 +241,11 @@ class MeasurementReceiver(LeafSystem):
         nj = len(robot.joint_names)
         start = nominal_measurements(robot)
 
-        def proprioception(data):
-            m = decode_proprioception(data, nj)
-            return m.utime, np.concatenate([m.q, m.v, m.imu, m.foot_contact])
-
-        def base_state(data):
-            m = decode_base_state(data)
-            return m.utime, np.concatenate([m.quaternion, m.position, m.angular_velocity, m.linear_velocity])
-
         first = np.concatenate([start["joint_state"], start["imu"], start["foot_contact"]])
-        self.proprioception = Inbox(self, "proprioception", proprioception, first)
+        self.proprioception = Inbox(self, "proprioception", lambda data: proprioception_vector(data, nj),
+                                    first)
         base_default = np.concatenate([start["base_pose"], start["base_velocity"]])
-        self.base_state = Inbox(self, "base_state", base_state, base_default)
+        self.base_state = Inbox(self, "base_state", base_state_vector, base_default)
         self.command_port = self.DeclareVectorInputPort("command", 5 * robot.nu)
         self.loop_stage_port = self.DeclareVectorInputPort("loop_stage", 1)
         self.predictor = BlindPredictor(self, robot, config, self.proprioception, self.base_state)
