@@ -66,9 +66,8 @@ from romoco_drake.interfaces.lcm_codec import (
     MOTOR_COMMAND_CHANNEL,
     PROPRIOCEPTION_CHANNEL,
     ControllerStatus,
-    MotorCommand,
     encode_controller_status,
-    encode_motor_command,
+    motor_command_bytes,
 )
 from romoco_drake.interfaces.link import (
     PUBLISH_DELAY,
@@ -181,16 +180,16 @@ class CommandSender(LeafSystem):
     def _update(self, context, state) -> None:
         engaged, bad = self.estop.take(context, state)
         command, non_finite, clipped = self._checked_entry.Eval(context)
-        counts = LinkCounters.from_vector(context.get_discrete_state(self._stats).value()) + LinkCounters(
-            rejected_messages=bad + non_finite, clamped_commands=clipped, estop=engaged)
         discrete = state.get_mutable_discrete_state()
-        discrete.get_mutable_vector(int(self._stats)).SetFromVector(counts.vector())
+        if bad or non_finite or clipped or engaged:  # else the counts stand (most ticks)
+            counts = LinkCounters.from_vector(context.get_discrete_state(self._stats).value()) + LinkCounters(
+                rejected_messages=bad + non_finite, clamped_commands=clipped, estop=engaged)
+            discrete.get_mutable_vector(int(self._stats)).SetFromVector(counts.vector())
         discrete.get_mutable_vector(int(self._sent)).SetFromVector(command)
 
     def _message(self, context, out) -> None:
-        q_d, v_d, tau_ff, kp, kd = self._checked_entry.Eval(context)[0].reshape(5, self.robot.nu)
-        utime = int(round(context.get_time() * 1e6))
-        out.set_value(encode_motor_command(MotorCommand(utime, q_d, v_d, tau_ff, kp, kd)))
+        command = self._checked_entry.Eval(context)[0]
+        out.set_value(motor_command_bytes(round(context.get_time() * 1e6), command))
 
 
 def make_hardware_station(robot: RobotModel, lcm: DrakeLcmInterface, period: float, motor_pd: bool = False,

@@ -175,10 +175,13 @@ def encode_proprioception(msg: Proprioception) -> bytes:
 
 
 def encode_motor_command(msg: MotorCommand) -> bytes:
-    """The bytes ``biped_motor_command_t.encode`` gives, packed from the arrays at once (sent every tick)."""
-    values = np.concatenate([msg.q_d, msg.v_d, msg.tau_ff, msg.kp, msg.kd]).astype(">f8")
-    header = struct.pack(">qi", int(msg.utime), msg.q_d.size)
-    return biped_motor_command_t._get_packed_fingerprint() + header + values.tobytes()
+    return motor_command_bytes(msg.utime, np.concatenate([msg.q_d, msg.v_d, msg.tau_ff, msg.kp, msg.kd]))
+
+
+def motor_command_bytes(utime: int, command: np.ndarray) -> bytes:
+    """``biped_motor_command_t.encode`` of [q_d; v_d; τ_ff; K_p; K_d] (5·nu), packed in one piece."""
+    header = struct.pack(">qi", int(utime), command.size // 5)
+    return biped_motor_command_t._get_packed_fingerprint() + header + command.astype(">f8").tobytes()
 
 
 def encode_base_state(msg: BaseState) -> bytes:
@@ -306,8 +309,7 @@ def _unit_or_none(quaternion: np.ndarray) -> np.ndarray | None:
 
 
 def _fast_proprioception(data: bytes, n: int) -> tuple[int, np.ndarray] | None:
-    """(utime, [q; v; τ; imu; foot_contact]) of a good message, at numpy speed (None: not one,
-    or not sure)."""
+    """(utime, [q; v; τ; imu; foot_contact]) of a good message, fast (None: not one, or not sure)."""
     fields = _doubles(data, biped_proprioception_t, ">qi", 3 * n + 10, 2)
     if fields is None or fields[0][0] < 0 or fields[0][1] != n:
         return None
@@ -322,8 +324,7 @@ def _fast_proprioception(data: bytes, n: int) -> tuple[int, np.ndarray] | None:
 def proprioception_vector(data: bytes, num_joints: int) -> tuple[int, np.ndarray]:
     """(utime, [q; v; imu; foot_contact]) of :func:`decode_proprioception`: what a receiver keeps,
     without building the dataclass for a good message."""
-    n, fast = num_joints, _fast_proprioception(data, num_joints)
-    if fast is not None:
+    if (fast := _fast_proprioception(data, n := num_joints)) is not None:
         return fast[0], np.concatenate([fast[1][:2 * n], fast[1][3 * n:]])
     m = decode_proprioception(data, n)
     return m.utime, np.concatenate([m.q, m.v, m.imu, m.foot_contact])
