@@ -159,17 +159,17 @@ class CommandSender(LeafSystem):
             wanted = self.motor_command_port.Eval(context).copy()
         else:
             # Torque mode: K_p = 0, so q_d only has to be valid (within limits, not counted).
-            wanted = np.concatenate([np.clip(q, self._lower[:nu], self._upper[:nu]), np.zeros(4 * nu)])
+            wanted = np.concatenate([q.clip(self._lower[:nu], self._upper[:nu]), np.zeros(4 * nu)])
         wanted[2 * nu:3 * nu] += self.actuation_port.Eval(context)
         if stage != LinkStage.FRESH:  # predicted measurements: joints without gains follow the prediction
             q_d, v_d, _, kp, kd = wanted.reshape(5, nu)
             torque = (kp == 0.0) & (kd == 0.0)
             q_d[torque], v_d[torque] = q[torque], v[torque]
             kp[torque], kd[torque] = self.robot.kp[torque], self.robot.kd[torque]
-        if not np.all(np.abs(wanted) < DIVERGED):  # non-finite or diverged (NaN included)
+        if not (np.abs(wanted) < DIVERGED).all():  # non-finite or diverged (NaN included)
             return self._damping(q), True, False
-        command = np.clip(wanted, self._lower, self._upper)
-        return command, False, bool(np.any(command != wanted))
+        command = wanted.clip(self._lower, self._upper)
+        return command, False, bool((command != wanted).any())
 
     def _damping(self, q: np.ndarray) -> np.ndarray:
         """The damping command about the measured ``q``, within the joint limits (K_p = 0: q_d only
