@@ -292,7 +292,7 @@ def _nonnegative(name: str, field: str, values) -> np.ndarray:
     return array
 
 
-def _doubles(data: bytes, lcm_type, header: str, count: int, tail: int = 0):
+def _doubles(data: bytes, lcm_type, header: str, count: int, tail: int = 0) -> tuple | None:
     """(header fields, ``count`` doubles) of a message of ``lcm_type`` laid out as its fingerprint,
     ``header`` (struct format), the doubles and ``tail`` more bytes; None unless ``data`` is that
     long and carries the fingerprint, or when a double is not finite."""
@@ -304,6 +304,7 @@ def _doubles(data: bytes, lcm_type, header: str, count: int, tail: int = 0):
 
 
 def _unit_or_none(quaternion: np.ndarray) -> np.ndarray | None:
+    """``quaternion`` normalised as the generated path does, or None beyond the norm tolerance."""
     norm = math.hypot(*quaternion)
     return quaternion / norm if abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE else None
 
@@ -333,10 +334,9 @@ def proprioception_vector(data: bytes, num_joints: int) -> tuple[int, np.ndarray
 def decode_proprioception(data: bytes, num_joints: int) -> Proprioception:
     """The checked measurement in ``data``; MessageRejected unless it has ``num_joints`` joints.
     A good message takes the fast path; anything else the generated decoder, which says why."""
-    n, fast = num_joints, _fast_proprioception(data, num_joints)
-    if fast is not None:
-        utime, x = fast
-        return Proprioception(utime, x[:n], x[n:2 * n], x[2 * n:3 * n], x[3 * n:3 * n + 10], x[3 * n + 10:])
+    if (fast := _fast_proprioception(data, n := num_joints)) is not None:
+        x = fast[1]
+        return Proprioception(fast[0], x[:n], x[n:2 * n], x[2 * n:3 * n], x[3 * n:3 * n + 10], x[3 * n + 10:])
     name = "biped_proprioception_t"
     lcm = _unpack(biped_proprioception_t, data)
     utime = _check_utime(name, lcm.utime)
