@@ -21,8 +21,8 @@ from pydrake.systems.framework import PortDataType
 
 from romoco_drake.interfaces import lcm_codec as codec
 from romoco_drake.interfaces.hardware import CommandSender, make_hardware_station
-from romoco_drake.interfaces.link import LinkConfig
-from romoco_drake.interfaces.receiver import nominal_measurements
+from romoco_drake.interfaces.link import PUBLISH_DELAY, LinkConfig
+from romoco_drake.interfaces.receiver import MeasurementReceiver, nominal_measurements
 from romoco_drake.interfaces.station import make_station
 from romoco_drake.modes import LinkStage
 from romoco_drake.robots.model import load_robot
@@ -144,6 +144,55 @@ def test_stalled_proprioception_degrades_in_stages_counts_each_and_resumes(g1):
                                           "damping_events": 1}
 
 
+def test_measurements_hold_between_updates_and_turn_stale_after_timeout(g1, monkeypatch):
+    """The measurement ports depend on the receiver's last update and the newest message, not on
+    time: between updates Drake's cache serves them. A stalled stream's ports carry the last
+    message up to timeout_s after it was taken and the prediction from then on."""
+    times, measured = [], MeasurementReceiver._measured
+
+    def counted(self, context, inbox):
+        times.append(context.get_time())
+        return measured(self, context, inbox)
+
+    monkeypatch.setattr(MeasurementReceiver, "_measured", counted)
+    side = ControllerSide(g1, np.full(g1.nu, 0.2))
+    receiver = side.station.GetSubsystemByName("receiver")
+    nj = len(g1.joint_names)
+    q, v = inside_limits(g1, 0.05), np.linspace(-0.2, 0.2, nj)
+    side.advance(0.01, lambda utime: proprioception(g1, utime, q, v=v))
+    side.simulator.AdvanceTo(side.time + 0.0012)  # the update that takes the last message, and 0.2 ms
+    first = side.output("joint_state").copy()
+    calculated = len(times)
+    side.simulator.AdvanceTo(side.time + 0.0005)  # no update in between
+    np.testing.assert_array_equal(side.output("joint_state"), first)
+    assert len(times) == calculated
+
+    arrival = side.time - receiver.proprioception.age(receiver.GetMyContextFromRoot(side.context))
+    timeout = side.config.timeout_s
+    side.simulator.AdvanceTo(arrival + timeout - 0.0005)
+    np.testing.assert_array_equal(side.output("joint_state")[:nj], q)
+    side.simulator.AdvanceTo(arrival + timeout + 0.0005)
+    assert np.abs(side.output("joint_state")[:nj] - q).max() > 1e-6
+
+
+def test_the_command_is_computed_once_a_tick(g1, monkeypatch):
+    """The sender computes its command for the publish; the update after it (counts, the command
+    kept for the receiver) and the receiver's updates find it in Drake's cache."""
+    calls, checked = [], CommandSender._checked
+
+    def counted(self, context, latched):
+        calls.append(context.get_time())
+        return checked(self, context, latched)
+
+    monkeypatch.setattr(CommandSender, "_checked", counted)
+    side = ControllerSide(g1, np.full(g1.nu, 0.2))
+    q = inside_limits(g1, 0.05)
+    side.advance(0.02, lambda utime: proprioception(g1, utime, q))
+    start = len(calls)
+    side.advance(0.02, lambda utime: proprioception(g1, utime, q) if utime % 2000 else b"")
+    assert len(calls) - start == round(0.02 / TICK)
+
+
 def test_without_ride_through_a_loss_goes_to_stand_then_damping(g1):
     """ride_through_s = 0 and stand_s = 0: a stale stream is damping at once (the old link), and
     the skipped stages are not counted."""
@@ -235,8 +284,8 @@ class SenderBench:
             self.sender.actuation_port.FixValue(self.context, actuation)
         if motor_command is not None:
             self.sender.motor_command_port.FixValue(self.context, np.concatenate(motor_command))
-        # One periodic (unrestricted) update: the one at the next multiple of the period.
-        self.simulator.AdvanceTo(self.context.get_time() + 0.002 if self.ticks else 1e-6)
+        # One periodic (unrestricted) update: the next one, PUBLISH_DELAY after a multiple of the period.
+        self.simulator.AdvanceTo(self.context.get_time() + 0.002 if self.ticks else PUBLISH_DELAY + 1e-6)
         self.ticks += 1
         sent = decode_command(self.robot, self.sender.message_port.Eval(self.context))
         np.testing.assert_array_equal(np.concatenate(list(sent.values())),

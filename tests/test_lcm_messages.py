@@ -5,6 +5,7 @@ import re
 import shutil
 import subprocess
 import sys
+from unittest import mock
 
 import hypothesis.extra.numpy as hnp
 import hypothesis.strategies as st
@@ -99,6 +100,37 @@ def test_base_state_round_trip(msg):
 def test_estop_round_trip(utime, engaged, source):
     msg = codec.Estop(utime, engaged, source)
     assert codec.decode_estop(codec.encode_estop(msg)) == msg
+
+
+def _generated_decoder_only():
+    """Within: every decode takes the generated decoder's path (the fast path finds no message)."""
+    return mock.patch.object(codec, "_doubles", lambda *args, **kwargs: None)
+
+
+@given(proprioceptions(), base_states(), motor_commands())
+def test_fast_paths_agree_with_the_generated_bindings(proprioception, base_state, command):
+    """The fast decoders (dataclasses and the receiver's vectors) give what the generated ones give,
+    bit for bit, and the motor command's fast encoder the generated encoder's bytes."""
+    n = proprioception.q.size
+    messages = [(codec.encode_proprioception(proprioception), lambda d: codec.decode_proprioception(d, n),
+                 lambda d: codec._fast_proprioception(d, n)),
+                (codec.encode_base_state(base_state), codec.decode_base_state, codec._fast_base_state)]
+    vectors = [lambda d: codec.proprioception_vector(d, n), codec.base_state_vector]
+    for (data, decode, fast_path), vector in zip(messages, vectors, strict=True):
+        assert fast_path(data) is not None
+        fast, fast_vector = decode(data), vector(data)
+        with _generated_decoder_only():
+            slow, slow_vector = decode(data), vector(data)
+        assert fast.utime == slow.utime == fast_vector[0] == slow_vector[0]
+        for name, value in vars(fast).items():
+            if name != "utime":
+                assert value.tobytes() == getattr(slow, name).tobytes(), name
+        assert fast_vector[1].tobytes() == slow_vector[1].tobytes()
+    lcm = biped_motor_command_t()
+    lcm.utime, lcm.num_actuators = command.utime, command.q_d.size
+    lcm.q_d, lcm.v_d, lcm.tau_ff = command.q_d.tolist(), command.v_d.tolist(), command.tau_ff.tolist()
+    lcm.kp, lcm.kd = command.kp.tolist(), command.kd.tolist()
+    assert codec.encode_motor_command(command) == lcm.encode()
 
 
 def test_dataclasses_check_shapes():

@@ -7,7 +7,7 @@ import dataclasses
 import time
 from collections.abc import Callable
 
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import EventStatus, LeafSystem
 
 from romoco_drake.interfaces.link import PUBLISH_DELAY, LinkConfig, counters_port, link_stage
 from romoco_drake.modes import DeadlineStats, LinkStage
@@ -66,10 +66,12 @@ class DeadlineMonitor(LeafSystem):
     def _start(self, context, state) -> None:
         state.get_mutable_discrete_state().get_mutable_vector(self._started).SetFromVector([self._clock()])
 
-    def _finish(self, context, discrete_state) -> None:
+    def _finish(self, context, discrete_state) -> EventStatus | None:
         took = self._clock() - context.get_discrete_state(self._started).GetAtIndex(0)
         if took <= self.period and not context.get_discrete_state(self._stats).GetAtIndex(_STREAK):
-            return  # on time after a tick on time: the counts stand (the update starts from them)
+            # On time after a tick on time: the counts stand, and Drake leaves the state (and what
+            # depends on it) as it is.
+            return EventStatus.DidNothing()
         s = self._read(context)
         if took > self.period:
             streak = s.miss_streak + 1

@@ -66,9 +66,8 @@ from romoco_drake.interfaces.lcm_codec import (
     MOTOR_COMMAND_CHANNEL,
     PROPRIOCEPTION_CHANNEL,
     ControllerStatus,
-    MotorCommand,
     encode_controller_status,
-    encode_motor_command,
+    motor_command_bytes,
 )
 from romoco_drake.interfaces.link import (
     PUBLISH_DELAY,
@@ -95,8 +94,8 @@ class CommandSender(LeafSystem):
     | joint_state   | in  | 2·nj     | measured joints (damping holds these)                  |
     | link          | in  | 1        | :class:`~romoco_drake.modes.LinkStage` of the measurements |
     | estop         | in  | abstract | raw bytes of ROMOCO_ESTOP                              |
-    | message       | out | abstract | encoded biped_motor_command_t of the last update       |
-    | command       | out | 5·nu     | the command sent                                        |
+    | message       | out | abstract | encoded biped_motor_command_t of the current inputs    |
+    | command       | out | 5·nu     | the command last sent (the last update's)               |
     | stats         | out | abstract | ``LinkCounters``: rejected (non-finite), clamped commands, E-stops |
 
     The command is computed from the current inputs: the controller's command, clamped (module
@@ -107,7 +106,9 @@ class CommandSender(LeafSystem):
     the robot near the prediction; damping after that, before the first measurement, or while
     the E-stop is engaged (:class:`EstopLatch`). It is published ``PUBLISH_DELAY`` after each
     controller tick, because a publish at the tick's own instant sees the state from before that
-    tick's command. The periodic update (every ``period``) latches the E-stop and counts.
+    tick's command. The periodic update right after each publish latches the E-stop, counts the
+    command just sent and keeps it (``command``: what the receiver's prediction runs on), so
+    the command is computed once a tick, for the publish, and the update finds it in Drake's cache.
     """
 
     def __init__(self, robot: RobotModel, period: float, motor_pd: bool, config: LinkConfig,
@@ -129,6 +130,7 @@ class CommandSender(LeafSystem):
         self.estop = EstopLatch(self)
         self.estop_port = self.estop.port
         self._stats = self.DeclareDiscreteState(LinkCounters.size())
+        self._sent = self.DeclareDiscreteState(self._damping(robot.nominal.q[robot.actuated_q_index]))
         # The command and its flags, once per change of what they are computed from (not of time).
         inputs = [self.actuation_port, self.joint_state_port, self.link_port, self.estop.port] + (
             [self.motor_command_port] if motor_pd else [])
@@ -137,14 +139,13 @@ class CommandSender(LeafSystem):
                 allocate=lambda: AbstractValue.Make((np.zeros(5 * nu), False, False)),
                 calc=lambda context, value: value.set_value(
                     self._checked(context, self.estop.engaged(context)))),
-            {*(self.input_port_ticket(port.get_index()) for port in inputs), self.all_state_ticket()})
-        self.command_port = self.DeclareVectorOutputPort(
-            "command", 5 * nu, lambda context, out: out.SetFromVector(self._checked_entry.Eval(context)[0]),
-            prerequisites_of_calc={self._checked_entry.ticket()})
+            {*(self.input_port_ticket(port.get_index()) for port in inputs),
+             self.discrete_state_ticket(self.estop.latched)})
+        self.command_port = self.DeclareStateOutputPort("command", self._sent)
         self.stats_port = counters_port(self, "stats", LinkCounters, self._stats)
         self.message_port = self.DeclareAbstractOutputPort(
             "message", lambda: AbstractValue.Make(b""), self._message)
-        self.DeclarePeriodicUnrestrictedUpdateEvent(period, offset, self._update)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, offset + PUBLISH_DELAY, self._update)
 
     def _checked(self, context, latched: bool) -> tuple[np.ndarray, bool, bool]:
         """(command to send, rejected as non-finite, clamped) for the current inputs."""
@@ -158,17 +159,17 @@ class CommandSender(LeafSystem):
             wanted = self.motor_command_port.Eval(context).copy()
         else:
             # Torque mode: K_p = 0, so q_d only has to be valid (within limits, not counted).
-            wanted = np.concatenate([np.clip(q, self._lower[:nu], self._upper[:nu]), np.zeros(4 * nu)])
+            wanted = np.concatenate([q.clip(self._lower[:nu], self._upper[:nu]), np.zeros(4 * nu)])
         wanted[2 * nu:3 * nu] += self.actuation_port.Eval(context)
         if stage != LinkStage.FRESH:  # predicted measurements: joints without gains follow the prediction
             q_d, v_d, _, kp, kd = wanted.reshape(5, nu)
             torque = (kp == 0.0) & (kd == 0.0)
             q_d[torque], v_d[torque] = q[torque], v[torque]
             kp[torque], kd[torque] = self.robot.kp[torque], self.robot.kd[torque]
-        if not np.all(np.abs(wanted) < DIVERGED):  # non-finite or diverged (NaN included)
+        if not (np.abs(wanted) < DIVERGED).all():  # non-finite or diverged (NaN included)
             return self._damping(q), True, False
-        command = np.clip(wanted, self._lower, self._upper)
-        return command, False, bool(np.any(command != wanted))
+        command = wanted.clip(self._lower, self._upper)
+        return command, False, bool((command != wanted).any())
 
     def _damping(self, q: np.ndarray) -> np.ndarray:
         """The damping command about the measured ``q``, within the joint limits (K_p = 0: q_d only
@@ -178,15 +179,17 @@ class CommandSender(LeafSystem):
 
     def _update(self, context, state) -> None:
         engaged, bad = self.estop.take(context, state)
-        _, non_finite, clipped = self._checked_entry.Eval(context)
-        counts = LinkCounters.from_vector(context.get_discrete_state(self._stats).value()) + LinkCounters(
-            rejected_messages=bad + non_finite, clamped_commands=clipped, estop=engaged)
-        state.get_mutable_discrete_state().get_mutable_vector(int(self._stats)).SetFromVector(counts.vector())
+        command, non_finite, clipped = self._checked_entry.Eval(context)
+        discrete = state.get_mutable_discrete_state()
+        if bad or non_finite or clipped or engaged:  # else the counts stand (most ticks)
+            counts = LinkCounters.from_vector(context.get_discrete_state(self._stats).value()) + LinkCounters(
+                rejected_messages=bad + non_finite, clamped_commands=clipped, estop=engaged)
+            discrete.get_mutable_vector(int(self._stats)).SetFromVector(counts.vector())
+        discrete.get_mutable_vector(int(self._sent)).SetFromVector(command)
 
     def _message(self, context, out) -> None:
-        q_d, v_d, tau_ff, kp, kd = self.command_port.Eval(context).reshape(5, self.robot.nu)
-        utime = int(round(context.get_time() * 1e6))
-        out.set_value(encode_motor_command(MotorCommand(utime, q_d, v_d, tau_ff, kp, kd)))
+        command = self._checked_entry.Eval(context)[0]
+        out.set_value(motor_command_bytes(round(context.get_time() * 1e6), command))
 
 
 def make_hardware_station(robot: RobotModel, lcm: DrakeLcmInterface, period: float, motor_pd: bool = False,

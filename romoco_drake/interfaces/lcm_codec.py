@@ -175,12 +175,13 @@ def encode_proprioception(msg: Proprioception) -> bytes:
 
 
 def encode_motor_command(msg: MotorCommand) -> bytes:
-    lcm = biped_motor_command_t()
-    lcm.utime = int(msg.utime)
-    lcm.num_actuators = msg.q_d.size
-    lcm.q_d, lcm.v_d, lcm.tau_ff = msg.q_d.tolist(), msg.v_d.tolist(), msg.tau_ff.tolist()
-    lcm.kp, lcm.kd = msg.kp.tolist(), msg.kd.tolist()
-    return lcm.encode()
+    return motor_command_bytes(msg.utime, np.concatenate([msg.q_d, msg.v_d, msg.tau_ff, msg.kp, msg.kd]))
+
+
+def motor_command_bytes(utime: int, command: np.ndarray) -> bytes:
+    """``biped_motor_command_t.encode`` of [q_d; v_d; τ_ff; K_p; K_d] (5·nu), packed in one piece."""
+    header = struct.pack(">qi", int(utime), command.size // 5)
+    return biped_motor_command_t._get_packed_fingerprint() + header + command.astype(">f8").tobytes()
 
 
 def encode_base_state(msg: BaseState) -> bytes:
@@ -291,8 +292,51 @@ def _nonnegative(name: str, field: str, values) -> np.ndarray:
     return array
 
 
+def _doubles(data: bytes, lcm_type, header: str, count: int, tail: int = 0) -> tuple | None:
+    """(header fields, ``count`` doubles) of a message of ``lcm_type`` laid out as its fingerprint,
+    ``header`` (struct format), the doubles and ``tail`` more bytes; None unless ``data`` is that
+    long and carries the fingerprint, or when a double is not finite."""
+    start = 8 + struct.calcsize(header)
+    if len(data) != start + 8 * count + tail or data[:8] != lcm_type._get_packed_fingerprint():
+        return None
+    values = np.frombuffer(data, ">f8", count, start).astype(float)
+    return (struct.unpack_from(header, data, 8), values) if np.isfinite(values).all() else None
+
+
+def _unit_or_none(quaternion: np.ndarray) -> np.ndarray | None:
+    """``quaternion`` normalised as the generated path does, or None beyond the norm tolerance."""
+    norm = math.hypot(*quaternion)
+    return quaternion / norm if abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE else None
+
+
+def _fast_proprioception(data: bytes, n: int) -> tuple[int, np.ndarray] | None:
+    """(utime, [q; v; τ; imu; foot_contact]) of a good message, fast (None: not one, or not sure)."""
+    fields = _doubles(data, biped_proprioception_t, ">qi", 3 * n + 10, 2)
+    if fields is None or fields[0][0] < 0 or fields[0][1] != n:
+        return None
+    d = fields[1]
+    quaternion = _unit_or_none(d[3 * n:3 * n + 4])
+    if quaternion is None:
+        return None
+    d[3 * n:3 * n + 4] = quaternion
+    return fields[0][0], np.concatenate([d, np.frombuffer(data, np.int8, 2, len(data) - 2) != 0])
+
+
+def proprioception_vector(data: bytes, num_joints: int) -> tuple[int, np.ndarray]:
+    """(utime, [q; v; imu; foot_contact]) of :func:`decode_proprioception`: what a receiver keeps,
+    without building the dataclass for a good message."""
+    if (fast := _fast_proprioception(data, n := num_joints)) is not None:
+        return fast[0], np.concatenate([fast[1][:2 * n], fast[1][3 * n:]])
+    m = decode_proprioception(data, n)
+    return m.utime, np.concatenate([m.q, m.v, m.imu, m.foot_contact])
+
+
 def decode_proprioception(data: bytes, num_joints: int) -> Proprioception:
-    """The checked measurement in ``data``; MessageRejected unless it has ``num_joints`` joints."""
+    """The checked measurement in ``data``; MessageRejected unless it has ``num_joints`` joints.
+    A good message takes the fast path; anything else the generated decoder, which says why."""
+    if (fast := _fast_proprioception(data, n := num_joints)) is not None:
+        x = fast[1]
+        return Proprioception(fast[0], x[:n], x[n:2 * n], x[2 * n:3 * n], x[3 * n:3 * n + 10], x[3 * n + 10:])
     name = "biped_proprioception_t"
     lcm = _unpack(biped_proprioception_t, data)
     utime = _check_utime(name, lcm.utime)
@@ -321,8 +365,29 @@ def decode_motor_command(data: bytes, num_actuators: int) -> MotorCommand:
     )
 
 
+def _fast_base_state(data: bytes) -> tuple[int, np.ndarray] | None:
+    """(utime, [quaternion; position; ω; v]) of a good message, as :func:`_fast_proprioception`."""
+    fields = _doubles(data, base_state_t, ">q", 13)
+    quaternion = None if fields is None or fields[0][0] < 0 else _unit_or_none(fields[1][:4])
+    if quaternion is None:
+        return None
+    fields[1][:4] = quaternion
+    return fields[0][0], fields[1]
+
+
+def base_state_vector(data: bytes) -> tuple[int, np.ndarray]:
+    """(utime, [quaternion; position; ω; v]) of :func:`decode_base_state` (as proprioception_vector)."""
+    if (fast := _fast_base_state(data)) is not None:
+        return fast
+    m = decode_base_state(data)
+    return m.utime, np.concatenate([m.quaternion, m.position, m.angular_velocity, m.linear_velocity])
+
+
 def decode_base_state(data: bytes) -> BaseState:
-    """The checked base state in ``data`` (all sizes are fixed by the message)."""
+    """The checked base state in ``data`` (all sizes are fixed by the message); a good message
+    takes the fast path, as in :func:`decode_proprioception`."""
+    if (fast := _fast_base_state(data)) is not None:
+        return BaseState(fast[0], fast[1][:4], fast[1][4:7], fast[1][7:10], fast[1][10:])
     name = "base_state_t"
     lcm = _unpack(base_state_t, data)
     quaternion, position, angular_velocity, linear_velocity = _all_finite(name, {

@@ -10,10 +10,10 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.common.eigen_geometry import Quaternion
 from pydrake.common.value import AbstractValue, Value
-from pydrake.systems.framework import LeafSystem, ValueProducer
+from pydrake.systems.framework import InputPort, LeafSystem, ValueProducer
 
 from romoco_drake.estimation.ground_truth import plant_state
-from romoco_drake.interfaces.lcm_codec import decode_base_state, decode_proprioception
+from romoco_drake.interfaces.lcm_codec import base_state_vector, proprioception_vector
 from romoco_drake.interfaces.link import Inbox, LinkConfig, counters_port, link_stage
 from romoco_drake.interfaces.predictor import ContactPredictor, DivergedPrediction, PredictedState
 from romoco_drake.modes import LinkCounters, LinkStage
@@ -90,7 +90,7 @@ class BlindPredictor:
 
     def __init__(self, system: LeafSystem, robot: RobotModel, config: LinkConfig, proprioception: Inbox,
                  base_state: Inbox):
-        self.robot, self.config = robot, config
+        self.system, self.robot, self.config = system, robot, config
         self.proprioception, self.base_state = proprioception, base_state
         self.predictor = ContactPredictor(robot)
         self._blind = system.DeclareAbstractState(Value[object](None))
@@ -99,6 +99,10 @@ class BlindPredictor:
     def current(self, context) -> BlindPrediction | None:
         """The current prediction (None until the update before proprioception goes stale)."""
         return context.get_abstract_state(int(self._blind)).get_value()
+
+    def ticket(self):
+        """The dependency ticket of :meth:`current`."""
+        return self.system.abstract_state_ticket(self._blind)
 
     def base(self, blind: BlindPrediction) -> np.ndarray:
         """[quaternion; position; ω_W; v_W] of the prediction."""
@@ -140,9 +144,9 @@ class BlindPredictor:
         base_wxyz = x[r.base_q_start:r.base_q_start + 4].copy()
         return BlindPrediction(self.predictor.start(x, contact), imu.copy(), base_wxyz)
 
-    def advance(self, context, state, command: np.ndarray, stage: LinkStage) -> None:
-        """Keeps this update (``command``: the motor command being sent) for a catch-up, or starts,
-        steps or ends the prediction (the receiver's docstring)."""
+    def advance(self, context, state, command_port: InputPort, stage: LinkStage) -> None:
+        """Keeps this update (``command_port``: the motor command being sent, read only then) for a
+        catch-up, or starts, steps or ends the prediction (the receiver's docstring)."""
         blind, missed = self.current(context), context.get_abstract_state(int(self._missed)).get_value()
         abstract = state.get_mutable_abstract_state
         _, arrival, received = state.get_discrete_state().get_vector(int(self.proprioception.meta)).value()
@@ -155,11 +159,10 @@ class BlindPredictor:
         if stage == LinkStage.DAMPING and blind is not None:
             return
         base = state.get_discrete_state().get_vector(int(self.base_state.values)).value().copy()
-        update = MissedUpdate(command.copy(),
+        update = MissedUpdate(command_port.Eval(context).copy(),
                               base if self.base_state.age(context, state) < np.inf else None,
                               self.base_state.fresh(context, state, self.config.timeout_s))
-        # The outputs read the stream's age at any time before the next update: the prediction is
-        # there from the last update before it goes stale (half an update early against round-off).
+        # The prediction is there one update before the outputs turn stale (MeasurementReceiver.stale).
         h = 1.0 / self.config.receive_rate_hz
         if self.proprioception.fresh(context, state, self.config.timeout_s - 1.5 * h):
             abstract(int(self._missed)).set_value((*missed, update))
@@ -198,7 +201,7 @@ class MeasurementReceiver(LeafSystem):
     |-----------------|-----|----------|------------------------------------------------------|
     | proprioception  | in  | abstract | raw bytes of ROMOCO_PROPRIOCEPTION                    |
     | base_state      | in  | abstract | raw bytes of ROMOCO_BASE_STATE                        |
-    | command         | in  | 5·nu     | the motor command being sent (drives the prediction)  |
+    | command         | in  | 5·nu     | the motor command last sent (drives the prediction)   |
     | loop_stage      | in  | 1        | the stage the loop's missed deadlines ask for          |
     | joint_state, imu, …, base_velocity | out | as the station | newest good values, or predicted |
     | link            | out | 1        | the :class:`~romoco_drake.modes.LinkStage` (below)     |
@@ -215,10 +218,15 @@ class MeasurementReceiver(LeafSystem):
     starts and catches up on them. The outputs carry the prediction (joints, contacts, the IMU
     turned, its gyro and accelerometer from the predicted base motion) through ride-through and
     STAND; in DAMPING it stops where it was. A new message ends it. A stale base stream with
-    fresh proprioception is predicted at constant velocity (:func:`predict_base_state`). A last
-    message that is no robot state (diverged, :class:`~.predictor.DivergedPrediction`) is held,
-    not predicted from. The command input has no feedthrough: the outputs are the state of the
-    last update.
+    fresh proprioception is predicted at constant velocity (:func:`predict_base_state`, to the
+    last update). A last message that is no robot state (diverged,
+    :class:`~.predictor.DivergedPrediction`) is held, not predicted from.
+
+    The outputs depend on the last update's state and the newest messages, never on time, so
+    Drake's cache serves them between updates: the update decides whether a stream is stale for
+    the outputs until the next one (:meth:`stale`), while a fresh stream's newest message passes
+    straight through before an update takes it. The command input has no feedthrough and is
+    read only while messages are missing.
 
     ``loop_stage`` (the :class:`~romoco_drake.interfaces.deadline.DeadlineMonitor`'s) takes the
     link to a later stage than the streams' when the loop misses its deadlines; each stage
@@ -233,35 +241,31 @@ class MeasurementReceiver(LeafSystem):
         nj = len(robot.joint_names)
         start = nominal_measurements(robot)
 
-        def proprioception(data):
-            m = decode_proprioception(data, nj)
-            return m.utime, np.concatenate([m.q, m.v, m.imu, m.foot_contact])
-
-        def base_state(data):
-            m = decode_base_state(data)
-            return m.utime, np.concatenate([m.quaternion, m.position, m.angular_velocity, m.linear_velocity])
-
         first = np.concatenate([start["joint_state"], start["imu"], start["foot_contact"]])
-        self.proprioception = Inbox(self, "proprioception", proprioception, first)
+        self.proprioception = Inbox(self, "proprioception", lambda data: proprioception_vector(data, nj),
+                                    first)
         base_default = np.concatenate([start["base_pose"], start["base_velocity"]])
-        self.base_state = Inbox(self, "base_state", base_state, base_default)
+        self.base_state = Inbox(self, "base_state", base_state_vector, base_default)
         self.command_port = self.DeclareVectorInputPort("command", 5 * robot.nu)
         self.loop_stage_port = self.DeclareVectorInputPort("loop_stage", 1)
         self.predictor = BlindPredictor(self, robot, config, self.proprioception, self.base_state)
         self._link = self.DeclareDiscreteState([float(LinkStage.DAMPING)])
         self._stream = self.DeclareDiscreteState([float(LinkStage.DAMPING)])  # the streams' own stage
         self._stats = self.DeclareDiscreteState(LinkCounters.size())
+        self._inboxes = (self.proprioception, self.base_state)
+        self._ages = self.DeclareDiscreteState([np.inf, np.inf])  # the streams' ages at the last update
         layout = {"joint_state": (self.proprioception, 0, 2 * nj),
                   "imu": (self.proprioception, 2 * nj, 2 * nj + 10),
                   "foot_contact": (self.proprioception, 2 * nj + 10, 2 * nj + 12),
                   "base_pose": (self.base_state, 0, 7), "base_velocity": (self.base_state, 7, 13)}
-        # One evaluation per stream for all of its ports (they change with time, so at every event).
+        # One evaluation per stream for all of its ports, once per update or new message.
         measured = {
             inbox: self.DeclareCacheEntry(
                 f"measured {name}", ValueProducer(
                     allocate=lambda default=default: AbstractValue.Make(default.copy()),
                     calc=lambda context, value, inbox=inbox: value.set_value(self._measured(context, inbox))),
-                {inbox.latest.ticket(), self.time_ticket(), self.all_state_ticket()})
+                {inbox.latest.ticket(), self.discrete_state_ticket(inbox.values),
+                 self.discrete_state_ticket(self._ages), self.predictor.ticket()})
             for name, inbox, default in (("proprioception", self.proprioception, first),
                                          ("base state", self.base_state, base_default))}
         for name, (inbox, a, b) in layout.items():
@@ -274,10 +278,16 @@ class MeasurementReceiver(LeafSystem):
         self.stats_port = counters_port(self, "stats", LinkCounters, self._stats)
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.receive_rate_hz, 0.0, self._update)
 
+    def stale(self, age: float) -> bool:
+        """Whether a stream ``age`` s old at an update is stale for the outputs until the next
+        update: older than ``timeout_s`` half a period later (the half period against round-off;
+        with ``timeout_s`` a multiple of the period, what its age at any time in between says)."""
+        return np.isfinite(age) and age > self.config.timeout_s - 0.5 / self.config.receive_rate_hz
+
     def _measured(self, context, inbox: Inbox) -> np.ndarray:
-        """The inbox's newest values, or predicted while its stream is stale."""
-        age = inbox.age(context)
-        if age <= self.config.timeout_s or not np.isfinite(age):
+        """The inbox's newest values, or predicted while the last update found its stream stale."""
+        age = context.get_discrete_state(self._ages).GetAtIndex(self._inboxes.index(inbox))
+        if not self.stale(age):
             return inbox.latest.Eval(context)
         blind = self.predictor.current(context)
         if blind is None:  # only the base stream is stale, or the last message could not be predicted from
@@ -290,10 +300,9 @@ class MeasurementReceiver(LeafSystem):
         return self.predictor.base(blind)
 
     def _update(self, context, state) -> None:
-        rejected = sum(not inbox.take(context, state) for inbox in (self.proprioception, self.base_state))
-        age = self.proprioception.age(context, state)
-        if self.require_base_state:
-            age = max(age, self.base_state.age(context, state))
+        rejected = sum(not inbox.take(context, state) for inbox in self._inboxes)
+        ages = [inbox.age(context, state) for inbox in self._inboxes]
+        age = max(ages) if self.require_base_state else ages[0]
         stream = link_stage(age, self.config)
         stage = max(stream, LinkStage.decode(self.loop_stage_port.Eval(context)[0]))
         was = LinkStage.decode(context.get_discrete_state(self._link).GetAtIndex(0))
@@ -308,6 +317,7 @@ class MeasurementReceiver(LeafSystem):
             if entered:
                 counts = counts.entered(stage)
             discrete.get_mutable_vector(int(self._stats)).SetFromVector(counts.vector())
-        self.predictor.advance(context, state, self.command_port.Eval(context), stream)
+        self.predictor.advance(context, state, self.command_port, stream)
         discrete.get_mutable_vector(int(self._link)).SetFromVector([float(stage)])
         discrete.get_mutable_vector(int(self._stream)).SetFromVector([float(stream)])
+        discrete.get_mutable_vector(int(self._ages)).SetFromVector(ages)

@@ -236,6 +236,7 @@ _R = np.linspace(0.0, 1.0, 65)[1:-1]
 _G = 30.0 * _R ** 2 * (1.0 - _R) ** 2
 _H = 1.0 - 18.0 * _R ** 2 + 32.0 * _R ** 3 - 15.0 * _R ** 4
 _K = _R - 4.5 * _R ** 2 + 6.0 * _R ** 3 - 2.5 * _R ** 4
+_G_SQUARED = np.sum(_G * _G)
 _PEAK = 1.875
 
 
@@ -258,16 +259,15 @@ class SwingWindow:
         """(lo, hi) of the touchdown point, with a leading dimension of 2 (x, y) over ``t_ss``'s shape."""
         d = np.maximum(np.asarray(t_ss, dtype=float) - self.tau, 0.0)
         vmax = _PEAK * self.speed
-        lo, hi = [], []
-        for s, v, a in zip(self.s, self.v, self.a, strict=True):
-            rest = v * _H + a * d[..., None] * _K  # the swing's velocity with d = 0
-            low = np.max((-vmax - rest) / _G, axis=-1)
-            high = np.min((vmax - rest) / _G, axis=-1)
-            least = -np.sum(rest * _G, axis=-1) / np.sum(_G * _G)
-            crossed = low > high
-            lo.append(s + d * np.where(crossed, least, low))
-            hi.append(s + d * np.where(crossed, least, high))
-        return np.stack(lo), np.stack(hi)
+        axes = (2,) + (1,) * (d.ndim + 1)  # both axes at once, elementwise as one at a time
+        s, v, a = (np.reshape(x, axes) for x in (self.s, self.v, self.a))
+        rest = v * _H + a * d[..., None] * _K  # the swing's velocity with d = 0
+        low = ((-vmax - rest) / _G).max(axis=-1)
+        high = ((vmax - rest) / _G).min(axis=-1)
+        least = -(rest * _G).sum(axis=-1) / _G_SQUARED
+        crossed = low > high
+        s, d = s[..., 0], d[None]
+        return s + d * np.where(crossed, least, low), s + d * np.where(crossed, least, high)
 
     def contains(self, u: Sequence[float], t_ss: float) -> bool:
         lo, hi = self.interval(t_ss)
