@@ -153,8 +153,7 @@ def run_summary(built, context, scenario: Scenario, link: str, end: RunEnd, dura
         "estimator": scenario.estimator.name,
         "engine": scenario.station.engine,
         "duration_s": duration,
-        "wall_s": round(end.wall_s, 3),
-        "realtime_factor": round(duration / end.wall_s, 3) if end.wall_s > 0 else None,
+        "wall_s": round(end.wall_s, 3), "realtime_factor": end.realtime_factor,
     }
     summary |= end.outcome(built.monitor.summary(built.monitor.GetMyContextFromRoot(context)))
     # What a run measured is scored up to a fall: after it the state (diverged, in the worst
@@ -210,7 +209,8 @@ def run_robot_sim(scenario: Scenario, duration: float | None = None, lcm_url: st
                    lambda: plant.GetPositionsAndVelocities(plant.GetMyContextFromRoot(context)), report,
                    logs=RunLogs([station.GetSubsystemByName("truth_log")]))
     monitor = station.GetSubsystemByName("monitor")
-    return ({"robot": robot.name, "lcm_url": lcm.get_lcm_url(), "duration_s": duration}
+    return ({"robot": robot.name, "lcm_url": lcm.get_lcm_url(), "duration_s": duration,
+             "wall_s": round(end.wall_s, 3), "realtime_factor": end.realtime_factor}
             | end.outcome(monitor.summary(monitor.GetMyContextFromRoot(context)))
             | robot_summary(robot_sim, context))
 

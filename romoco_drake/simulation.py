@@ -50,6 +50,11 @@ class RunEnd:
     stopped: float | None = None
     interrupted: bool = False
 
+    @property
+    def realtime_factor(self) -> float | None:
+        """Simulated time over the wall time it took (None: no wall time passed)."""
+        return round(self.time / self.wall_s, 3) if self.wall_s > 0 else None
+
     def outcome(self, monitor_summary: dict) -> dict:
         """The fall monitor's summary with how the loop ended: a divergence is a fall."""
         out = dict(monitor_summary)
