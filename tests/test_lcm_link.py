@@ -144,17 +144,23 @@ def test_stalled_proprioception_degrades_in_stages_counts_each_and_resumes(g1):
                                           "damping_events": 1}
 
 
+def _calls(monkeypatch, cls, name: str) -> list[float]:
+    """Patches ``cls.name`` (a method taking the context first) to record each call's time."""
+    times, original = [], getattr(cls, name)
+
+    def counted(self, context, *args):
+        times.append(context.get_time())
+        return original(self, context, *args)
+
+    monkeypatch.setattr(cls, name, counted)
+    return times
+
+
 def test_measurements_hold_between_updates_and_turn_stale_after_timeout(g1, monkeypatch):
     """The measurement ports depend on the receiver's last update and the newest message, not on
     time: between updates Drake's cache serves them. A stalled stream's ports carry the last
     message up to timeout_s after it was taken and the prediction from then on."""
-    times, measured = [], MeasurementReceiver._measured
-
-    def counted(self, context, inbox):
-        times.append(context.get_time())
-        return measured(self, context, inbox)
-
-    monkeypatch.setattr(MeasurementReceiver, "_measured", counted)
+    times = _calls(monkeypatch, MeasurementReceiver, "_measured")
     side = ControllerSide(g1, np.full(g1.nu, 0.2))
     receiver = side.station.GetSubsystemByName("receiver")
     nj = len(g1.joint_names)
@@ -178,13 +184,7 @@ def test_measurements_hold_between_updates_and_turn_stale_after_timeout(g1, monk
 def test_the_command_is_computed_once_a_tick(g1, monkeypatch):
     """The sender computes its command for the publish; the update after it (counts, the command
     kept for the receiver) and the receiver's updates find it in Drake's cache."""
-    calls, checked = [], CommandSender._checked
-
-    def counted(self, context, latched):
-        calls.append(context.get_time())
-        return checked(self, context, latched)
-
-    monkeypatch.setattr(CommandSender, "_checked", counted)
+    calls = _calls(monkeypatch, CommandSender, "_checked")
     side = ControllerSide(g1, np.full(g1.nu, 0.2))
     q = inside_limits(g1, 0.05)
     side.advance(0.02, lambda utime: proprioception(g1, utime, q))
