@@ -179,6 +179,8 @@ BOUNDS: dict[str, Bound] = {
     "turning.draco.wz_rms": ceiling(0.02, 0.01385),
     "terrain.g1_slope.vx_rms": ceiling(0.055, 0.0368),
     "terrain.cassie_slope.vx_rms": ceiling(0.0125, 0.0086),
+    "terrain.cassie_slope.invariant_ekf.vx_rms": ceiling(0.075, 0.0512),
+    "terrain.cassie_slope.kalman.vx_rms": ceiling(0.026, 0.018),
     "turning.g1.heading_lag": ceiling(0.17, 0.1185),
     "turning.g1.rest_speed": ceiling(0.00075, 0.0005048),
     "turning.g1.vx_rms": ceiling(0.017, 0.01193),
