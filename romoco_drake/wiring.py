@@ -334,14 +334,15 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
                "kinematics": kin, "mode": machine.mode_port, "schedule": machine.schedule_port,
                "stance_frame": rom_state.stance_frame_port}
     for name in planner.loop_inputs:
-        if name != "swing_reference":  # the embedding's, connected below once it exists
+        if name not in EMBEDDING_SIGNALS:  # the embedding's, connected below once it exists
             builder.Connect(signals[name], planner.GetInputPort(name))
     if planner.adapts_timing:
         builder.Connect(planner.planner_output_port, machine.planner_output_port)
     embedding, controller, gate = _add_tracking(builder, scenario, robot, kin, machine, planner, station,
                                                 estop, steps)
-    if "swing_reference" in planner.loop_inputs:
-        builder.Connect(embedding.swing_reference_port, planner.GetInputPort("swing_reference"))
+    for name in EMBEDDING_SIGNALS:
+        if name in planner.loop_inputs:
+            builder.Connect(embedding.GetOutputPort(name), planner.GetInputPort(name))
     momentum_log, horizon_log = _add_loop_logs(builder, scenario, robot, kin, embedding, planner, heading,
                                                rom_state)
     return WalkingLoop(machine, planner, embedding, controller,
@@ -363,6 +364,10 @@ def _add_velocity_trim(builder: DiagramBuilder, scenario: Scenario, robot: Robot
                          (machine.schedule_port, trim.schedule_port)):
         builder.Connect(source, port)
     return trim
+
+
+# The planner inputs the output embedding gives (its swing), on the loop's feedback path.
+EMBEDDING_SIGNALS = ("swing_reference", "swing_surface")
 
 
 def _add_loop_logs(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, kin, embedding, planner,

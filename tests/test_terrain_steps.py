@@ -9,7 +9,13 @@ import pytest
 from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
-from romoco_drake.embedding.terrain import FOOTHOLD_REACH, TerrainSteps, sole_tilt
+from romoco_drake.embedding.terrain import (
+    FOOTHOLD_REACH,
+    SURFACE_COMMIT,
+    TerrainSteps,
+    committed_surface,
+    sole_tilt,
+)
 from romoco_drake.planners.state_machine import GaitStateMachine
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import load_robot
@@ -203,6 +209,32 @@ def test_region_on_a_tread_is_supported_everywhere(g1):
     for x in np.linspace(x_lo, x_hi, 7):
         for y in np.linspace(y_lo, y_hi, 7):
             assert terrain.supports(_world(origin, 0.0, (x, y)), _world_footprint(steps, "right", 0.0)) == 1
+
+
+def test_a_committed_step_keeps_its_tread(g1):
+    """A plan midway between tread 1 and tread 2 (from tread 1): the nearest foothold flips between
+    the two as the plan moves a centimetre; a step committed to one (SURFACE_COMMIT of its single
+    support passed) keeps it, in the embedding's placement and the planner's region alike, while
+    that tread has a foothold in reach."""
+    terrain = _stairs()
+    steps = TerrainSteps(g1, terrain)
+    origin, liftoff = np.array([1.15, 0.1, RISE]), np.array([-0.2, -0.2, 0.0])
+    fp = steps.footprint["right"]
+    # The last foothold on tread 1 and the first on tread 2 (x rel. the stance), and between them
+    # the plan's x at which the nearest tread changes.
+    last_1, first_2 = EDGE + RUN - fp[:, 0].max() - origin[0], EDGE + RUN - fp[:, 0].min() - origin[0]
+    middle = 0.5 * (last_1 + first_2)
+    near = [steps.place(origin, 0.0, (middle + d, -0.2), 0.0, "right", liftoff) for d in (-0.01, 0.01)]
+    assert [g.surface for g in near] == [0, 1]
+    for ground in near:
+        assert committed_surface(ground, 0.29 * 0.3, 0.3) is None
+        kept = committed_surface(ground, 0.31 * 0.3, 0.3)
+        assert kept == ground.surface
+        for d in (-0.01, 0.01):
+            assert steps.place(origin, 0.0, (middle + d, -0.2), 0.0, "right", liftoff, kept).surface == kept
+            (x_lo, x_hi), _ = steps.region(origin, 0.0, (middle + d, -0.2), 0.0, "right", kept)
+            assert x_hi <= last_1 + 1e-9 if kept == 0 else x_lo >= first_2 - 1e-9
+    assert SURFACE_COMMIT == pytest.approx(0.3)
 
 
 def test_region_on_a_stepping_stone_is_supported_everywhere(g1):

@@ -64,6 +64,22 @@ def test_cassie_on_the_slope_estimates_its_height_from_the_terrain_map(estimator
     check(f"terrain.cassie_slope.{estimator}.vx_rms", s["velocity_rms_error"][0])
 
 
+@pytest.mark.slow
+def test_g1_climbs_the_five_steps_onto_the_landing():
+    """g1_stairs up to its 0.5 m landing (16 s; the way down does not pass yet): no fall, no QP
+    failure, the base over the landing at its nominal height above it, every step onto supported
+    ground (none in place). Each step keeps the tread it committed to (SURFACE_COMMIT): without
+    that, a plan between two treads flipped the step time and G1 fell at the fourth riser."""
+    run = walk(load_scenario("g1_stairs"), duration=16.0)
+    s = run.summary
+    assert not s["fell"] and s["qp_failures"] == 0
+    b = run.robot.base_q_start
+    assert 2.6 < run.states[b + 4][-1] < 3.4  # the landing spans x = 2.4 … 3.4 m
+    assert run.states[b + 6][-1] - 0.5 == pytest.approx(run.robot.nominal.base_height, abs=0.03)
+    footholds = s["footholds"]
+    assert footholds["in_place"] == 0 and footholds["planned"] + footholds["adjusted"] >= s["steps"] - 2
+
+
 def test_terrain_overlay_is_a_ramp_pair():
     """The overlay's course rises to its plateau and comes back to the floor."""
     terrain = Terrain(load_scenario("g1_walk", ["terrain"]).terrain)

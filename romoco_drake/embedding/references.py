@@ -36,7 +36,7 @@ import numpy as np
 from romoco_drake.embedding.bezier import BezierCurve, SwingTrajectory, plan_swing, quintic_bezier
 from romoco_drake.embedding.contact import ContactModel, contact_frame, contact_frame_state
 from romoco_drake.embedding.outputs import InAirOutputs, Output, StandingOutputs, WalkingOutputs
-from romoco_drake.embedding.terrain import StepGround, TerrainSteps
+from romoco_drake.embedding.terrain import StepGround, TerrainSteps, committed_surface
 from romoco_drake.modes import Domain, Mode
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
@@ -203,14 +203,17 @@ class EmbeddingCore:
     def update_swing(self, swing: SwingState, tau: float, plan: PlannerOutput) -> SwingState:
         """Replans the swing toward the plan's latest target, from the trajectory's own state at
         ``tau`` seconds into the step, and re-times it to the plan's step time when that was
-        adapted; both stay as they are once the robot's ``swing_target_freeze`` of the swing has passed."""
+        adapted; both stay as they are once the robot's ``swing_target_freeze`` of the swing has passed.
+        On terrain the foothold keeps its surface once the step is committed to it
+        (:func:`~romoco_drake.embedding.terrain.committed_surface`)."""
         if swing.trajectory is None or tau >= self.swing_freeze * swing.trajectory.duration:
             return swing
         duration = plan.t_ss if plan.timing_adapted and plan.t_ss > tau else swing.trajectory.duration
         if swing.ground is None:
             return replace(swing, trajectory=swing.trajectory.replan(tau, self._target(plan), duration))
         g, side = swing.ground, other_side(swing.stance_side)
-        ground = self.terrain.place(g.origin, g.heading, plan.swing_target, plan.swing_yaw, side, g.liftoff)
+        ground = self.terrain.place(g.origin, g.heading, plan.swing_target, plan.swing_yaw, side, g.liftoff,
+                                    committed_surface(g, tau, duration))
         apex = self.swing_height + self.terrain.apex_raise(ground, side)
         trajectory = swing.trajectory.replan(tau, ground.target, duration, apex)
         return replace(swing, trajectory=trajectory, ground=ground)

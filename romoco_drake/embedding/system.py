@@ -10,6 +10,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.embedding.references import EmbeddingCore, StandState, SwingState, TaskReferences
+from romoco_drake.embedding.terrain import committed_surface
 from romoco_drake.modes import Mode
 from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_value
 from romoco_drake.robots.model import RobotModel
@@ -48,6 +49,7 @@ class OutputEmbedding(LeafSystem):
     | ``task_references`` | out | abstract | :class:`~romoco_drake.embedding.references.TaskReferences` |
     | ``tracking_error`` | out | 6 | norm of the active errors y − y_d per ``ERROR_GROUPS`` (m or rad) |
     | ``swing_reference`` | out | 6 | swing (x, y), velocity, acceleration now; stance yaw frame; NaN: none |
+    | ``swing_surface`` | out | 1 | on terrain, the surface a committed step lands on (-1: floor; NaN: none) |
 
     Abstract state: the current step's :class:`SwingState` when walking, the
     :class:`StandState` latched on entering standing, else nothing. Discrete state: the
@@ -79,6 +81,10 @@ class OutputEmbedding(LeafSystem):
         # the gait phase only, so no loop through the planner's output.
         self.swing_reference_port = self.DeclareVectorOutputPort(
             "swing_reference", 6, self._calc_swing_reference,
+            prerequisites_of_calc={self.abstract_state_ticket(self._swing),
+                                   self.gait_phase_port.ticket(), self.time_ticket()})
+        self.swing_surface_port = self.DeclareVectorOutputPort(
+            "swing_surface", 1, self._calc_swing_surface,
             prerequisites_of_calc={self.abstract_state_ticket(self._swing),
                                    self.gait_phase_port.ticket(), self.time_ticket()})
         self.DeclareInitializationUnrestrictedUpdateEvent(self._update_swing)
@@ -146,15 +152,27 @@ class OutputEmbedding(LeafSystem):
                 new = self.core.start_step(self._kinematics(context), side, step_start, plan, tau)
         state.get_mutable_abstract_state(int(self._swing)).set_value(new)
 
-    def _calc_swing_reference(self, context, out) -> None:
+    def _current_swing(self, context) -> tuple[SwingState | None, float]:
+        """The latched swing if it is this step's (else None), and the time into the step."""
         swing = self.swing_state(context)
         sign, tau = self.gait_phase_port.Eval(context)
         if (swing is None or swing.trajectory is None or swing.stance_side != side_from_sign(sign)
                 or abs(swing.step_start - (context.get_time() - tau)) > 1e-6):
+            return None, float(tau)
+        return swing, float(tau)
+
+    def _calc_swing_reference(self, context, out) -> None:
+        swing, tau = self._current_swing(context)
+        if swing is None:
             out.SetFromVector(np.full(6, np.nan))
             return
-        p, v, a = swing.trajectory.evaluate(float(tau))
+        p, v, a = swing.trajectory.evaluate(tau)
         out.SetFromVector(np.array([p[0], p[1], v[0], v[1], a[0], a[1]]))
+
+    def _calc_swing_surface(self, context, out) -> None:
+        swing, tau = self._current_swing(context)
+        surface = None if swing is None else committed_surface(swing.ground, tau, swing.trajectory.duration)
+        out.SetAtIndex(0, np.nan if surface is None else float(surface))
 
     def _calc_references(self, context, value) -> None:
         if not self._kinematics(context).finite:  # the controllers damp; these are never tracked

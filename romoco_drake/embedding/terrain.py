@@ -48,6 +48,12 @@ SLOPE_MAX = 1.0
 STEP_DIP = 0.5
 # Each sample of the path's clearance reaches this far past the sole's centre (m) beyond half its length.
 PATH_MARGIN = 0.02
+# After this fraction of its single support a step keeps the surface its foothold is on, in the
+# embedding's swing and the planner's step adaptation alike (TerrainSteps.place, .region): a plan
+# crossing the midpoint between two treads otherwise moved the foothold from one to the other and
+# back, tick by tick, the step time with it (0.2 <-> 0.4 s), and G1 on g1_stairs whipped its swing
+# foot up and back at the fourth riser.
+SURFACE_COMMIT = 0.3
 # How far (m) the ground under a line or point foot may leave its surface's plane where two
 # surfaces meet without a step (a ramp's foot or top; Terrain.supports). Such a foot has no sole
 # to rock on the kink: Cassie on cassie_slope, whose 0.3 m/s steps were otherwise moved off every
@@ -64,7 +70,8 @@ class StepGround:
     yaw frame); the swing sole's (roll, pitch) on the ground it lifted off and on the ground it
     lands on; the virtual ``slope`` k; and ``status``: ``planned`` (the plan's foothold is
     supported), ``adjusted`` (moved to supported ground) or ``in_place`` (none in reach); ``dip``
-    (m): how far the CoM runs below the virtual slope in this step (module docstring)."""
+    (m): how far the CoM runs below the virtual slope in this step (module docstring);
+    ``surface``: the terrain surface the foothold is on (-1: the floor; None: in place)."""
 
     origin: np.ndarray
     heading: float
@@ -75,6 +82,15 @@ class StepGround:
     slope: float
     status: str
     dip: float = 0.0
+    surface: int | None = None
+
+
+def committed_surface(ground: StepGround | None, tau: float, t_ss: float) -> int | None:
+    """The surface a step ``tau`` s into its single support of ``t_ss`` s keeps its foothold on:
+    ``ground``'s once ``SURFACE_COMMIT`` of it has passed, else None (the nearest is taken)."""
+    if ground is None or ground.surface is None or not tau >= SURFACE_COMMIT * t_ss:
+        return None
+    return ground.surface
 
 
 def sole_tilt(normal: np.ndarray, yaw: float) -> tuple[float, float]:
@@ -108,10 +124,11 @@ class TerrainSteps:
         self.seam = SEAM if line_foot else 0.0
 
     def place(self, origin: np.ndarray, heading: float, target, swing_yaw: float, swing_side: str,
-              liftoff: np.ndarray) -> StepGround:
+              liftoff: np.ndarray, surface: int | None = None) -> StepGround:
         """The step's ground from stance ``origin``/``heading``, the plan's ``target`` (x, y rel.
         stance, stance yaw frame), the sole's planned ``swing_yaw`` (rel. stance) and its
-        ``liftoff`` position (3,, rel. stance), where an unreachable step lands."""
+        ``liftoff`` position (3,, rel. stance), where an unreachable step lands; with ``surface``
+        (a committed step's, ``SURFACE_COMMIT``), on that surface while it has a foothold in reach."""
         c, s = math.cos(heading), math.sin(heading)
         R = np.array([[c, -s], [s, c]])
         yaw = heading + swing_yaw
@@ -119,7 +136,7 @@ class TerrainSteps:
         footprint = self.footprint[swing_side] @ np.array([[cy, sy], [-sy, cy]])
         planned = origin[:2] + R @ np.asarray(target, dtype=float)[:2]
         reachable = self._reachable(origin, R, swing_side)
-        foothold = self.terrain.foothold(planned, footprint, FOOTHOLD_REACH, reachable, self.seam)
+        foothold = self._foothold(planned, footprint, reachable, surface, self.seam)
         lift_W = origin[:2] + R @ liftoff[:2]
         lift_tilt = sole_tilt(self.terrain.normal(lift_W), heading)
         if foothold is None:
@@ -133,7 +150,16 @@ class TerrainSteps:
             slope = float(np.clip(rel[2] / rel[0], -SLOPE_MAX, SLOPE_MAX))
         status = "planned" if foothold.shift < 1e-9 else "adjusted"
         return StepGround(origin, heading, rel, liftoff, lift_tilt, sole_tilt(foothold.normal, yaw), slope,
-                          status, STEP_DIP * abs(float(rel[2])))
+                          status, STEP_DIP * abs(float(rel[2])), foothold.surface)
+
+    def _foothold(self, planned: np.ndarray, footprint: np.ndarray, reachable, surface: int | None,
+                  seam: float):
+        """The nearest supported foothold in reach, on ``surface`` if it has one there."""
+        if surface is not None:
+            foothold = self.terrain.foothold(planned, footprint, FOOTHOLD_REACH, reachable, seam, surface)
+            if foothold is not None:
+                return foothold
+        return self.terrain.foothold(planned, footprint, FOOTHOLD_REACH, reachable, seam)
 
     def ground_under(self, origin: np.ndarray, heading: float, side: str) -> float:
         """The ground's z under the ``side`` sole centred at ``origin`` with ``heading``: the
@@ -178,20 +204,21 @@ class TerrainSteps:
         highest -= self.ground_under(ground.origin, ground.heading, stance)
         return max(0.0, highest - max(float(start[2]), float(ground.target[2])))
 
-    def region(self, origin: np.ndarray, heading: float, target, swing_yaw: float, swing_side: str
-               ) -> tuple[tuple[float, float], tuple[float, float]] | None:
+    def region(self, origin: np.ndarray, heading: float, target, swing_yaw: float, swing_side: str,
+               surface: int | None = None) -> tuple[tuple[float, float], tuple[float, float]] | None:
         """The box ((x_lo, x_hi), (y_lo, y_hi)) in the stance yaw frame, relative to ``origin``,
         of supported footholds around the one nearest the plan's ``target`` (None: none in reach):
         what the planner's step adaptation keeps the step in, choosing its timing to match (a step
         over a riser is longer, and later). Only the edges within 30° of the stance frame's axes
-        bound it; the embedding's own check (:meth:`place`) covers the rest."""
+        bound it; the embedding's own check (:meth:`place`) covers the rest. ``surface``: as for
+        :meth:`place`."""
         c, s = math.cos(heading), math.sin(heading)
         R = np.array([[c, -s], [s, c]])
         yaw = heading + swing_yaw
         cy, sy = math.cos(yaw), math.sin(yaw)
         footprint = self.footprint[swing_side] @ np.array([[cy, sy], [-sy, cy]])
-        foothold = self.terrain.foothold(origin[:2] + R @ np.asarray(target, dtype=float)[:2], footprint,
-                                         FOOTHOLD_REACH, self._reachable(origin, R, swing_side))
+        foothold = self._foothold(origin[:2] + R @ np.asarray(target, dtype=float)[:2], footprint,
+                                  self._reachable(origin, R, swing_side), surface, 0.0)
         if foothold is None:
             return None
         q = R.T @ (foothold.position[:2] - origin[:2])

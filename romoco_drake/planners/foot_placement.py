@@ -36,7 +36,8 @@ class FootPlacementPlanner(LeafSystem):
     foot at rest (a step's first tick, before its swing is latched). With ``terrain``
     (:class:`~romoco_drake.embedding.terrain.TerrainSteps`) and an adapter, the step is also kept
     where the ground supports the sole, its timing adapted to match (a step over a riser lands
-    later, so the CoM arrives over it).
+    later, so the CoM arrives over it), on the surface the embedding's swing has committed to
+    (``swing_surface``, :data:`~romoco_drake.embedding.terrain.SURFACE_COMMIT`).
 
     | port | kind | size | meaning |
     |---|---|---|---|
@@ -47,6 +48,7 @@ class FootPlacementPlanner(LeafSystem):
     | ``swing_reference`` | in | 6 | optional: the embedding's swing (x, y, velocity, acceleration); same |
     | ``schedule`` | in | abstract | optional: the state machine's :class:`GaitSchedule` (its T_SS) |
     | ``stance_frame`` | in | 4 | with ``terrain``: the stance contact's origin (world, m) and heading |
+    | ``swing_surface`` | in | 1 | with ``terrain``: the embedding's committed surface (NaN: none) |
     | ``planner_output`` | out | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` |
     """
 
@@ -69,6 +71,7 @@ class FootPlacementPlanner(LeafSystem):
         placeholder = GaitSchedule(Mode.STANDING, "left", 0.0, WalkCommand().step_time, 0, 0, 0, "")
         self.schedule_port = self.DeclareAbstractInputPort("schedule", AbstractValue.Make(placeholder))
         self.stance_frame_port = self.DeclareVectorInputPort("stance_frame", 4)
+        self.swing_surface_port = self.DeclareVectorInputPort("swing_surface", 1)
         # The last plan and the input values it was made from. A tick's state machine update
         # invalidates the output (Drake cannot tell that a rewritten schedule is unchanged), so
         # the same inputs arrive twice a tick; the plan is a pure function of their values.
@@ -83,7 +86,7 @@ class FootPlacementPlanner(LeafSystem):
         do: the output embedding still moves each foothold onto supported ground."""
         if self.adapter is not None:
             self.terrain = terrain
-            self.loop_inputs += ("stance_frame",)
+            self.loop_inputs += ("stance_frame", "swing_surface")
 
     def summary(self, context) -> dict:
         """The run summary's planner keys: the law's name."""
@@ -101,6 +104,8 @@ class FootPlacementPlanner(LeafSystem):
         swing = step_t_ss = frame = None
         if self.terrain is not None:
             frame = self.stance_frame_port.Eval(context).tolist()
+            if self.swing_surface_port.HasValue(context):
+                frame.append(float(self.swing_surface_port.Eval(context)[0]))
         if self.adapter is not None:
             if self.swing_foot_port.HasValue(context):
                 swing = self.swing_foot_port.Eval(context).tolist() + [0.0] * 4
@@ -121,8 +126,9 @@ class FootPlacementPlanner(LeafSystem):
         plan = self.law.plan(rom_state, side_from_sign(sign), t_in_step, WalkCommand(*command))
         if self.adapter is not None:
             region = None
-            if frame is not None and plan.valid and all(map(math.isfinite, frame)):
+            if frame is not None and plan.valid and all(map(math.isfinite, frame[:4])):
+                surface = int(frame[4]) if len(frame) > 4 and math.isfinite(frame[4]) else None
                 region = self.terrain.region(np.array(frame[:3]), frame[3], plan.swing_target, plan.swing_yaw,
-                                             other_side(plan.stance_side))
+                                             other_side(plan.stance_side), surface)
             plan = self.adapter.adapt(plan, rom_state, t_in_step, swing, step_t_ss, region)
         return plan
