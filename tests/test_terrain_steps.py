@@ -10,6 +10,7 @@ from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 from romoco_drake.embedding.terrain import (
+    DROP_MARGIN,
     FOOTHOLD_REACH,
     SURFACE_COMMIT,
     TerrainSteps,
@@ -235,6 +236,27 @@ def test_a_committed_step_keeps_its_tread(g1):
             (x_lo, x_hi), _ = steps.region(origin, 0.0, (middle + d, -0.2), 0.0, "right", kept)
             assert x_hi <= last_1 + 1e-9 if kept == 0 else x_lo >= first_2 - 1e-9
     assert SURFACE_COMMIT == pytest.approx(0.3)
+
+
+def test_a_step_down_lands_clear_of_the_edge_it_steps_over(g1):
+    """Walking down the flight (heading π) from tread 2 with the plan over the riser: the foothold
+    is DROP_MARGIN further along the step than the nearest supported one, still on tread 1; the
+    same plan walking up (onto tread 2 from tread 1) takes the nearest one."""
+    terrain = _stairs()
+    steps = TerrainSteps(g1, terrain)
+    footprint = _world_footprint(steps, "right", math.pi)
+    down_origin, liftoff = np.array([1.45, 0.1, 2 * RISE]), np.array([0.0, -0.2, 0.0])
+    plan = (0.18, -0.2)  # world x = 1.27: the heel over the riser between tread 1 and tread 2
+    ground = steps.place(down_origin, math.pi, plan, 0.0, "right", liftoff)
+    nearest = terrain.foothold(_world(down_origin, math.pi, plan), footprint)
+    assert nearest.surface == 0 and ground.surface == 0 and ground.target[2] == pytest.approx(-RISE)
+    landed = _world(down_origin, math.pi, ground.target)
+    assert nearest.position[0] - landed[0] == pytest.approx(DROP_MARGIN, abs=0.01)
+    assert terrain.supports(landed, footprint) == 0
+    up_origin = np.array([1.15, 0.1, RISE])
+    up = steps.place(up_origin, 0.0, (0.16, -0.2), 0.0, "right", liftoff)
+    up_nearest = terrain.foothold(_world(up_origin, 0.0, (0.16, -0.2)), _world_footprint(steps, "right", 0.0))
+    assert _world(up_origin, 0.0, up.target) == pytest.approx(up_nearest.position[:2])
 
 
 def test_region_on_a_stepping_stone_is_supported_everywhere(g1):

@@ -32,7 +32,7 @@ import numpy as np
 
 from romoco_drake.embedding.outputs import sole_frame
 from romoco_drake.robots.model import RobotModel
-from romoco_drake.rom.terrain import Terrain
+from romoco_drake.rom.terrain import Foothold, Terrain
 from romoco_drake.rom.types import other_side
 
 # How far (m) a planned foothold may move to reach supported ground: beyond it, the step is taken
@@ -54,6 +54,11 @@ PATH_MARGIN = 0.02
 # back, tick by tick, the step time with it (0.2 <-> 0.4 s), and G1 on g1_stairs whipped its swing
 # foot up and back at the fourth riser.
 SURFACE_COMMIT = 0.3
+# A step down of more than DROP_STEP (m) lands DROP_MARGIN (m) further along the step than the
+# nearest supported foothold, where that is still supported and in reach: the nearest is
+# ``edge_margin`` past the edge it steps over, and a swing lagging its path by a few centimetres
+# put G1's heel on the landing's edge with its toe still above the first tread (g1_stairs).
+DROP_STEP, DROP_MARGIN = 0.02, 0.05
 # How far (m) the ground under a line or point foot may leave its surface's plane where two
 # surfaces meet without a step (a ramp's foot or top; Terrain.supports). Such a foot has no sole
 # to rock on the kink: Cassie on cassie_slope, whose 0.3 m/s steps were otherwise moved off every
@@ -138,6 +143,8 @@ class TerrainSteps:
         reachable = self._reachable(origin, R, swing_side)
         foothold = self._foothold(planned, footprint, reachable, surface, self.seam)
         lift_W = origin[:2] + R @ liftoff[:2]
+        if foothold is not None:
+            foothold = self._clear_of_drop(foothold, lift_W, planned, footprint, reachable)
         lift_tilt = sole_tilt(self.terrain.normal(lift_W), heading)
         if foothold is None:
             rel = np.asarray(liftoff, dtype=float).copy()
@@ -151,6 +158,31 @@ class TerrainSteps:
         status = "planned" if foothold.shift < 1e-9 else "adjusted"
         return StepGround(origin, heading, rel, liftoff, lift_tilt, sole_tilt(foothold.normal, yaw), slope,
                           status, STEP_DIP * abs(float(rel[2])), foothold.surface)
+
+    def _clear_of_drop(self, foothold: Foothold, lift_W: np.ndarray, planned: np.ndarray,
+                       footprint: np.ndarray, reachable) -> Foothold:
+        """``foothold`` moved ``DROP_MARGIN`` on along the step from ``lift_W`` when the step goes
+        down an edge of more than ``DROP_STEP`` and the moved sole is still supported and in reach."""
+        step = foothold.position[:2] - lift_W
+        length = float(np.linalg.norm(step))
+        if self.terrain.height(lift_W) - foothold.position[2] <= DROP_STEP or not self._drops(lift_W, step):
+            return foothold
+        moved = foothold.position[:2] + DROP_MARGIN * step / length
+        A, b = reachable
+        if self.terrain.supports(moved, footprint, self.seam) != foothold.surface or np.any(A @ moved > b):
+            return foothold
+        height = self.terrain.height(moved)
+        return Foothold(np.array([moved[0], moved[1], height]), foothold.normal, foothold.surface,
+                        float(np.linalg.norm(moved - planned)))
+
+    def _drops(self, start: np.ndarray, step: np.ndarray) -> bool:
+        """Whether the ground from ``start`` along ``step`` falls by more than ``DROP_STEP`` at an
+        edge (between samples 1 cm apart), not along a slope or across a seam."""
+        n = int(math.ceil(float(np.linalg.norm(step)) / 0.01))
+        if n == 0:
+            return False
+        heights = [self.terrain.height(start + step * k / n) for k in range(n + 1)]
+        return bool(np.max(-np.diff(heights)) > DROP_STEP)
 
     def _foothold(self, planned: np.ndarray, footprint: np.ndarray, reachable, surface: int | None,
                   seam: float):
