@@ -32,7 +32,7 @@ def test_robot_sim_and_hardware_controller_talk_over_udp():
     ours, theirs = _summary(controller), _summary(robot)
     # The robot started (it waits for a first motor command) and took every command it got.
     assert theirs["robot"] == "g1" and theirs["duration_s"] == 2.5
-    assert theirs["realtime_factor"] == pytest.approx(2.5 / theirs["wall_s"], rel=1e-2)  # its own pace
+    assert theirs["wall_s"] > 0.0 and 0.0 < theirs["realtime_factor"] <= 1.1  # paced at real time at most
     assert theirs["rejected_messages"] == 0 and theirs["estop"] == 0
     # The controller took the robot's messages and computed from them.
     assert ours["link"] == "hardware" and ours["rejected_messages"] == 0
