@@ -101,11 +101,12 @@ class FootPlacementPlanner(LeafSystem):
         phase = self.gait_phase_port.Eval(context).tolist()
         command = self.command_port.Eval(context).tolist()
         rom_state = self.rom_state_port.Eval(context).tolist()
-        swing = step_t_ss = frame = None
+        swing = step_t_ss = frame = surface = None
         if self.terrain is not None:
             frame = self.stance_frame_port.Eval(context).tolist()
             if self.swing_surface_port.HasValue(context):
-                frame.append(float(self.swing_surface_port.Eval(context)[0]))
+                committed = float(self.swing_surface_port.Eval(context)[0])
+                surface = int(committed) if math.isfinite(committed) else None
         if self.adapter is not None:
             if self.swing_foot_port.HasValue(context):
                 swing = self.swing_foot_port.Eval(context).tolist() + [0.0] * 4
@@ -115,19 +116,19 @@ class FootPlacementPlanner(LeafSystem):
                     swing = reference
             if self.schedule_port.HasValue(context):
                 step_t_ss = self.schedule_port.Eval(context).t_ss
-        key = (phase, command, rom_state, swing, step_t_ss, frame)
+        key = (phase, command, rom_state, swing, step_t_ss, frame, surface)
         if key != self._last[0]:
-            self._last = (key, self._plan(phase, command, rom_state, swing, step_t_ss, frame))
+            self._last = (key, self._plan(phase, command, rom_state, swing, step_t_ss, frame, surface))
         value.set_value(self._last[1])
 
     def _plan(self, phase: list[float], command: list[float], rom_state: list[float],
-              swing: list[float] | None, step_t_ss: float | None, frame: list[float] | None) -> PlannerOutput:
+              swing: list[float] | None, step_t_ss: float | None, frame: list[float] | None,
+              surface: int | None) -> PlannerOutput:
         sign, t_in_step = phase
         plan = self.law.plan(rom_state, side_from_sign(sign), t_in_step, WalkCommand(*command))
         if self.adapter is not None:
             region = None
-            if frame is not None and plan.valid and all(map(math.isfinite, frame[:4])):
-                surface = int(frame[4]) if len(frame) > 4 and math.isfinite(frame[4]) else None
+            if frame is not None and plan.valid and all(map(math.isfinite, frame)):
                 region = self.terrain.region(np.array(frame[:3]), frame[3], plan.swing_target, plan.swing_yaw,
                                              other_side(plan.stance_side), surface)
             plan = self.adapter.adapt(plan, rom_state, t_in_step, swing, step_t_ss, region)
