@@ -259,6 +259,21 @@ def test_a_step_down_lands_clear_of_the_edge_it_steps_over(g1):
     assert _world(up_origin, 0.0, up.target) == pytest.approx(up_nearest.position[:2])
 
 
+@pytest.mark.parametrize("plan_x, shift", [(0.33, 0.0), (0.27, DROP_MARGIN / 2)])
+def test_a_step_down_moves_only_as_far_as_its_clearance_needs(g1, plan_x, shift):
+    """Down the flight from tread 2: a plan whose sole is already DROP_MARGIN past the riser lands
+    where planned; one 3.5 cm past it moves on by the quarters of DROP_MARGIN that make 5 cm."""
+    terrain = _stairs()
+    steps = TerrainSteps(g1, terrain)
+    origin, liftoff = np.array([1.45, 0.1, 2 * RISE]), np.array([0.0, -0.2, 0.0])
+    ground = steps.place(origin, math.pi, (plan_x, -0.2), 0.0, "right", liftoff)
+    planned, landed = _world(origin, math.pi, (plan_x, -0.2)), _world(origin, math.pi, ground.target)
+    heel = landed[0] + steps.footprint["right"][:, 0].max()  # heading π: the heel is the +x end
+    assert ground.surface == 0 and planned[0] - landed[0] == pytest.approx(shift, abs=1e-9)
+    assert EDGE + RUN - heel >= DROP_MARGIN - 1e-9
+    assert terrain.supports(planned, _world_footprint(steps, "right", math.pi)) == 0
+
+
 def test_region_on_a_stepping_stone_is_supported_everywhere(g1):
     stones = [TerrainPiece(box=BoxPiece(center=[x, 0.0], size=[0.3, 0.4], top=0.1)) for x in (0.0, 0.45)]
     terrain = _terrain(*stones, floor_steppable=False)

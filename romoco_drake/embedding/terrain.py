@@ -54,11 +54,11 @@ PATH_MARGIN = 0.02
 # back, tick by tick, the step time with it (0.2 <-> 0.4 s), and G1 on g1_stairs whipped its swing
 # foot up and back at the fourth riser.
 SURFACE_COMMIT = 0.3
-# A step down of more than DROP_STEP (m) lands DROP_MARGIN (m) further along the step than the
-# nearest supported foothold, where that is still supported and in reach: the nearest is
+# A step down of more than DROP_STEP (m) lands at least DROP_MARGIN (m) past the edge, moved along the
+# step in DROP_QUARTERS increments, where that is still supported and in reach: the nearest foothold is
 # ``edge_margin`` past the edge it steps over, and a swing lagging its path by a few centimetres
 # put G1's heel on the landing's edge with its toe still above the first tread (g1_stairs).
-DROP_STEP, DROP_MARGIN = 0.02, 0.05
+DROP_STEP, DROP_MARGIN, DROP_QUARTERS = 0.02, 0.05, 4
 # How far (m) the ground under a line or point foot may leave its surface's plane where two
 # surfaces meet without a step (a ramp's foot or top; Terrain.supports). Such a foot has no sole
 # to rock on the kink: Cassie on cassie_slope, whose 0.3 m/s steps were otherwise moved off every
@@ -161,19 +161,30 @@ class TerrainSteps:
 
     def _clear_of_drop(self, foothold: Foothold, lift_W: np.ndarray, planned: np.ndarray,
                        footprint: np.ndarray, reachable) -> Foothold:
-        """``foothold`` moved ``DROP_MARGIN`` on along the step from ``lift_W`` when the step goes
-        down an edge of more than ``DROP_STEP`` and the moved sole is still supported and in reach."""
+        """``foothold`` moved on along the step from ``lift_W`` until the sole is ``DROP_MARGIN``
+        clear of the edge it steps down (by more than ``DROP_STEP``), in quarters of the margin,
+        as far as the moved sole is still supported and in reach. A foothold already that far past the
+        edge stays: moved unconditionally, G1's step back onto its first tread down (the law's
+        answer to a CoM behind the new stance foot) landed 5 cm ahead instead (g1_stairs)."""
         step = foothold.position[:2] - lift_W
         length = float(np.linalg.norm(step))
         if self.terrain.height(lift_W) - foothold.position[2] <= DROP_STEP or not self._drops(lift_W, step):
             return foothold
-        moved = foothold.position[:2] + DROP_MARGIN * step / length
+        u = step / length
         A, b = reachable
-        if self.terrain.supports(moved, footprint, self.seam) != foothold.surface or np.any(A @ moved > b):
+        shift = 0.0
+        for k in range(DROP_QUARTERS + 1):
+            moved = foothold.position[:2] + DROP_MARGIN * k / DROP_QUARTERS * u
+            if self.terrain.supports(moved, footprint, self.seam) != foothold.surface or np.any(A @ moved > b):
+                break
+            shift = DROP_MARGIN * k / DROP_QUARTERS
+            if self.terrain.supports(moved - DROP_MARGIN * u, footprint, self.seam) == foothold.surface:
+                break
+        if shift == 0.0:
             return foothold
-        height = self.terrain.height(moved)
-        return Foothold(np.array([moved[0], moved[1], height]), foothold.normal, foothold.surface,
-                        float(np.linalg.norm(moved - planned)))
+        moved = foothold.position[:2] + shift * u
+        return Foothold(np.array([moved[0], moved[1], self.terrain.height(moved)]), foothold.normal,
+                        foothold.surface, float(np.linalg.norm(moved - planned)))
 
     def _drops(self, start: np.ndarray, step: np.ndarray) -> bool:
         """Whether the ground from ``start`` along ``step`` falls by more than ``DROP_STEP`` at an
