@@ -65,12 +65,14 @@ def test_cassie_on_the_slope_estimates_its_height_from_the_terrain_map(estimator
 
 
 @pytest.mark.slow
-def test_g1_climbs_the_five_steps_onto_the_landing():
-    """g1_stairs up to its 0.5 m landing (16 s; the way down does not pass yet): no fall, no QP
-    failure, the base over the landing at its nominal height above it, every step onto supported
-    ground (none in place). Each step keeps the tread it committed to (SURFACE_COMMIT): without
-    that, a plan between two treads flipped the step time and G1 fell at the fourth riser."""
-    run = walk(load_scenario("g1_stairs"), duration=16.0)
+@pytest.mark.parametrize("controller", ["tscqp", "velik"])
+def test_g1_climbs_the_five_steps_onto_the_landing(controller):
+    """g1_stairs up to its 0.5 m landing (16 s; the way down does not pass yet) under the TSC-QP and
+    the velocity IK: no fall, no QP failure, the base over the landing at its nominal height above
+    it, every step onto supported ground (none in place). Each step keeps the tread it committed
+    to (SURFACE_COMMIT): without that, a plan between two treads flipped the step time and G1 fell
+    at the fourth riser."""
+    run = walk(with_overrides(load_scenario("g1_stairs"), controller=controller), duration=16.0)
     s = run.summary
     assert not s["fell"] and s["qp_failures"] == 0
     b = run.robot.base_q_start
