@@ -175,7 +175,8 @@ class TerrainSteps:
         shift = 0.0
         for k in range(DROP_QUARTERS + 1):
             moved = foothold.position[:2] + DROP_MARGIN * k / DROP_QUARTERS * u
-            if self.terrain.supports(moved, footprint, self.seam) != foothold.surface or np.any(A @ moved > b):
+            supported = self.terrain.supports(moved, footprint, self.seam) == foothold.surface
+            if not supported or np.any(A @ moved > b):
                 break
             shift = DROP_MARGIN * k / DROP_QUARTERS
             if self.terrain.supports(moved - DROP_MARGIN * u, footprint, self.seam) == foothold.surface:
