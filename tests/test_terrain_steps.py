@@ -274,6 +274,18 @@ def test_a_step_down_moves_only_as_far_as_its_clearance_needs(g1, plan_x, shift)
     assert terrain.supports(planned, _world_footprint(steps, "right", math.pi)) == 0
 
 
+def test_no_foothold_further_down_or_up_than_the_step_height(g1):
+    """On a 0.5 m block (beyond G1's 0.3 z0 = 0.195 m step height) a plan past its edge keeps to
+    the block, never the floor below; a 0.15 m block's edge gives the floor next to it."""
+    for top, floor_taken in ((0.5, False), (0.15, True)):
+        terrain = _terrain(TerrainPiece(box=BoxPiece(center=[0.0, 0.0], size=[1.0, 1.0], top=top)))
+        steps = TerrainSteps(g1, terrain)
+        origin = np.array([0.3, 0.1, top])
+        ground = steps.place(origin, 0.0, (0.3, -0.2), 0.0, "right", np.array([0.0, -0.2, 0.0]))
+        assert (ground.surface == -1) == floor_taken
+        assert ground.status == "adjusted" and abs(ground.target[2]) <= (top if floor_taken else 0.0) + 1e-9
+        assert steps.region(origin, 0.0, (0.3, -0.2), 0.0, "right") is not None
+
 def test_region_on_a_stepping_stone_is_supported_everywhere(g1):
     stones = [TerrainPiece(box=BoxPiece(center=[x, 0.0], size=[0.3, 0.4], top=0.1)) for x in (0.0, 0.45)]
     terrain = _terrain(*stones, floor_steppable=False)

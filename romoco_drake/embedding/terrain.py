@@ -59,6 +59,9 @@ SURFACE_COMMIT = 0.3
 # ``edge_margin`` past the edge it steps over, and a swing lagging its path by a few centimetres
 # put G1's heel on the landing's edge with its toe still above the first tread (g1_stairs).
 DROP_STEP, DROP_MARGIN, DROP_QUARTERS = 0.02, 0.05, 4
+# The highest step up or down (m), as a fraction of the robot's CoM height z0 (G1: 0.2 m; the
+# stairs' 0.1 m risers well inside; a leg at z0 that reaches 0.3 z0 down still bends its knee).
+STEP_HEIGHT = 0.3
 # How far (m) the ground under a line or point foot may leave its surface's plane where two
 # surfaces meet without a step (a ramp's foot or top; Terrain.supports). Such a foot has no sole
 # to rock on the kink: Cassie on cassie_slope, whose 0.3 m/s steps were otherwise moved off every
@@ -117,6 +120,7 @@ class TerrainSteps:
     def __init__(self, robot: RobotModel, terrain: Terrain, edge_margin: float = 0.0):
         self.terrain = terrain
         self.reach = robot.config.walking.step_reach
+        self.step_height = STEP_HEIGHT * robot.config.walking.z0
         self.footprint, self.half_length, self.sole = {}, {}, {}
         for side in ("left", "right"):
             R_FS, p_FS = sole_frame(robot, side)
@@ -141,7 +145,8 @@ class TerrainSteps:
         footprint = self.footprint[swing_side] @ np.array([[cy, sy], [-sy, cy]])
         planned = origin[:2] + R @ np.asarray(target, dtype=float)[:2]
         reachable = self._reachable(origin, R, swing_side)
-        foothold = self._foothold(planned, footprint, reachable, surface, self.seam)
+        band = self._height_band(origin, heading, swing_side)
+        foothold = self._foothold(planned, footprint, reachable, surface, self.seam, band)
         lift_W = origin[:2] + R @ liftoff[:2]
         if foothold is not None:
             foothold = self._clear_of_drop(foothold, lift_W, planned, footprint, reachable)
@@ -197,13 +202,23 @@ class TerrainSteps:
         return bool(np.max(-np.diff(heights)) > DROP_STEP)
 
     def _foothold(self, planned: np.ndarray, footprint: np.ndarray, reachable, surface: int | None,
-                  seam: float):
-        """The nearest supported foothold in reach, on ``surface`` if it has one there."""
+                  seam: float, band: tuple[float, float]):
+        """The nearest supported foothold in reach, its height in ``band``, on ``surface`` if it
+        has one there."""
         if surface is not None:
-            foothold = self.terrain.foothold(planned, footprint, FOOTHOLD_REACH, reachable, seam, surface)
+            foothold = self.terrain.foothold(planned, footprint, FOOTHOLD_REACH, reachable, seam, surface,
+                                             band)
             if foothold is not None:
                 return foothold
-        return self.terrain.foothold(planned, footprint, FOOTHOLD_REACH, reachable, seam)
+        return self.terrain.foothold(planned, footprint, FOOTHOLD_REACH, reachable, seam, band=band)
+
+    def _height_band(self, origin: np.ndarray, heading: float, swing_side: str) -> tuple[float, float]:
+        """The heights (m) a step's foothold may have: within ``STEP_HEIGHT`` z0 of the stance
+        ground. Found with a descent planner under trial: G1, 0.37 m off its line on g1_stairs'
+        way down, took the floor 0.4 m below the stairs' side as the nearest foothold and
+        crouched toward it."""
+        stance_z = self.ground_under(origin, heading, other_side(swing_side))
+        return stance_z - self.step_height, stance_z + self.step_height
 
     def ground_under(self, origin: np.ndarray, heading: float, side: str) -> float:
         """The ground's z under the ``side`` sole centred at ``origin`` with ``heading``: the
@@ -262,7 +277,8 @@ class TerrainSteps:
         cy, sy = math.cos(yaw), math.sin(yaw)
         footprint = self.footprint[swing_side] @ np.array([[cy, sy], [-sy, cy]])
         foothold = self._foothold(origin[:2] + R @ np.asarray(target, dtype=float)[:2], footprint,
-                                  self._reachable(origin, R, swing_side), surface, 0.0)
+                                  self._reachable(origin, R, swing_side), surface, 0.0,
+                                  self._height_band(origin, heading, swing_side))
         if foothold is None:
             return None
         q = R.T @ (foothold.position[:2] - origin[:2])

@@ -316,11 +316,12 @@ class Terrain:
 
     def foothold(self, xy, footprint: np.ndarray, max_shift: float = math.inf,
                  within: tuple[np.ndarray, np.ndarray] | None = None, seam: float = 0.0,
-                 surface: int | None = None) -> Foothold | None:
+                 surface: int | None = None, band: tuple[float, float] = (-math.inf, math.inf)
+                 ) -> Foothold | None:
         """The supported foothold nearest the planned ``xy`` (horizontal distance), at most
         ``max_shift`` (m) away and inside ``within`` (A p ≤ b, unit rows: the leg's reach), or None
         when there is none (see :meth:`supports`, which ``seam`` is passed to); with ``surface``,
-        on that surface only (-1: the floor).
+        on that surface only (-1: the floor); with its height in ``band`` (lo, hi; m).
 
         The candidates are ``xy`` itself, its projection into each patch's outline shrunk by the
         footprint (and cut by ``within``), and, on the floor, the nearest points just clear of each
@@ -345,6 +346,8 @@ class Terrain:
             index = self.supports(c, footprint, seam)
             if index is not None and surface in (None, index):
                 z = self.floor if index < 0 else self.surfaces[index].height(c)
+                if not band[0] <= z <= band[1]:
+                    continue
                 n = np.array([0.0, 0.0, 1.0]) if index < 0 else self.surfaces[index].normal.copy()
                 best = Foothold(np.array([c[0], c[1], z]), n, index, shift)
         return best
