@@ -149,6 +149,55 @@ def test_touchdown_and_liftoff_keep_inactive_slots_uncorrelated():
     np.testing.assert_array_equal(back.active, s.active)
 
 
+def test_a_turning_foot_gives_no_velocity_measurement():
+    """A stance foot whose contact point moves 10 cm/s (a spin on the ground): while its turning is
+    above the velocity noise the wrong velocity is not fused, the position still is; when the
+    foot does not turn, the same measurement pulls the velocity to it."""
+    ekf = InvariantEkf()
+    R, p = Rotation.from_rotvec([0.02, -0.01, 0.3]).as_matrix(), np.array([1.0, 0.5, 0.75])
+    s = ekf.initial(p, R)
+    s.v = np.array([0.3, 0.0, 0.0])
+    s = ekf.touchdown(s, 0, FEET_B[0])
+    v_rel_B = np.tile(-R.T @ (s.v + [0.0, 0.1, 0.0]), (2, 1))
+    h_B = FEET_B + [0.0, 0.004, 0.0]
+    noise = ekf.params.kinematic_velocity_noise
+    turning = ekf.correct(s, h_B, v_rel_B, turning=np.array([2.0 * noise, 0.0]))
+    still = ekf.correct(s, h_B, v_rel_B, turning=np.array([0.5 * noise, 0.0]))
+    np.testing.assert_allclose(turning.v, s.v, atol=1e-12)
+    assert not np.allclose(turning.d[0], s.d[0])
+    assert still.v[1] > 0.05
+
+
+def test_turn_speeds_are_the_sole_points_speeds_about_the_contact_point():
+    """The foot's turning from the Jacobians against finite differences of the sole points' positions
+    relative to their mean, the base turning too; zero for feet that stand flat and a still base."""
+    from romoco_drake.estimation.invariant_estimator import InvariantEkfEstimator
+    from romoco_drake.robots.kinematics import RobotKinematics
+    from romoco_drake.robots.model import load_robot
+
+    robot = load_robot("g1")
+    system = InvariantEkfEstimator(robot, period=DT)
+    nj = len(robot.joint_names)
+    q = robot.nominal.q[robot.joint_q_index]
+    qd = np.random.default_rng(0).uniform(-1.0, 1.0, nj)
+    omega_B = np.array([0.3, -0.2, 0.5])
+
+    def relative_points(q_j):
+        kin = RobotKinematics(robot, system.leg_state(np.concatenate([q_j, np.zeros(nj)])))
+        points = [robot.sole_points_in_world(kin.context, side).T for side in ("left", "right")]
+        return [x - x.mean(axis=0) for x in points]
+
+    h = 1e-6
+    ahead, behind = relative_points(q + h * qd), relative_points(q - h * qd)
+    expected = [np.max(np.linalg.norm((a - b) / (2 * h) + np.cross(omega_B, 0.5 * (a + b)), axis=1))
+                for a, b in zip(ahead, behind, strict=True)]
+    kin = RobotKinematics(robot, system.leg_state(np.concatenate([q, qd])))
+    np.testing.assert_allclose(system.turn_speeds(kin, omega_B), expected, rtol=1e-6)
+    assert expected[0] > 0.05
+    still = RobotKinematics(robot, system.leg_state(np.concatenate([q, np.zeros(nj)])))
+    np.testing.assert_allclose(system.turn_speeds(still, np.zeros(3)), 0.0, atol=1e-12)
+
+
 def test_params_reject_non_positive_noise():
     with pytest.raises(ValueError, match="gyro_noise"):
         InvariantEkfParams(gyro_noise=-1.0)

@@ -63,3 +63,20 @@ class ContactEstimator(LeafSystem):
                                                         world, world)
             v[i] = J @ kin.v
         return p, v
+
+    def turn_speeds(self, kin: RobotKinematics, omega_B: np.ndarray) -> np.ndarray:
+        """Each foot's turning (m/s, left then right): the largest speed of a sole point relative to
+        the foot's contact point (their mean), at ``kin``'s state (the base at the origin, so world
+        axes are base axes) with the base turning at ``omega_B`` (rad/s). The base's velocity cancels
+        from it; it is max |ω_F × (p_k − c)|, ω_F the foot's angular velocity, so zero for a foot
+        standing flat, for a line foot turning about its own line and for a point foot."""
+        plant, world = self._robot.plant, self._robot.plant.world_frame()
+        speeds = np.zeros(2)
+        for i, side in enumerate(SIDES):
+            frame, points = self._robot.foot_frames[side], self._robot.feet[side].points
+            p = plant.CalcPointsPositions(kin.context, frame, points, world).T
+            J = plant.CalcJacobianTranslationalVelocity(kin.context, JacobianWrtVariable.kV, frame, points,
+                                                        world, world)
+            v = (J @ kin.v).reshape(-1, 3) + np.cross(omega_B, p)
+            speeds[i] = np.max(np.linalg.norm(v - v.mean(axis=0), axis=1))
+        return speeds

@@ -22,9 +22,9 @@ R̂ h_B − (d̂ − p̂) equals ξ_p − ξ_d to first order, a Jacobian H inde
 of the invariant filter). An addition to Hartley's filter (as the Cheetah-3 style ``kalman`` uses
 it): the stance foot's velocity gives the base velocity in the base frame,
 v_B = −(ω_B × h_B + J_B q̇_j), a measurement of the same invariant form, Y = X⁻¹ b, with innovation
-R̂ v_B − v̂ = −ξ_v (``kinematic_velocity_noise`` = inf turns it off). With K the Kalman gain of
-these innovations z = H ξ, ξ̂ = K z and the correction is X̂⁺ = exp(−ξ̂) X̂, θ̂⁺ = θ̂ − ξ̂_θ
-(X = exp(−ξ) X̂ by the definition of η).
+R̂ v_B − v̂ = −ξ_v (``kinematic_velocity_noise`` = inf turns it off; a foot turning on the ground
+gives none, :meth:`InvariantEkf.correct`). With K the Kalman gain of these innovations z = H ξ,
+ξ̂ = K z and the correction is X̂⁺ = exp(−ξ̂) X̂, θ̂⁺ = θ̂ − ξ̂_θ (X = exp(−ξ) X̂ by the definition of η).
 
 A foot is added to the state on touchdown at d̂ = p̂ + R̂ h_B, whose error is ξ_p plus the
 kinematics noise, and dropped on lift-off. The foot slots are fixed in size (for Drake state);
@@ -247,12 +247,19 @@ class InvariantEkf:
         return s
 
     def correct(self, s: InekfState, h_B: np.ndarray, v_rel_B: np.ndarray,
-                confidence: np.ndarray | None = None) -> InekfState:
+                confidence: np.ndarray | None = None, turning: np.ndarray | None = None) -> InekfState:
         """Fuses each active foot: ``h_B`` (2×3) its contact point relative to the base and
         ``v_rel_B`` (2×3) that point's velocity relative to the base, both in base axes
-        (ω_B × h_B + J_B q̇_j). A velocity innovation past the slip gate is dropped."""
+        (ω_B × h_B + J_B q̇_j). A velocity innovation past the slip gate is dropped, and so is the
+        velocity of a foot whose ``turning`` (per foot, m/s: its sole points' largest speed relative
+        to the contact point) is above ``kinematic_velocity_noise``: a foot spinning or rolling on the
+        ground has no still contact point to that accuracy. (G1 on g1_slope's ramp down: the stance
+        foot spun at 0.6–1.2 rad/s in late single support, its contact point moved 5–12 cm/s, each
+        sample inside the slip gate; the estimate followed it within 20 ms, overstating the lateral
+        velocity by 3–7 cm/s as the next foothold was chosen; the steps widened and G1 fell.)"""
         p = self.params
         confidence = np.ones(FEET) if confidence is None else np.asarray(confidence)
+        turning = np.zeros(FEET) if turning is None else np.asarray(turning)
         H, z, var = [], [], []
         for i in range(FEET):
             if not s.active[i]:
@@ -262,7 +269,7 @@ class InvariantEkf:
             H.append(h)
             z.append(s.R @ h_B[i] - (s.d[i] - s.p))
             var.append(np.full(3, p.kinematic_position_noise**2))
-            if not math.isfinite(p.kinematic_velocity_noise):
+            if not math.isfinite(p.kinematic_velocity_noise) or turning[i] > p.kinematic_velocity_noise:
                 continue
             var_v = p.kinematic_velocity_noise**2 * (1.0 + (1.0 - min(confidence[i], 1.0)) * SUSPECT_GAIN)
             innovation = s.R @ -np.asarray(v_rel_B[i]) - s.v

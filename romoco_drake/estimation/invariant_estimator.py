@@ -38,7 +38,9 @@ class InvariantEkfEstimator(ContactEstimator):
 
     Rate: one update every ``period`` s (discrete state: the packed filter, each foot's time in
     contact, a started flag and the rejection count). The foot's contact point is the mean of its
-    sole points. A foot joins the filter on its switch's rising edge and leaves on the falling one.
+    sole points; while the foot turns (:meth:`~.contact_estimator.ContactEstimator.turn_speeds`) that
+    point moves, and its velocity is not fused. A foot joins the filter on its switch's rising edge
+    and leaves on the falling one.
 
     Link gaps: while the station's ``link_stage`` is past FRESH its measurements are the link's
     prediction: the filter propagates at constant velocity (the predicted accelerometer is not
@@ -135,9 +137,10 @@ class InvariantEkfEstimator(ContactEstimator):
                 s = ekf.touchdown(s, i, h_B[i])
             elif not contact[i] and s.active[i]:
                 s = ekf.liftoff(s, i)
-        v_rel_B = np.cross(gyro - s.gyro_bias, h_B) + v_joint_B
+        omega_B = gyro - s.gyro_bias
+        v_rel_B = np.cross(omega_B, h_B) + v_joint_B
         confidence = ekf.contact_confidence(contact_time)
-        s = ekf.correct(s, h_B, v_rel_B, confidence)
+        s = ekf.correct(s, h_B, v_rel_B, confidence, self.turn_speeds(self._legs.Eval(context), omega_B))
         settled = np.flatnonzero(s.active & (confidence >= 1.0))
         if self._terrain is not None and len(settled):
             gap = np.mean([self._terrain.height(s.d[i][:2]) - s.d[i][2] for i in settled])
