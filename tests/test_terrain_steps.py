@@ -286,6 +286,7 @@ def test_no_foothold_further_down_or_up_than_the_step_height(g1):
         assert ground.status == "adjusted" and abs(ground.target[2]) <= (top if floor_taken else 0.0) + 1e-9
         assert steps.region(origin, 0.0, (0.3, -0.2), 0.0, "right") is not None
 
+
 def test_region_on_a_stepping_stone_is_supported_everywhere(g1):
     stones = [TerrainPiece(box=BoxPiece(center=[x, 0.0], size=[0.3, 0.4], top=0.1)) for x in (0.0, 0.45)]
     terrain = _terrain(*stones, floor_steppable=False)
