@@ -145,7 +145,8 @@ class TerrainSteps:
         footprint = self.footprint[swing_side] @ np.array([[cy, sy], [-sy, cy]])
         planned = origin[:2] + R @ np.asarray(target, dtype=float)[:2]
         reachable = self._reachable(origin, R, swing_side)
-        band = self._height_band(origin, heading, swing_side)
+        stance_z = self.ground_under(origin, heading, other_side(swing_side))
+        band = self._height_band(stance_z)
         foothold = self._foothold(planned, footprint, reachable, surface, self.seam, band)
         lift_W = origin[:2] + R @ liftoff[:2]
         if foothold is not None:
@@ -155,8 +156,7 @@ class TerrainSteps:
             rel = np.asarray(liftoff, dtype=float).copy()
             return StepGround(origin, heading, rel, liftoff, lift_tilt, lift_tilt, 0.0, "in_place")
         xy = R.T @ (foothold.position[:2] - origin[:2])
-        stance = other_side(swing_side)
-        rel = np.array([xy[0], xy[1], foothold.position[2] - self.ground_under(origin, heading, stance)])
+        rel = np.array([xy[0], xy[1], foothold.position[2] - stance_z])
         slope = 0.0
         if abs(rel[0]) >= SLOPE_MIN_STEP:
             slope = float(np.clip(rel[2] / rel[0], -SLOPE_MAX, SLOPE_MAX))
@@ -212,12 +212,11 @@ class TerrainSteps:
                 return foothold
         return self.terrain.foothold(planned, footprint, FOOTHOLD_REACH, reachable, seam, band=band)
 
-    def _height_band(self, origin: np.ndarray, heading: float, swing_side: str) -> tuple[float, float]:
+    def _height_band(self, stance_z: float) -> tuple[float, float]:
         """The heights (m) a step's foothold may have: within ``STEP_HEIGHT`` z0 of the stance
-        ground. Found with a descent planner under trial: G1, 0.37 m off its line on g1_stairs'
-        way down, took the floor 0.4 m below the stairs' side as the nearest foothold and
-        crouched toward it."""
-        stance_z = self.ground_under(origin, heading, other_side(swing_side))
+        ground ``stance_z``. Found with a descent planner under trial: G1, 0.37 m off its line on
+        g1_stairs' way down, took the floor 0.4 m below the stairs' side as the nearest foothold
+        and crouched toward it."""
         return stance_z - self.step_height, stance_z + self.step_height
 
     def ground_under(self, origin: np.ndarray, heading: float, side: str) -> float:
@@ -276,9 +275,9 @@ class TerrainSteps:
         yaw = heading + swing_yaw
         cy, sy = math.cos(yaw), math.sin(yaw)
         footprint = self.footprint[swing_side] @ np.array([[cy, sy], [-sy, cy]])
+        band = self._height_band(self.ground_under(origin, heading, other_side(swing_side)))
         foothold = self._foothold(origin[:2] + R @ np.asarray(target, dtype=float)[:2], footprint,
-                                  self._reachable(origin, R, swing_side), surface, 0.0,
-                                  self._height_band(origin, heading, swing_side))
+                                  self._reachable(origin, R, swing_side), surface, 0.0, band)
         if foothold is None:
             return None
         q = R.T @ (foothold.position[:2] - origin[:2])
