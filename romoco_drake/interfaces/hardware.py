@@ -204,7 +204,8 @@ def make_hardware_station(robot: RobotModel, lcm: DrakeLcmInterface, period: flo
     config = config or LinkConfig()
     builder = DiagramBuilder()
     builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
-    receiver = builder.AddNamedSystem("receiver", MeasurementReceiver(robot, config, require_base_state))
+    receiver = builder.AddNamedSystem("receiver", MeasurementReceiver(robot, config, period,
+                                                                          require_base_state))
     sender = builder.AddNamedSystem("sender", CommandSender(robot, period, motor_pd, config, offset))
     subscribe(builder, lcm, PROPRIOCEPTION_CHANNEL, receiver.GetInputPort("proprioception"))
     subscribe(builder, lcm, BASE_STATE_CHANNEL, receiver.GetInputPort("base_state"))

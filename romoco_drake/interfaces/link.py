@@ -30,7 +30,9 @@ class LinkConfig:
     """Timing and limits of the LCM link (both the controller's and the robot's side)."""
 
     timeout_s: float = 0.02  # no new message for this long: the stream is stale
-    receive_rate_hz: float = 1000.0  # how often received messages are checked and taken over
+    # Robot side: how often received commands are checked and taken over (the controller side
+    # takes its measurements once a controller tick).
+    receive_rate_hz: float = 1000.0
     max_joint_speed: float = 30.0  # rad/s, |v_d| limit of a sent command
     max_gain_factor: float = 3.0  # K_p, K_d at most this times the robot YAML's gains
     # Controller side, measurements lost: predicted, walking on, up to this age of the last message ...

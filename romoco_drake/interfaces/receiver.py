@@ -88,9 +88,9 @@ class BlindPredictor:
     owner's unrestricted update.
     """
 
-    def __init__(self, system: LeafSystem, robot: RobotModel, config: LinkConfig, proprioception: Inbox,
-                 base_state: Inbox):
-        self.system, self.robot, self.config = system, robot, config
+    def __init__(self, system: LeafSystem, robot: RobotModel, config: LinkConfig, period: float,
+                 proprioception: Inbox, base_state: Inbox):
+        self.system, self.robot, self.config, self.period = system, robot, config, period
         self.proprioception, self.base_state = proprioception, base_state
         self.predictor = ContactPredictor(robot)
         self._blind = system.DeclareAbstractState(Value[object](None))
@@ -163,7 +163,7 @@ class BlindPredictor:
                               base if self.base_state.age(context, state) < np.inf else None,
                               self.base_state.fresh(context, state, self.config.timeout_s))
         # The prediction is there one update before the outputs turn stale (MeasurementReceiver.stale).
-        h = 1.0 / self.config.receive_rate_hz
+        h = self.period
         if self.proprioception.fresh(context, state, self.config.timeout_s - 1.5 * h):
             abstract(int(self._missed)).set_value((*missed, update))
             return
@@ -207,11 +207,14 @@ class MeasurementReceiver(LeafSystem):
     | link            | out | 1        | the :class:`~romoco_drake.modes.LinkStage` (below)     |
     | stats           | out | abstract | ``LinkCounters``: rejected, stale events, stages entered |
 
-    When proprioception goes stale (``timeout_s``) the receiver predicts the robot
+    It updates once per controller tick, at the tick's start: nothing reads the measurements
+    in between, and a second update per tick (it ran at the link's 1 kHz before) cost G1's
+    hardware tick about a tenth of its time. When proprioception goes stale (``timeout_s``) the
+    receiver predicts the robot
     (:class:`BlindPredictor`) from the last message on: its
     joints, the base from the motion capture of the first update after it (without any: the
     IMU's orientation and gyro, the velocity that keeps the feet in contact still) and its
-    contact flags, propagated one update period per update under the ``command`` input, with the
+    contact flags, propagated one tick per update under the ``command`` input, with the
     base reset to the motion capture's while that stream is fresh. Nothing is predicted while
     the stream is fresh: the updates without a new message keep their command and motion capture
     (:class:`MissedUpdate`), and in the last update before the stream goes stale the prediction
@@ -233,11 +236,14 @@ class MeasurementReceiver(LeafSystem):
     entered counts either way, ``stale_events`` only the streams going stale.
     """
 
-    def __init__(self, robot: RobotModel, config: LinkConfig, require_base_state: bool = False):
-        """``require_base_state``: the estimator reads the base ports (ground truth from motion
+    def __init__(self, robot: RobotModel, config: LinkConfig, period: float,
+                 require_base_state: bool = False):
+        """``period``: the controller's tick, the update period (class docstring).
+        ``require_base_state``: the estimator reads the base ports (ground truth from motion
         capture), so a stale or missing ROMOCO_BASE_STATE stream breaks the link too."""
         super().__init__()
         self.robot, self.config, self.require_base_state = robot, config, require_base_state
+        self.period = period
         nj = len(robot.joint_names)
         start = nominal_measurements(robot)
 
@@ -248,7 +254,7 @@ class MeasurementReceiver(LeafSystem):
         self.base_state = Inbox(self, "base_state", base_state_vector, base_default)
         self.command_port = self.DeclareVectorInputPort("command", 5 * robot.nu)
         self.loop_stage_port = self.DeclareVectorInputPort("loop_stage", 1)
-        self.predictor = BlindPredictor(self, robot, config, self.proprioception, self.base_state)
+        self.predictor = BlindPredictor(self, robot, config, period, self.proprioception, self.base_state)
         self._link = self.DeclareDiscreteState([float(LinkStage.DAMPING)])
         self._stream = self.DeclareDiscreteState([float(LinkStage.DAMPING)])  # the streams' own stage
         self._stats = self.DeclareDiscreteState(LinkCounters.size())
@@ -276,13 +282,13 @@ class MeasurementReceiver(LeafSystem):
                 prerequisites_of_calc={entry.ticket()})
         self.link_port = self.DeclareStateOutputPort("link", self._link)
         self.stats_port = counters_port(self, "stats", LinkCounters, self._stats)
-        self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.receive_rate_hz, 0.0, self._update)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
 
     def stale(self, age: float) -> bool:
         """Whether a stream ``age`` s old at an update is stale for the outputs until the next
         update: older than ``timeout_s`` half a period later (the half period against round-off;
         with ``timeout_s`` a multiple of the period, what its age at any time in between says)."""
-        return np.isfinite(age) and age > self.config.timeout_s - 0.5 / self.config.receive_rate_hz
+        return np.isfinite(age) and age > self.config.timeout_s - 0.5 * self.period
 
     def _measured(self, context, inbox: Inbox) -> np.ndarray:
         """The inbox's newest values, or predicted while the last update found its stream stale."""
