@@ -53,8 +53,10 @@ class MomentumRecord:
     l_contact_predicted: np.ndarray = _nan(2)  # the planner's (L̂_cx, L̂_cy) at the step's end, in {c}
 
     def pack(self) -> np.ndarray:
-        """The MOMENTUM_LOG_SIZE vector, fields in declaration order."""
-        return np.concatenate([np.atleast_1d(np.asarray(v, dtype=float)) for v in astuple(self)])
+        """The MOMENTUM_LOG_SIZE vector, fields in declaration order (read directly: ``astuple``
+        deep-copies every array, which was 60 µs of XO's 2 ms tick)."""
+        return np.concatenate([np.atleast_1d(np.asarray(getattr(self, name), dtype=float))
+                               for name in _FIELD_NAMES])
 
     @classmethod
     def unpack(cls, data: np.ndarray) -> MomentumRecord:
@@ -66,6 +68,7 @@ class MomentumRecord:
         return cls(**values)
 
 
+_FIELD_NAMES = tuple(f.name for f in fields(MomentumRecord))
 _SIZES = tuple(np.atleast_1d(np.asarray(v)).size for v in astuple(MomentumRecord()))
 MOMENTUM_LOG_SIZE = sum(_SIZES)
 
