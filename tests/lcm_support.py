@@ -11,7 +11,7 @@ from romoco_drake.interfaces.link import LinkConfig
 from romoco_drake.interfaces.receiver import nominal_measurements
 from romoco_drake.modes import LinkStage
 
-TICK = 0.001  # s: the robot's publish period and the link's default receive period
+TICK = 0.001  # s: the robot's publish period and the test controller's default tick
 NO_FAULTS = {"stale_events": 0, "ride_through_events": 0, "stand_events": 0, "damping_events": 0,
              "rejected_messages": 0, "clamped_commands": 0, "estop": 0}
 ROBOT_NO_FAULTS = {"stale_events": 0, "hold_events": 0, "damping_events": 0, "rejected_messages": 0,
@@ -69,10 +69,11 @@ class ControllerSide:
     """A hardware station on memq:// with a fixed actuation and the test playing the robot."""
 
     def __init__(self, robot, actuation: np.ndarray, config: LinkConfig | None = None,
-                 require_base_state: bool = False):
+                 require_base_state: bool = False, period: float = TICK):
+        """``period``: the controller's tick (the robot publishes every ``TICK`` regardless)."""
         self.robot, self.lcm = robot, DrakeLcm("memq://")
         self.config = config or LinkConfig()
-        self.station = make_hardware_station(robot, self.lcm, TICK, config=self.config,
+        self.station = make_hardware_station(robot, self.lcm, period, config=self.config,
                                              require_base_state=require_base_state)
         self.simulator = Simulator(self.station)
         self.context = self.simulator.get_mutable_context()

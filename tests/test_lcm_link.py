@@ -193,6 +193,22 @@ def test_the_command_is_computed_once_a_tick(g1, monkeypatch):
     assert len(calls) - start == round(0.02 / TICK)
 
 
+def test_the_receiver_takes_the_newest_message_once_a_controller_tick(g1, monkeypatch):
+    """Under a 500 Hz controller the receiver updates every 2 ms, not at the robot's 1 kHz
+    (nothing reads the measurements in between), and each update takes the newest message."""
+    times = _calls(monkeypatch, MeasurementReceiver, "_update")
+    side = ControllerSide(g1, np.full(g1.nu, 0.2), period=2 * TICK)
+    receiver = side.station.GetSubsystemByName("receiver")
+    q = inside_limits(g1, 0.05)
+    side.advance(0.02, lambda utime: proprioception(g1, utime, q))
+    np.testing.assert_allclose(np.diff(times[-5:]), 2 * TICK)
+    utime, arrival, _ = receiver.GetMyContextFromRoot(side.context).get_discrete_state(
+        receiver.proprioception.meta).value()
+    # Taken at the last update, sent no more than one robot period before it (the newest).
+    assert arrival == pytest.approx(times[-1]) and times[-1] - TICK - 1e-9 <= utime * 1e-6 <= times[-1]
+    assert {k: side.summary()[k] for k in NO_FAULTS} == NO_FAULTS
+
+
 def test_without_ride_through_a_loss_goes_to_stand_then_damping(g1):
     """ride_through_s = 0 and stand_s = 0: a stale stream is damping at once (the old link), and
     the skipped stages are not counted."""
