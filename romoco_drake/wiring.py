@@ -62,6 +62,10 @@ from romoco_drake.scenario import CommandPoint, Scenario, validate_scenario
 STATE_LOG_PERIOD = 0.01  # s, the state samples summaries and plots are computed from
 LINKS = ("sim", "hardware", "via_lcm")
 STATUS_PERIOD = 0.01  # s, controller status messages on LCM links (for logs)
+# The slower periodic work on the hardware controller runs in ticks of its own, not in the ticks
+# that sample the logs: G1's hardware tick was 0.2 ms longer every 10 ms with the fall monitor
+# (the estimate's body poses), the status message and the logs in one tick (romoco bench realtime).
+MONITOR_TICKS, STATUS_TICKS = 2, 3
 
 
 def uses_motor_command(scenario: Scenario) -> bool:
@@ -169,13 +173,15 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
             _add_page_display(builder, meshcat, robot, walking, estimator.state_output, kinematics,
                               Terrain(scenario.terrain))
         if link != "sim":
-            _add_status(builder, robot, lcm, estimator.state_output, command, walking, kinematics, deadline)
+            _add_status(builder, robot, lcm, estimator.state_output, command, walking, kinematics, deadline,
+                        period)
     estimate_log = LogVectorOutput(estimator.state_output, builder, STATE_LOG_PERIOD)
     if plant_station is not None:
         monitor = plant_station.GetSubsystemByName("monitor")
         state_log = plant_station.GetSubsystemByName("truth_log")
     else:
-        monitor = builder.AddNamedSystem("monitor", FallMonitor(robot, terrain=Terrain(scenario.terrain)))
+        monitor = builder.AddNamedSystem("monitor", FallMonitor(robot, terrain=Terrain(scenario.terrain),
+                                                                offset=MONITOR_TICKS * period))
         builder.Connect(estimator.state_output, monitor.state_input)
         state_log = estimate_log
     diagram = builder.Build()
@@ -243,8 +249,10 @@ def _add_command(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel,
 
 
 def _add_status(builder: DiagramBuilder, robot: RobotModel, lcm: DrakeLcmInterface, state, command,
-                walking: WalkingLoop, kinematics: RobotKinematicsSystem, deadline: DeadlineMonitor) -> None:
-    """The controller's status messages on an LCM link (for logs)."""
+                walking: WalkingLoop, kinematics: RobotKinematicsSystem, deadline: DeadlineMonitor,
+                period: float) -> None:
+    """The controller's status messages on an LCM link (for logs), ``STATUS_TICKS`` controller
+    periods after the logs' instants."""
     status = builder.AddNamedSystem("status", StatusSender(
         robot, command.command_port.size(), walking.embedding.tracking_error_port.size()))
     builder.Connect(state, status.state_port)
@@ -254,7 +262,7 @@ def _add_status(builder: DiagramBuilder, robot: RobotModel, lcm: DrakeLcmInterfa
     builder.Connect(command.command_port, status.command_port)
     builder.Connect(walking.embedding.tracking_error_port, status.tracking_error_port)
     publish(builder, lcm, STATUS_CHANNEL, status.message_port, STATUS_PERIOD,
-            LINK_TICK_OFFSET + PUBLISH_DELAY)
+            STATUS_TICKS * period + LINK_TICK_OFFSET + PUBLISH_DELAY)
 
 
 def _add_page_display(builder: DiagramBuilder, meshcat: Meshcat, robot: RobotModel, walking: WalkingLoop,

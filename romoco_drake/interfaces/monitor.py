@@ -29,7 +29,8 @@ FELL, FALL_TIME, REASON, MIN_HEIGHT, MAX_HEIGHT, LAST_HEIGHT = range(6)
 
 
 class FallMonitor(LeafSystem):
-    """Records the first fall and the base height range up to it, at ``period`` (no outputs).
+    """Records the first fall and the base height range up to it, at ``period`` from ``offset``
+    (no outputs).
 
     | port  | dir | size    | meaning                       |
     |-------|-----|---------|-------------------------------|
@@ -38,7 +39,7 @@ class FallMonitor(LeafSystem):
 
     def __init__(self, robot: RobotModel, period: float = 0.01, height_fraction: float = 0.5,
                  max_tilt: float = np.deg2rad(45.0), body_clearance: float = 0.02,
-                 terrain: Terrain | None = None):
+                 terrain: Terrain | None = None, offset: float = 0.0):
         super().__init__()
         self._robot = robot
         self._terrain = terrain = terrain or Terrain()
@@ -60,7 +61,7 @@ class FallMonitor(LeafSystem):
                                                     {self.state_input.ticket()})
         h0 = self._nominal_height
         self._state_index = self.DeclareDiscreteState([0.0, np.nan, 0.0, h0, h0, h0])
-        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
 
     def check(self, x: np.ndarray) -> tuple[str, float]:
         """(fall reason or "", base height above the ground under it) for state ``x``."""
