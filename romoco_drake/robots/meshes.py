@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import os
 import struct
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -38,14 +39,16 @@ def read_stl(path: Path) -> np.ndarray:
 
 
 def write_obj(triangles: np.ndarray, path: Path) -> None:
-    """Writes triangles as an OBJ with shared vertices."""
+    """Writes triangles as an OBJ with shared vertices, through a temporary file of this writer's
+    own: processes converting the same mesh at once (parallel test workers) each replace the
+    finished file atomically; a shared temporary name made one's rename fail."""
     verts, faces = np.unique(triangles.reshape(-1, 3), axis=0, return_inverse=True)
     faces = faces.reshape(-1, 3) + 1
-    tmp = path.with_suffix(".tmp")
-    with tmp.open("w") as f:
+    with tempfile.NamedTemporaryFile("w", dir=path.parent, prefix=f"{path.stem}-", suffix=".tmp",
+                                     delete=False) as f:
         f.write("".join(f"v {x:.6g} {y:.6g} {z:.6g}\n" for x, y, z in verts))
         f.write("".join(f"f {a} {b} {c}\n" for a, b, c in faces))
-    tmp.replace(path)
+    os.replace(f.name, path)
 
 
 def stl_as_obj(stl: Path) -> Path:
