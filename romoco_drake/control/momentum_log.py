@@ -10,7 +10,7 @@ Its record is a vector port, because a ``VectorLogSink`` logs it every tick;
 from __future__ import annotations
 
 import math
-from dataclasses import astuple, dataclass, field, fields
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -69,7 +69,7 @@ class MomentumRecord:
 
 
 _FIELD_NAMES = tuple(f.name for f in fields(MomentumRecord))
-_SIZES = tuple(np.atleast_1d(np.asarray(v)).size for v in astuple(MomentumRecord()))
+_SIZES = tuple(np.atleast_1d(np.asarray(getattr(MomentumRecord(), name))).size for name in _FIELD_NAMES)
 MOMENTUM_LOG_SIZE = sum(_SIZES)
 
 

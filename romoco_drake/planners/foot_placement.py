@@ -29,7 +29,8 @@ class FootPlacementPlanner(LeafSystem):
 
     Stateless: the output is a function of the inputs' values (cached by Drake until they change,
     and memoised on their values for the last plan). With an
-    ``adapter`` (:class:`~romoco_drake.rom.step_adapt.StepAdapter`) the law's plan is then bounded
+    ``adapter`` (:class:`~romoco_drake.rom.step_adapt.StepAdapter`) the law's plan is, while the
+    ``schedule`` says walking (a standing robot takes no step), bounded
     to the robot's reach and its step time adapted to the current swing (push recovery); with
     ``swing_foot`` connected, also to where the swing foot can still land in the time left: from
     ``swing_reference`` (the swing being tracked) when that is for this step, else from the measured
