@@ -24,6 +24,9 @@ from romoco_drake.rom.types import (
 )
 
 
+_SWING_KEY_DIGITS = 9
+
+
 class FootPlacementPlanner(LeafSystem):
     """Plans the swing foot's touchdown from the ROM state, every time its output is evaluated.
 
@@ -75,7 +78,10 @@ class FootPlacementPlanner(LeafSystem):
         self.swing_surface_port = self.DeclareVectorInputPort("swing_surface", 1)
         # The last plan and the input values it was made from. A tick's state machine update
         # invalidates the output (Drake cannot tell that a rewritten schedule is unchanged), so
-        # the same inputs arrive twice a tick; the plan is a pure function of their values.
+        # the same inputs arrive twice a tick; the plan is a pure function of their values. The
+        # embedding's update in between replans the swing from its own state, which gives back
+        # that state only to rounding (1e-16), so the swing enters the key to ``_SWING_KEY_DIGITS``
+        # decimals (1 nm, 1 nm/s, 1 nm/s²): otherwise 1280 of g1_walk's first 2000 ticks planned twice.
         self._last: tuple[tuple | None, PlannerOutput | None] = (None, None)
         self.planner_output_port = self.DeclareAbstractOutputPort(
             "planner_output", lambda: AbstractValue.Make(self._plan_default()), self._calc_plan
@@ -119,7 +125,8 @@ class FootPlacementPlanner(LeafSystem):
             if self.schedule_port.HasValue(context):
                 schedule = self.schedule_port.Eval(context)
                 step_t_ss, walking = schedule.t_ss, schedule.mode == Mode.WALKING
-        key = (phase, command, rom_state, swing, step_t_ss, frame, surface, walking)
+        swing_key = None if swing is None else [round(x, _SWING_KEY_DIGITS) for x in swing]
+        key = (phase, command, rom_state, swing_key, step_t_ss, frame, surface, walking)
         if key != self._last[0]:
             self._last = (key, self._plan(phase, command, rom_state, swing, step_t_ss, frame, surface,
                                           walking))
