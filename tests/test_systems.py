@@ -140,6 +140,36 @@ def test_closed_loop_evaluates_the_kinematics_once_per_tick(monkeypatch):
     assert ticks <= len(calls) <= ticks + 1  # (+1: the interval's end may fall between a step and a tick)
 
 
+def test_closed_loop_plans_once_per_tick_but_at_step_switches(monkeypatch):
+    """The planner's memo holds across the embedding's swing replan within a tick (which gives the
+    swing's state back only to rounding): one plan a tick while walking, two only in the ticks
+    around a step switch (the new step's plans from the measured foot, then from its latched swing).
+    Before the memo held, about two ticks in three planned twice."""
+    from romoco_drake.planners.foot_placement import FootPlacementPlanner
+
+    plan_times = []
+    original = FootPlacementPlanner._plan
+
+    def counting(self, *args):
+        plan_times.append(round(root.get_time(), 6))
+        return original(self, *args)
+
+    monkeypatch.setattr(FootPlacementPlanner, "_plan", counting)
+    scenario = load_scenario("g1_walk")
+    built = build_diagram(scenario)
+    simulator = Simulator(built.diagram)
+    root = simulator.get_mutable_context()
+    plant = built.plant_station.GetSubsystemByName("plant")
+    plant.SetPositions(plant.GetMyMutableContextFromRoot(root), initial_positions(built.robot, scenario))
+    simulator.AdvanceTo(2.0)  # standing, then walking from 1 s
+    plan_times.clear()
+    ticks = 300  # 0.6 s: two steps of 0.3 s
+    simulator.AdvanceTo(2.0 + ticks / scenario.controller.rate_hz)
+    twice = sum(1 for t in set(plan_times) if plan_times.count(t) > 1)
+    assert ticks <= len(set(plan_times)) <= ticks + 1
+    assert 1 <= twice <= 6  # two a step; 0.6 s holds parts of three steps
+
+
 def test_heading_hold_integrates_the_command_and_corrects_the_heading():
     robot = load_robot("g1")
     system = HeadingHold(robot, PERIOD, gain=1.0, max_correction=0.3)
