@@ -23,7 +23,6 @@ from romoco_drake.rom.types import (
     side_from_sign,
 )
 
-
 _SWING_KEY_DIGITS = 9
 
 
