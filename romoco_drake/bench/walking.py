@@ -177,28 +177,24 @@ def passive_plant_steps(robot, scenario: Scenario, steps: int) -> list[int]:
     """Wall time (ns) of each of ``steps`` simulated plant steps with no controller.
 
     The scenario's simulated station alone (plant, contact, sensors) on its engine
-    (``station.engine``), holding the nominal pose's gravity-compensation torque, started at the
-    nominal pose on the ground: what one step of the simulation costs by itself.
+    (``station.engine``), holding the nominal pose's gravity-compensation torque from the nominal
+    pose on the ground, where the robot topples and sinks through the floor (:func:`_stepped`):
+    a fixed, repeatable reference of what the simulation's steps cost by themselves, mostly
+    without contact.
     """
     station = make_engine_station(scenario.station.engine, robot, scenario.time_step,
                                   sensors=scenario.sensors)
     return _stepped([(station, station.GetSubsystemByName("plant"))], robot, scenario.time_step, steps)[0]
 
 
-def bare_plant_steps(robot, scenario: Scenario, steps: int) -> list[int]:
-    """Wall time (ns) of each of ``steps`` steps of the robot's bare simulation ``MultibodyPlant``
-    (no sensors, no monitor, no logs), holding the nominal pose's gravity-compensation torque
-    from the nominal pose on the ground: the physics alone, the reference of the timing benches."""
-    return _stepped([_bare_plant(robot, scenario)], robot, scenario.time_step, steps)[0]
-
-
 def station_and_bare_plant_steps(robot, scenario: Scenario, steps: int) -> tuple[list[int], list[int]]:
     """(station, bare plant) wall times (ns) of ``steps`` steps each, stepped alternately so that
     both meet the same machine load: what the simulated station's sensors, monitor and logs cost
-    over the physics (Drake engine)."""
+    over the physics (Drake engine), with the robot held standing on both feet (``hold`` of
+    :func:`_stepped`), so that the per-contact work of the foot sensors is in every step."""
     station = make_engine_station("drake", robot, scenario.time_step, sensors=scenario.sensors)
     times = _stepped([(station, station.GetSubsystemByName("plant")), _bare_plant(robot, scenario)],
-                     robot, scenario.time_step, steps)
+                     robot, scenario.time_step, steps, hold=True)
     return times[0], times[1]
 
 
@@ -209,23 +205,36 @@ def _bare_plant(robot, scenario: Scenario):
     return builder.Build(), plant
 
 
-def _stepped(diagrams, robot, time_step: float, steps: int) -> list[list[int]]:
-    """Wall time (ns) of each of ``steps`` steps of each (diagram, its plant) (the diagram's input
-    ``actuation`` fixed), from the nominal pose under the nominal pose's gravity compensation;
-    the diagrams step in turn."""
-    torque = contact_gravity_compensation(robot, RobotKinematics(robot))
-    simulators = []
+def _stepped(diagrams, robot, time_step: float, steps: int, hold: bool = False) -> list[list[int]]:
+    """Wall time (ns) of each of ``steps`` steps of each (diagram, its plant), the diagrams stepping
+    in turn from the nominal pose, the diagram's input ``actuation`` at the nominal pose's gravity
+    compensation. That alone does not keep the robot up: it topples within about 0.5 s and, only
+    its feet colliding, sinks through the floor, so most steps have no contact. ``hold``: before
+    each (untimed) step the actuation becomes a joint PD about the nominal pose (the robot's YAML
+    gains) plus that compensation, and the robot stands on both feet throughout (G1: 8 contact
+    points at the median step)."""
+    gravity = contact_gravity_compensation(robot, RobotKinematics(robot))
+    q0 = robot.nominal.q[robot.actuated_q_index]
+    runs = []
     for diagram, plant in diagrams:
         simulator = Simulator(diagram)
         context = simulator.get_mutable_context()
-        plant.SetPositions(plant.GetMyMutableContextFromRoot(context), robot.nominal.q)
-        diagram.GetInputPort("actuation").FixValue(context, torque)
+        plant_context = plant.GetMyMutableContextFromRoot(context)
+        plant.SetPositions(plant_context, robot.nominal.q)
+        actuation = diagram.GetInputPort("actuation")
+        actuation.FixValue(context, gravity)
         simulator.Initialize()
-        simulators.append(simulator)
-    out = [[] for _ in simulators]
+        runs.append((simulator, plant.GetOutputPort("state"), plant_context, actuation, context))
+    out = [[] for _ in runs]
+    nq = robot.plant.num_positions()
     with frozen_heap():
         for k in range(1, steps + 1):
-            for simulator, times in zip(simulators, out, strict=True):
+            for (simulator, state, plant_context, actuation, context), times in zip(runs, out, strict=True):
+                if hold:
+                    x = state.Eval(plant_context)
+                    u = (robot.kp * (q0 - x[robot.actuated_q_index])
+                         - robot.kd * x[nq + robot.actuated_v_index] + gravity)
+                    actuation.FixValue(context, np.clip(u, -robot.effort_limits, robot.effort_limits))
                 t0 = time.perf_counter_ns()
                 simulator.AdvanceTo(k * time_step)
                 times.append(time.perf_counter_ns() - t0)

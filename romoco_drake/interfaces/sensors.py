@@ -116,23 +116,34 @@ def _unit(q: np.ndarray) -> np.ndarray | None:
     return q / norm if np.isfinite(norm) and norm > 1e-9 else None
 
 
-def foot_normal_forces(contacts: ContactResults, foot_bodies: Sequence[BodyIndex]) -> np.ndarray:
+def foot_normal_forces(contacts: ContactResults, foot_bodies: Sequence[BodyIndex],
+                       level_world: bool = False) -> list[float]:
     """Total normal force (N, ≥ 0 when pressing) of the point contacts on each of ``foot_bodies``.
 
     A point pair's force on body B is f_Bc_W and its normal n̂_BA_W points from B into A, so
     −f_Bc_W·n̂_BA_W is the pair's compressive normal force, the same for either body.
+    ``level_world``: the world's only collision geometry is a level floor, so a pair with the
+    world body has n̂ = ±z and its normal force is |f_z|, without reading the normal (at 8 sole
+    points a step, reading it was a fifth of G1's whole station step).
     """
-    forces = [0.0] * len(foot_bodies)
     feet = {int(body): k for k, body in enumerate(foot_bodies)}
+    forces = [0.0] * len(feet)
+    world = 0  # BodyIndex of the world body
     for i in range(contacts.num_point_pair_contacts()):
         info = contacts.point_pair_contact_info(i)
-        a, b = feet.get(int(info.bodyA_index())), feet.get(int(info.bodyB_index()))
-        if a is None and b is None:
+        a, b = int(info.bodyA_index()), int(info.bodyB_index())
+        foot_a, foot_b = feet.get(a), feet.get(b)
+        if foot_a is None and foot_b is None:
             continue
-        normal_force = -float(info.contact_force() @ info.point_pair().nhat_BA_W)
-        for k in {a, b} - {None}:
-            forces[k] += normal_force
-    return np.array(forces)
+        if level_world and (a == world or b == world):
+            normal_force = abs(float(info.contact_force()[2]))
+        else:
+            normal_force = -float(info.contact_force() @ info.point_pair().nhat_BA_W)
+        if foot_a is not None:
+            forces[foot_a] += normal_force
+        if foot_b is not None and foot_b != foot_a:
+            forces[foot_b] += normal_force
+    return forces
 
 
 class SimulatedSensors(LeafSystem):
@@ -244,20 +255,22 @@ class SimulatedSensors(LeafSystem):
         block, row = divmod(self._sample_index(context), _NOISE_BLOCK)
         return std * self._standard_normal(port, block, std.size)[row]
 
-    def _update_draws(self, first: int, last: int) -> np.ndarray:
+    def _update_draws(self, first: int, last: int) -> list[list[float]]:
         """Rows first … last of an update's noise: [bias walks (6), gyro (3), switch force (2)]."""
         (b0, r0), (b1, r1) = divmod(first, _NOISE_BLOCK), divmod(last, _NOISE_BLOCK)
         if b0 == b1:
             return self._update_block(b0)[r0:r1 + 1]
-        return np.vstack([self._update_block(b0)[r0:], self._update_block(b1)[:r1 + 1]])
+        return self._update_block(b0)[r0:] + self._update_block(b1)[:r1 + 1]
 
     @functools.lru_cache(maxsize=2)  # noqa: B019 (a memo of a pure function of the block)
-    def _update_block(self, block: int) -> np.ndarray:
+    def _update_block(self, block: int) -> list[list[float]]:
         """A block's scaled draws of ports 3 (walks), 2 (gyro columns) and 4 (switch force) side
-        by side, so that an update reads its samples' noise with one slice."""
+        by side, so that an update reads its samples' noise with one slice. Python floats: an
+        update takes a couple of rows, where numpy's per-call cost was most of the station's
+        sensor time."""
         return np.hstack([self._walk_std * self._standard_normal(3, block, 6),
                           self._imu_std[3:6] * self._standard_normal(2, block, 9)[:, 3:6],
-                          self._force_std * self._standard_normal(4, block, 2)])
+                          self._force_std * self._standard_normal(4, block, 2)]).tolist()
 
     def _sample_index(self, context) -> int:
         return math.floor(context.get_time() * self._rate + 1e-6)
@@ -289,26 +302,31 @@ class SimulatedSensors(LeafSystem):
         """The walk of the biases and the yaw error, and the switches' debounce, over the samples
         since the last update, oldest first (one, or a discrete plant step's worth: see
         :func:`_samples_per_step`). Sample j's yaw rate uses the bias before sample j's walk."""
-        s = self._sensor_state(context).copy()
+        s = self._sensor_state(context).tolist()
         last = self._sample_index(context)
         draws = self._update_draws(max(0, last - self._samples_per_update + 1), last)
-        walked = np.cumsum(draws[:, 0:6], axis=0)
+        bias, rate = s[0:6], [0.0, 0.0, 0.0]  # rate: Σ over the samples of gyro bias + noise
+        for row in draws:
+            for k in range(3):
+                rate[k] += bias[k] + row[6 + k]
+            for k in range(6):
+                bias[k] += row[k]
         w, qx, qy, qz = self.plant_state_input.Eval(context)[self._base_q:self._base_q + 4].tolist()
         norm2 = w * w + qx * qx + qy * qy + qz * qz
         if math.isfinite(norm2) and norm2 > 1e-18:
-            # Third row of R_WB (the world vertical in B) from the quaternion normalised.
-            R_z = (2.0 / norm2) * np.array([qx * qz - w * qy, qy * qz + w * qx,
-                                            0.5 * norm2 - qx * qx - qy * qy])
-            rates = len(draws) * s[0:3] + walked[:-1, 0:3].sum(axis=0) + draws[:, 6:9].sum(axis=0)
-            s[6] += self._dt * float(R_z @ rates)
-        s[0:6] += walked[-1]
-        loaded = (self.foot_forces_input.Eval(context) + draws[:, 9:11] > self._contact_threshold).tolist()
-        switch, timer = s[7:9].tolist(), s[9:11].tolist()
-        for raw in loaded:
+            # The world vertical in B (third row of R_WB, from the quaternion normalised) · rate.
+            vertical_rate = ((qx * qz - w * qy) * rate[0] + (qy * qz + w * qx) * rate[1]
+                             + (0.5 * norm2 - qx * qx - qy * qy) * rate[2])
+            s[6] += self._dt * (2.0 / norm2) * vertical_rate
+        s[0:6] = bias
+        forces = self.foot_forces_input.Eval(context).tolist()
+        switch, timer = s[7:9], s[9:11]
+        for row in draws:
             for foot in (0, 1):
-                timer[foot] = timer[foot] + self._dt if float(raw[foot]) != switch[foot] else 0.0
+                raw = 1.0 if forces[foot] + row[9 + foot] > self._contact_threshold else 0.0
+                timer[foot] = timer[foot] + self._dt if raw != switch[foot] else 0.0
                 if timer[foot] >= self._debounce - 1e-9:
-                    switch[foot], timer[foot] = float(raw[foot]), 0.0
+                    switch[foot], timer[foot] = raw, 0.0
         s[7:11] = switch + timer
         discrete_state.get_mutable_vector(self._state_index).SetFromVector(s)
 
@@ -359,7 +377,7 @@ class PlantContactReadout(LeafSystem):
     times as much to read).
     """
 
-    def __init__(self, robot: RobotModel, plant: MultibodyPlant):
+    def __init__(self, robot: RobotModel, plant: MultibodyPlant, level_world: bool = False):
         super().__init__()
         if plant.get_contact_model() != ContactModel.kPoint:
             raise RomocoError("simulated foot contact sensors need the point contact model, got "
@@ -379,7 +397,7 @@ class PlantContactReadout(LeafSystem):
             prerequisites_of_calc={self.accelerations_input.ticket()})
         self.foot_forces_output = self.DeclareVectorOutputPort(
             "foot_normal_forces", 2, lambda c, out: out.SetFromVector(
-                foot_normal_forces(self.contact_results_input.Eval(c), self._feet)),
+                foot_normal_forces(self.contact_results_input.Eval(c), self._feet, level_world)),
             prerequisites_of_calc={self.contact_results_input.ticket()})
 
 
@@ -398,11 +416,13 @@ def _samples_per_step(rate_hz: float, plant_time_step: float) -> int:
 
 
 def add_sensors(
-    builder: DiagramBuilder, plant: MultibodyPlant, robot: RobotModel, config: SensorConfig | None = None
+    builder: DiagramBuilder, plant: MultibodyPlant, robot: RobotModel, config: SensorConfig | None = None,
+    level_world: bool = False,
 ) -> SimulatedSensors:
     """Adds :class:`SimulatedSensors` named "sensors" to ``builder``, fed by ``plant`` through a
-    :class:`PlantContactReadout` named "contact_readout"."""
-    readout = builder.AddNamedSystem("contact_readout", PlantContactReadout(robot, plant))
+    :class:`PlantContactReadout` named "contact_readout" (``level_world``: see
+    :func:`foot_normal_forces`)."""
+    readout = builder.AddNamedSystem("contact_readout", PlantContactReadout(robot, plant, level_world))
     builder.Connect(plant.get_generalized_acceleration_output_port(), readout.accelerations_input)
     builder.Connect(plant.get_contact_results_output_port(), readout.contact_results_input)
     sensors = builder.AddNamedSystem("sensors", SimulatedSensors(robot, config, plant.time_step()))
