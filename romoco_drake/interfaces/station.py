@@ -79,7 +79,8 @@ def make_station(
         builder.Connect(total.get_output_port(), plant.get_actuation_input_port())
     else:
         builder.ExportInput(plant.get_actuation_input_port(), "actuation")
-    sensor_system = add_sensors(builder, plant, robot, sensors, level_world=terrain is None or not terrain.solids)
+    level_world = terrain is None or not terrain.solids
+    sensor_system = add_sensors(builder, plant, robot, sensors, level_world=level_world)
     for name in ("joint_state", "imu", "foot_contact", "base_pose", "base_velocity"):
         builder.ExportOutput(sensor_system.GetOutputPort(name), name)
     stage = builder.AddNamedSystem("link_stage", PassThrough(1))
