@@ -8,6 +8,7 @@ import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.tree import JacobianWrtVariable, MultibodyForces
 from pydrake.systems.analysis import Simulator
+from walk_support import closed_loop
 
 from romoco_drake.control.gravity import contact_gravity_compensation
 from romoco_drake.control.standing import StandingController
@@ -16,13 +17,13 @@ from romoco_drake.estimation.rom_state import RomStateFromRobot
 from romoco_drake.interfaces.hardware import StatusSender
 from romoco_drake.interfaces.lcm_codec import decode_controller_status
 from romoco_drake.modes import DeadlineStats, Mode, StateStats
+from romoco_drake.planners.foot_placement import FootPlacementPlanner
 from romoco_drake.planners.heading import HeadingHold, base_yaw
 from romoco_drake.robots import kinematics as kinematics_module
 from romoco_drake.robots.kinematics import RobotKinematics, RobotKinematicsSystem
 from romoco_drake.robots.model import load_robot
 from romoco_drake.rom.types import WalkCommand
 from romoco_drake.scenario import load_scenario
-from romoco_drake.wiring import build_diagram, initial_positions
 
 PERIOD = 0.002
 
@@ -126,11 +127,7 @@ def test_closed_loop_evaluates_the_kinematics_once_per_tick(monkeypatch):
 
     monkeypatch.setattr(kinematics_module.RobotKinematicsSystem, "_calc", counting)
     scenario = load_scenario("g1_walk")
-    built = build_diagram(scenario)
-    simulator = Simulator(built.diagram)
-    root = simulator.get_mutable_context()
-    plant = built.plant_station.GetSubsystemByName("plant")
-    plant.SetPositions(plant.GetMyMutableContextFromRoot(root), initial_positions(built.robot, scenario))
+    built, simulator, root, _ = closed_loop(scenario)
     simulator.AdvanceTo(1.5)  # standing, then walking from 1 s
     calls.clear()
     ticks = 100
@@ -145,8 +142,6 @@ def test_closed_loop_plans_once_per_tick_but_at_step_switches(monkeypatch):
     swing's state back only to rounding): one plan a tick while walking, two only in the ticks
     around a step switch (the new step's plans from the measured foot, then from its latched swing).
     Before the memo held, about two ticks in three planned twice."""
-    from romoco_drake.planners.foot_placement import FootPlacementPlanner
-
     plan_times = []
     original = FootPlacementPlanner._plan
 
@@ -156,11 +151,7 @@ def test_closed_loop_plans_once_per_tick_but_at_step_switches(monkeypatch):
 
     monkeypatch.setattr(FootPlacementPlanner, "_plan", counting)
     scenario = load_scenario("g1_walk")
-    built = build_diagram(scenario)
-    simulator = Simulator(built.diagram)
-    root = simulator.get_mutable_context()
-    plant = built.plant_station.GetSubsystemByName("plant")
-    plant.SetPositions(plant.GetMyMutableContextFromRoot(root), initial_positions(built.robot, scenario))
+    built, simulator, root, _ = closed_loop(scenario)
     simulator.AdvanceTo(2.0)  # standing, then walking from 1 s
     plan_times.clear()
     ticks = 300  # 0.6 s: two steps of 0.3 s

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from closed_loop_bounds import check
 from pydrake.systems.analysis import Simulator
-from walk_support import MEAN_TOLERANCE, check_mean, segments, walk
+from walk_support import MEAN_TOLERANCE, check_mean, closed_loop, segments, walk
 
 from romoco_drake.control.terms.load_split import LoadSplitConfig
 from romoco_drake.control.tscqp import TscQp, TscqpConfig
@@ -77,18 +77,6 @@ def test_tscqp_respects_torque_and_friction_limits(g1):
     assert np.any(np.abs(solution.tau) > 0.5 * robot.effort_limits)  # the limits were reached
     f = solution.forces[:refs.num_contact_forces]
     assert np.all(refs.A_f @ f <= refs.b_f + 1e-5 * np.abs(f).max())
-
-
-def _closed_loop(scenario):
-    """The scenario's diagram, a simulator on it and the plant set to the initial pose."""
-    from romoco_drake.wiring import initial_positions
-
-    built = build_diagram(scenario)
-    simulator = Simulator(built.diagram)
-    root = simulator.get_mutable_context()
-    plant = built.plant_station.GetSubsystemByName("plant")
-    plant.SetPositions(plant.GetMyMutableContextFromRoot(root), initial_positions(built.robot, scenario))
-    return built, simulator, root, plant
 
 
 def _machine(robot):
@@ -196,7 +184,7 @@ def test_dropped_robot_lands_stands_and_walks(scenario):
 
     s = with_overrides(load_scenario(scenario), command="0:0,0,0;1:0.3,0,0")
     s.initial_height_offset = 0.1
-    built, simulator, root, plant = _closed_loop(s)
+    built, simulator, root, plant = closed_loop(s)
     machine = built.walking.state_machine
     machine_ctx = machine.GetMyContextFromRoot(root)
     simulator.Initialize()
@@ -411,7 +399,7 @@ def test_g1_walks_sideways_and_keeps_its_heading():
     from romoco_drake.scenario import with_overrides
 
     s = with_overrides(load_scenario("g1_walk"), command="0:0,0,0;1:0,0.2,0")
-    built, simulator, root, plant = _closed_loop(s)
+    built, simulator, root, plant = closed_loop(s)
     simulator.Initialize()
     simulator.AdvanceTo(4.5)
     assert not built.monitor.summary(built.monitor.GetMyContextFromRoot(root))["fell"]

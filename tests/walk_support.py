@@ -14,11 +14,13 @@ from dataclasses import dataclass
 
 import numpy as np
 from closed_loop_bounds import BOUNDS, check, recording
+from pydrake.systems.analysis import Simulator
 
 from romoco_drake.metrics import AVERAGE_WINDOW_S, SETTLE_S, heading_velocity, moving_average
 from romoco_drake.planners.command import limited_velocity, reach_times
 from romoco_drake.planners.heading import base_yaw
 from romoco_drake.runner import log_samples, run_scenario
+from romoco_drake.wiring import build_diagram, initial_positions
 
 MEAN_TOLERANCE = 0.10  # a segment's mean velocity (and yaw rate, path radius) within 10 % of the command
 # An arc's sideways slip settles in about 3 s from its start (H1: the heading-frame vy from +0.04
@@ -37,6 +39,17 @@ class Walk:
     states: np.ndarray
     estimates: np.ndarray
     final_mode: str  # the gait state machine's mode at the end
+
+
+def closed_loop(scenario):
+    """The scenario's diagram, a simulator on it and the plant set to the initial pose:
+    (built diagram, simulator, root context, plant)."""
+    built = build_diagram(scenario)
+    simulator = Simulator(built.diagram)
+    root = simulator.get_mutable_context()
+    plant = built.plant_station.GetSubsystemByName("plant")
+    plant.SetPositions(plant.GetMyMutableContextFromRoot(root), initial_positions(built.robot, scenario))
+    return built, simulator, root, plant
 
 
 def walk(scenario, duration: float | None = None, **kwargs) -> Walk:
