@@ -5,16 +5,16 @@ controller on every engine, and sets the runs side by side: falls, velocity rms 
 and relaxed ticks, and per cell the ratio of each rms error on an engine to Drake's.
 
 ``engines`` times one station step per engine in the same process, on the same robot and plant
-step (:func:`~romoco_drake.bench.walking.passive_plant_steps` on each engine: the scenario's
-station alone holding the nominal pose's gravity compensation), so the two are measured on the
-same machine under the same load.
+step (:func:`~romoco_drake.bench.walking.station_steps` on each engine: the scenario's
+station alone, the robot held standing), so the two are measured on the same machine under the
+same load.
 """
 
 from __future__ import annotations
 
 from romoco_drake.bench.rom import percentiles
 from romoco_drake.bench.sweep import SweepOptions, Variant, run_sweep
-from romoco_drake.bench.walking import passive_plant_steps, walk_scenario
+from romoco_drake.bench.walking import station_steps, walk_scenario
 from romoco_drake.interfaces.engines import with_engine
 from romoco_drake.robots.model import load_robot
 from romoco_drake.runner import run_scenario
@@ -74,7 +74,7 @@ def bench_engines(robots, engines: list[str], steps: int = 500) -> list[dict]:
         for _ in range(2):
             for engine in engines:
                 scenario_on = with_engine(scenario, engine)
-                times[engine] += passive_plant_steps(robot_model, scenario_on, steps // 2)
+                times[engine] += station_steps(robot_model, scenario_on, steps // 2)
         row = {"robot": robot, "time_step": scenario.time_step}
         for engine in engines:
             row[engine] = percentiles(times[engine])  # µs

@@ -80,7 +80,7 @@ def bench_tick(scenario: Scenario, warmup: float = 2.0, ticks: int = 500) -> dic
     estimator output, the shared controller-plant evaluation (``kinematics``), state machine
     step (with the limited command and the contact switches it reads), ROM state and planner
     (with the heading hold's command it reads), embedding references, controller update (which then finds
-    everything upstream cached). ``plant_step`` (:func:`passive_plant_steps`) is the reference
+    everything upstream cached). ``plant_step`` (:func:`station_steps`) is the reference
     measured in the same run that makes the numbers comparable across machines
     (``controller_to_plant``: the ratio of the medians of the total tick and the plant step).
     """
@@ -106,7 +106,7 @@ def bench_tick(scenario: Scenario, warmup: float = 2.0, ticks: int = 500) -> dic
                 t7 = time.perf_counter_ns()
                 mpc.solve(kin, side_from_sign(sign), elapsed, cmd, t)
                 times["mpc_update"].append(time.perf_counter_ns() - t7)
-    times["plant_step"] = passive_plant_steps(built.robot, scenario, ticks)
+    times["plant_step"] = station_steps(built.robot, scenario, ticks)
     result = {n: {k: round(v / 1e3, 4) for k, v in percentiles(ns).items()} for n, ns in times.items()}
     total = np.sum([np.array(times[n]) for n in TICK_PARTS], axis=0)
     result["total"] = {k: round(v / 1e3, 4) for k, v in percentiles(list(total)).items()}
@@ -173,14 +173,12 @@ def _timed_tick(systems: dict, ctx: dict, loop, t: float, times: dict[str, list[
     return kin, cmd
 
 
-def passive_plant_steps(robot, scenario: Scenario, steps: int) -> list[int]:
-    """Wall time (ns) of each of ``steps`` simulated plant steps with no controller.
+def station_steps(robot, scenario: Scenario, steps: int) -> list[int]:
+    """Wall time (ns) of each of ``steps`` simulated station steps with no controller in them.
 
     The scenario's simulated station alone (plant, contact, sensors) on its engine
-    (``station.engine``), holding the nominal pose's gravity-compensation torque from the nominal
-    pose on the ground, where the robot topples and sinks through the floor (:func:`_stepped`):
-    a fixed, repeatable reference of what the simulation's steps cost by themselves, mostly
-    without contact.
+    (``station.engine``), the robot held standing on both feet by a joint PD outside the timed
+    steps (:func:`_stepped`): what one step of the simulation costs by itself, with its contacts.
     """
     station = make_engine_station(scenario.station.engine, robot, scenario.time_step,
                                   sensors=scenario.sensors)
@@ -190,11 +188,10 @@ def passive_plant_steps(robot, scenario: Scenario, steps: int) -> list[int]:
 def station_and_bare_plant_steps(robot, scenario: Scenario, steps: int) -> tuple[list[int], list[int]]:
     """(station, bare plant) wall times (ns) of ``steps`` steps each, stepped alternately so that
     both meet the same machine load: what the simulated station's sensors, monitor and logs cost
-    over the physics (Drake engine), with the robot held standing on both feet (``hold`` of
-    :func:`_stepped`), so that the per-contact work of the foot sensors is in every step."""
+    over the physics (Drake engine), the robot standing on both feet (:func:`_stepped`)."""
     station = make_engine_station("drake", robot, scenario.time_step, sensors=scenario.sensors)
     times = _stepped([(station, station.GetSubsystemByName("plant")), _bare_plant(robot, scenario)],
-                     robot, scenario.time_step, steps, hold=True)
+                     robot, scenario.time_step, steps)
     return times[0], times[1]
 
 
@@ -205,14 +202,13 @@ def _bare_plant(robot, scenario: Scenario):
     return builder.Build(), plant
 
 
-def _stepped(diagrams, robot, time_step: float, steps: int, hold: bool = False) -> list[list[int]]:
+def _stepped(diagrams, robot, time_step: float, steps: int) -> list[list[int]]:
     """Wall time (ns) of each of ``steps`` steps of each (diagram, its plant), the diagrams stepping
-    in turn from the nominal pose, the diagram's input ``actuation`` at the nominal pose's gravity
-    compensation. That alone does not keep the robot up: it topples within about 0.5 s and, only
-    its feet colliding, sinks through the floor, so most steps have no contact. ``hold``: before
-    each (untimed) step the actuation becomes a joint PD about the nominal pose (the robot's YAML
-    gains) plus that compensation, and the robot stands on both feet throughout (G1: 8 contact
-    points at the median step)."""
+    in turn from the nominal pose. Before each (untimed) step the diagram's input ``actuation``
+    is set to a joint PD about the nominal pose (the robot's YAML gains) plus the nominal pose's
+    gravity compensation, so the robot stands on both feet throughout (G1, H1, XO: 8 contact
+    points at the median step; Cassie 4). Under the compensation alone it toppled within about
+    0.5 s and, only its feet colliding, sank through the floor: most steps timed had no contact."""
     gravity = contact_gravity_compensation(robot, RobotKinematics(robot))
     q0 = robot.nominal.q[robot.actuated_q_index]
     runs = []
@@ -230,11 +226,9 @@ def _stepped(diagrams, robot, time_step: float, steps: int, hold: bool = False) 
     with frozen_heap():
         for k in range(1, steps + 1):
             for (simulator, state, plant_context, actuation, context), times in zip(runs, out, strict=True):
-                if hold:
-                    x = state.Eval(plant_context)
-                    u = (robot.kp * (q0 - x[robot.actuated_q_index])
-                         - robot.kd * x[nq + robot.actuated_v_index] + gravity)
-                    actuation.FixValue(context, np.clip(u, -robot.effort_limits, robot.effort_limits))
+                x = state.Eval(plant_context)
+                u = robot.kp * (q0 - x[robot.actuated_q_index]) - robot.kd * x[nq + robot.actuated_v_index]
+                actuation.FixValue(context, np.clip(u + gravity, -robot.effort_limits, robot.effort_limits))
                 t0 = time.perf_counter_ns()
                 simulator.AdvanceTo(k * time_step)
                 times.append(time.perf_counter_ns() - t0)
