@@ -323,9 +323,13 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     heading = builder.AddNamedSystem("heading", HeadingHold(robot, period, offset=offset))
     builder.Connect(limiter.command_port, heading.command_in_port)
     builder.Connect(state, heading.state_port)
+    if scenario.planner.weight_shift and not isinstance(planner_system, FootPlacementPlanner):
+        raise ConfigError(f"<scenario {scenario.name or scenario.robot}>", "planner.weight_shift",
+                          f"the {scenario.planner.name} planner plans its own start; the weight shift "
+                          "is for the foot-placement laws")
     machine = builder.AddNamedSystem("state_machine", GaitStateMachine(
         robot, period, planner_system.t_ds, step_in_place=scenario.planner.step_in_place, offset=offset,
-        terrain=terrain))
+        terrain=terrain, weight_shift=scenario.planner.weight_shift))
     builder.Connect(kin, machine.kinematics_port)
     builder.Connect(limiter.command_port, machine.command_port)
     builder.Connect(machine.stop_port, limiter.stop_port)

@@ -79,8 +79,10 @@ def test_tscqp_respects_torque_and_friction_limits(g1):
     assert np.all(refs.A_f @ f <= refs.b_f + 1e-5 * np.abs(f).max())
 
 
-def _machine(robot):
-    machine = GaitStateMachine(robot, period=0.002, t_ds=0.0)
+def _machine(robot, weight_shift=False):
+    """A state machine on G1 standing still; without the weight shift unless asked, so that a start
+    is at once (test_the_first_step_lifts_off_after_a_weight_shift covers the shift)."""
+    machine = GaitStateMachine(robot, period=0.002, t_ds=0.0, weight_shift=weight_shift)
     context = machine.CreateDefaultContext()
     x = np.concatenate([robot.nominal.q, np.zeros(robot.nv)])
     machine.kinematics_port.FixValue(context, RobotKinematics(robot, x))
@@ -96,16 +98,21 @@ def _command(w, vx=0.0, vy=0.0):
 
 def test_state_machine_stand_walk_stand_and_damping(g1):
     robot = g1[0]
-    machine, context, x, w = _machine(robot)
+    machine, context, x, w = _machine(robot, weight_shift=True)
     simulator = Simulator(machine, context)
     machine.command_port.FixValue(context, _command(w))
     simulator.AdvanceTo(0.1)
     assert machine.schedule(context).mode == "standing"
     machine.command_port.FixValue(context, _command(w, vx=0.3))
-    simulator.AdvanceTo(0.2)
+    simulator.AdvanceTo(0.15)
+    s = machine.schedule(context)  # the weight shift before the first step (about 0.11 s on G1)
+    assert s.mode == "standing" and s.side == "left" and s.shift_until > 0.15
+    phase = machine.gait_phase_port.Eval(context)
+    assert phase[0] == 1.0 and phase[1] == pytest.approx(0.15 - s.shift_until)
+    simulator.AdvanceTo(0.2 + 0.02)
     s = machine.schedule(context)
     assert s.mode == "walking" and s.side == "left"
-    simulator.AdvanceTo(0.2 + w.t_ss + 0.01)
+    simulator.AdvanceTo(0.22 + w.t_ss + 0.01)
     assert machine.schedule(context).side == "right"
     assert machine.mode_port.Eval(context) == Mode.WALKING
     phase = machine.gait_phase_port.Eval(context)
@@ -120,6 +127,70 @@ def test_state_machine_stand_walk_stand_and_damping(g1):
     s = machine.schedule(context)
     assert s.mode == "damping" and s.fall_reason == "invalid_state" and s.safe_mode_entries == 1
 
+
+
+@pytest.mark.parametrize("shift", [True, False])
+def test_the_first_step_lifts_off_after_a_weight_shift(g1, shift):
+    """A start from standing waits ln(1 + tanh(λT/2))/λ before the first lift-off (none when
+    ``weight_shift`` is off), with the coming stance side and the time to lift-off (< 0) on
+    ``gait_phase``."""
+    import math
+
+    robot = g1[0]
+    machine = GaitStateMachine(robot, period=0.002, t_ds=0.0, weight_shift=shift)
+    context = machine.CreateDefaultContext()
+    machine.kinematics_port.FixValue(context, RobotKinematics(robot, np.concatenate([robot.nominal.q,
+                                                                                     np.zeros(robot.nv)])))
+    machine.foot_contact_port.FixValue(context, [1.0, 1.0])
+    machine.link_stage_port.FixValue(context, [0.0])
+    w = robot.config.walking
+    machine.command_port.FixValue(context, _command(w, vx=0.3))
+    simulator = Simulator(machine, context)
+    lam = math.sqrt(9.81 / w.z0)
+    expected = math.log(1.0 + math.tanh(0.5 * lam * w.t_ss)) / lam if shift else 0.0
+    start = None
+    while start is None and context.get_time() < 0.5:
+        simulator.AdvanceTo(context.get_time() + 0.002)
+        s = machine.schedule(context)
+        if s.mode == Mode.WALKING:
+            start = s.step_start
+        elif shift and context.get_time() > 0.0:
+            sign, tau = machine.gait_phase_port.Eval(context)
+            assert s.side == "left" and sign == 1.0 and tau < 0.0
+    assert start == pytest.approx(expected, abs=0.0021)  # the update lands on the next tick
+
+
+def test_the_first_step_starts_on_the_lateral_orbit():
+    """G1 from standing with ``planner.weight_shift``: the CoM's sideways speed over the first steps
+    stays within the lateral orbit's (w/2) λ tanh(λT/2) = 0.20 m/s; lifting off at once (the
+    default) launches it at 0.49 m/s (a foot lifted with the CoM midway between the feet)."""
+    import math
+
+    s = load_scenario("g1_walk")
+    s.planner = dataclasses.replace(s.planner, weight_shift=True)
+    built, simulator, root, plant = closed_loop(s)
+    context = plant.GetMyContextFromRoot(root)
+    simulator.Initialize()
+    w = built.robot.config.walking
+    lam = math.sqrt(9.81 / w.z0)
+    orbit = 0.5 * w.step_width * lam * math.tanh(0.5 * lam * w.t_ss)
+    peak = 0.0
+    while root.get_time() < 2.0:
+        simulator.AdvanceTo(root.get_time() + 0.01)
+        peak = max(peak, abs(plant.CalcCenterOfMassTranslationalVelocityInWorld(context)[1]))
+    machine = built.walking.state_machine
+    assert machine.schedule(machine.GetMyContextFromRoot(root)).steps >= 2
+    assert peak < 1.2 * orbit, (peak, orbit)
+
+
+def test_the_weight_shift_is_a_load_time_error_under_the_vimpc():
+    """The VI-MPC plans its own start: asking it for a weight shift is a one-line error."""
+    from romoco_drake.errors import ConfigError
+
+    s = load_scenario("draco_walk")
+    s.planner = dataclasses.replace(s.planner, weight_shift=True)
+    with pytest.raises(ConfigError, match="planner.weight_shift"):
+        build_diagram(s)
 
 def test_state_machine_in_air_until_both_feet_touch_down(g1):
     """Lifted (no contact for lift_time) → in-air; one foot down is not enough; both → standing."""

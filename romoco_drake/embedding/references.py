@@ -130,6 +130,9 @@ class StandState(SharedValue):
     start: float  # controller time
     com: BezierCurve  # from the CoM's entry position and velocity to its standing target
     yaw: float  # pelvis heading target: the feet's mean heading at entry
+    # A weight shift before the first step (EmbeddingCore.start_shift): (start time, CoM x, y,
+    # vx, vy, pivot x, y, λ) of the LIP flow about the first swing foot's sole centre.
+    shift: tuple[float, ...] | None = None
 
 
 @functools.cache
@@ -230,6 +233,28 @@ class EmbeddingCore:
                                np.zeros(3), STAND_SETTLE_S)
         return StandState(t, curve, float(target[5]))
 
+    def start_shift(self, stand: StandState, kin: RobotKinematics, stance_side: str, t: float) -> StandState:
+        """Latches the weight shift before the first step on ``stance_side`` (at time t): the CoM
+        follows the LIP flow about the other sole's centre, which puts the centre of pressure
+        under the foot about to swing and moves the CoM toward the stance foot.
+
+        Why: from rest midway between the feet, a step lifting off at once lets the CoM fall
+        away from the stance foot, (w/2) λ sinh(λT) by the end of the step (0.56 m/s on G1)
+        against the lateral period-2 orbit's (w/2) λ tanh(λT/2) (0.20 m/s). Flowing about the
+        swing foot until the DCM ξ = p + ṗ/λ reaches the orbit's lift-off value,
+        ξ* = (w/2)(1 − tanh(λT/2)) inside the stance foot, starts the first step on the orbit:
+        measured from the swing foot, (ξ* + w)/(w/2) = e^{λ t}, so the shift lasts
+        t = ln(1 + tanh(λT/2)) / λ (0.11 s on G1; the state machine's ``_shift_time``), the
+        gait initiation of the DCM walking literature (Englsberger, Ott and Albu-Schäffer,
+        "Three-dimensional bipedal walking control based on divergent component of motion",
+        IEEE T-RO 31(2), 2015: the DCM led to the next support before the step)."""
+        pivot = self.contact.sole_center(kin, other_side(stance_side))
+        height = max(float(kin.p_com[2] - pivot[2]), 1e-3)
+        lam = math.sqrt(GRAVITY / height)
+        p, v = kin.p_com, kin.v_com
+        return replace(stand, shift=(t, float(p[0]), float(p[1]), float(v[0]), float(v[1]),
+                                     float(pivot[0]), float(pivot[1]), lam))
+
     def evaluate(self, kin: RobotKinematics, mode: Mode | str, tau: float, plan: PlannerOutput | None,
                  memory: SwingState | StandState | None, t: float = 0.0) -> TaskReferences:
         """References at the state of ``kin`` at controller time t.
@@ -242,7 +267,7 @@ class EmbeddingCore:
             return self._walking(kin, tau, plan, memory)
         if mode == Mode.IN_AIR:
             return self._in_air(kin)
-        return self._standing(kin, memory if isinstance(memory, StandState) else None, t)
+        return self._standing(kin, memory if isinstance(memory, StandState) else None, t, tau)
 
     def _walking(self, kin: RobotKinematics, tau: float, plan: PlannerOutput, swing: SwingState
                  ) -> TaskReferences:
@@ -299,12 +324,23 @@ class EmbeddingCore:
             if i is not None:
                 y_d[i], yd_d[i] = lift + progress * (land - lift), rate * (land - lift)
 
-    def _standing(self, kin: RobotKinematics, stand: StandState | None, t: float) -> TaskReferences:
+    def _standing(self, kin: RobotKinematics, stand: StandState | None, t: float,
+                  tau: float = 0.0) -> TaskReferences:
+        """Standing references; while a weight shift runs (``tau`` < 0, the time to lift-off),
+        the horizontal CoM follows its LIP flow (:meth:`start_shift`)."""
         out = self.standing.evaluate(kin)
         y_d, yd_d, ydd_d = self._standing_targets(kin), np.zeros(6), np.zeros(6)
         if stand is not None:
             y_d[:3], yd_d[:3], ydd_d[:3] = stand.com.evaluate(t - stand.start)
             y_d[5] = stand.yaw  # latched: a foot rocking on its edge must not swing the target
+            if stand.shift is not None and tau < 0.0:
+                t0, px, py, vx, vy, cx, cy, lam = stand.shift
+                ch, sh = math.cosh(lam * (t - t0)), math.sinh(lam * (t - t0))
+                d = np.array([px - cx, py - cy])
+                v0 = np.array([vx, vy])
+                y_d[:2] = (cx, cy) + ch * d + sh / lam * v0
+                yd_d[:2] = lam * sh * d + ch * v0
+                ydd_d[:2] = lam * lam * (y_d[:2] - (cx, cy))
         active = np.ones(6, dtype=bool)
         return self._pack(Mode.STANDING, Domain.DOUBLE, "left", out, y_d, yd_d, ydd_d, active, kin)
 

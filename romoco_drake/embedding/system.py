@@ -44,7 +44,7 @@ class OutputEmbedding(LeafSystem):
     |---|---|---|---|
     | ``kinematics`` | in | abstract | :class:`~romoco_drake.robots.kinematics.RobotKinematics` of the state |
     | ``planner_output`` | in | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` |
-    | ``gait_phase`` | in | 2 | stance (+1 left, −1 right), time in step [s] |
+    | ``gait_phase`` | in | 2 | stance (+1 left, −1 right), time in step [s] (< 0: a weight shift) |
     | ``mode`` | in | abstract | :class:`~romoco_drake.modes.Mode` |
     | ``task_references`` | out | abstract | :class:`~romoco_drake.embedding.references.TaskReferences` |
     | ``tracking_error`` | out | 6 | norm of the active errors y − y_d per ``ERROR_GROUPS`` (m or rad) |
@@ -52,7 +52,8 @@ class OutputEmbedding(LeafSystem):
     | ``swing_surface`` | out | 1 | on terrain, the surface a committed step lands on (-1: floor; NaN: none) |
 
     Abstract state: the current step's :class:`SwingState` when walking, the
-    :class:`StandState` latched on entering standing, else nothing. Discrete state: the
+    :class:`StandState` latched on entering standing (with the weight shift before a first step
+    latched into it), else nothing. Discrete state: the
     tracking errors of the last tick; on terrain, how many steps landed where planned, on a
     foothold moved to supported ground, and in place for want of one (``FOOTHOLD_STATUS``).
     A non-finite state latches nothing and gives standing references with NaN outputs (the
@@ -136,6 +137,10 @@ class OutputEmbedding(LeafSystem):
             if not isinstance(new, StandState):
                 self._count_step(context, state, swing)
                 new = self.core.start_standing(self._kinematics(context), context.get_time())
+            sign, tau = self.gait_phase_port.Eval(context)
+            if tau < 0.0 and new.shift is None:  # a weight shift before the first step began
+                new = self.core.start_shift(new, self._kinematics(context), side_from_sign(sign),
+                                            context.get_time())
         elif mode != Mode.WALKING:
             new = _NoSwing()
         else:

@@ -18,10 +18,16 @@ from romoco_drake.config import Range, declare_ranges
 class PlannerSettings:
     """``name``: the registry entry (``romoco list``). ``step_in_place``: the gait starts and keeps
     stepping under a zero command instead of standing (the RoMoCo paper's Fig. 9 steps G1 in
-    place); point feet always do, having nothing to stand on."""
+    place); point feet always do, having nothing to stand on. ``weight_shift`` (foot-placement
+    laws only): a walk from standing starts with the CoM led toward the first stance foot, so
+    that the first step starts on the lateral orbit (``EmbeddingCore.start_shift``); G1's first
+    sideways CoM speed falls from 0.49 to 0.20 m/s (H1 0.54 → 0.36, Cassie 0.57 → 0.42). Off
+    by default: on, every walk starts 0.1-0.15 s later and the slow suite's bounds moved in 17
+    tests (among them G1 fell on g1_stairs' climb and XO's arc widened), not yet re-measured."""
 
     name: str = "hlip"
     step_in_place: bool = False
+    weight_shift: bool = False
 
 
 @dataclass

@@ -23,6 +23,7 @@ from romoco_drake.rom.types import (
     WalkCommand,
     other_side,
 )
+from romoco_drake.spatial import GRAVITY
 from romoco_drake.values import SharedValue
 
 # A command component below these counts as zero (m/s, m/s, rad/s).
@@ -45,6 +46,7 @@ class GaitSchedule(SharedValue):
     blind: bool = False  # the link is past its ride-through: slow down to a stop, nothing starts
     lifted: bool = False  # the swing foot's switch has read no contact in this step
     touchdowns: tuple[int, int] = (0, 0)  # steps ended by the swing foot's contact (early, late)
+    shift_until: float = math.nan  # standing: the first step lifts off then, after a weight shift
 
 
 def is_zero(cmd: WalkCommand) -> bool:
@@ -63,6 +65,11 @@ class GaitStateMachine(LeafSystem):
       fell after a 5 cm drop; with 10 ms it lands from 15 cm (from 30 cm it falls).
     - standing → walking when the command is non-zero and the CoM is nearly still
       (|v_CoM| < ``balance_speed``); the first stance is the foot away from the lateral command.
+      With ``weight_shift`` (not for robots that step in place) the first foot lifts off
+      ln(1 + tanh(λT/2))/λ later (λ² = g/z0, T the step time: 0.11 s on G1), while the embedding
+      leads the CoM toward the stance foot (``EmbeddingCore.start_shift``); meanwhile the mode is
+      still standing and ``gait_phase`` carries the coming stance and the time to lift-off (< 0).
+      A blind link or a lift cancels the shift.
     - walking: each step is T_SS (from the command, latched at the step start) plus ``t_ds``;
       then the stance switches. A plan whose timing was adapted (``planner_output``, optional)
       sets this step's T_SS each tick until the step is committed (``SWING_COMMIT_FRACTION`` of
@@ -116,7 +123,7 @@ class GaitStateMachine(LeafSystem):
     | ``link_stage`` | in | 1 | the station's :class:`~romoco_drake.modes.LinkStage` |
     | ``planner_output`` | in | abstract | optional :class:`PlannerOutput`: an adapted step time |
     | ``mode`` | out | abstract | :class:`~romoco_drake.modes.Mode` |
-    | ``gait_phase`` | out | 2 | stance (+1 left, −1 right), time in step [s] |
+    | ``gait_phase`` | out | 2 | stance (+1 left, −1 right), time in step [s] (< 0: to lift-off) |
     | ``schedule`` | out | abstract | :class:`GaitSchedule` |
     | ``stop`` | out | 1 | 1.0 while the link is blind (the command limiter's ``stop``), else 0.0 |
     """
@@ -126,7 +133,7 @@ class GaitStateMachine(LeafSystem):
                  touchdown_height: float = 0.01, settle_time: float = 0.2, lift_time: float = 0.01,
                  early_touchdown: float = 0.6, touchdown_timeout: float = 0.1, air_height: float = 0.03,
                  landing_radius: float = 0.05, step_in_place: bool = False, offset: float = 0.0,
-                 terrain: Terrain | None = None):
+                 terrain: Terrain | None = None, weight_shift: bool = False):
         super().__init__()
         self.robot, self.t_ds, self.period = robot, t_ds, period
         self.terrain = None if terrain is None or terrain.is_flat else terrain
@@ -138,6 +145,7 @@ class GaitStateMachine(LeafSystem):
         self._min_base_z = fall_height * robot.nominal.base_height
         self._cos_tilt = math.cos(fall_tilt)
         self.steps_in_place = robot.is_point_foot or step_in_place
+        self.weight_shift = weight_shift and not self.steps_in_place
         self.kinematics_port = self.DeclareAbstractInputPort("kinematics", kinematics_model_value(robot))
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
         self.foot_contact_port = self.DeclareVectorInputPort("foot_contact", 2)
@@ -174,7 +182,10 @@ class GaitStateMachine(LeafSystem):
 
     def _calc_phase(self, context, out) -> None:
         s = self.schedule(context)
-        tau = context.get_time() - s.step_start if s.mode == Mode.WALKING else 0.0
+        if s.mode == Mode.WALKING:
+            tau = context.get_time() - s.step_start
+        else:  # negative during a weight shift: the time to lift-off
+            tau = 0.0 if math.isnan(s.shift_until) else min(context.get_time() - s.shift_until, -1e-9)
         out.SetFromVector([1.0 if s.side == "left" else -1.0, tau])
 
     def next_schedule(self, s: GaitSchedule, t: float, kin: RobotKinematics, cmd: WalkCommand,
@@ -198,15 +209,24 @@ class GaitStateMachine(LeafSystem):
             s = replace(s, air_since=t)
         if s.blind != blind:
             s = replace(s, blind=blind)
+        if (blind or s.mode != Mode.STANDING) and not math.isnan(s.shift_until):
+            s = replace(s, shift_until=math.nan)
         if blind and s.mode == Mode.STANDING:  # nothing starts while blind
             cmd = WalkCommand(step_width=cmd.step_width, com_height=cmd.com_height, step_time=cmd.step_time)
         if s.mode == Mode.STANDING and t - s.air_since >= self.lift_time - 1e-9:
             s = replace(s, mode=Mode.IN_AIR)
         elif s.mode == Mode.IN_AIR and on.all():
             s = replace(s, mode=Mode.STANDING)
+        elif s.mode == Mode.STANDING and not math.isnan(s.shift_until):
+            if t >= s.shift_until - 1e-9:
+                s = replace(s, mode=Mode.WALKING, step_start=t, t_ss=cmd.step_time, idle_steps=0,
+                            shift_until=math.nan)
         elif s.mode == Mode.STANDING and (self.steps_in_place or not is_zero(cmd)) and self._balanced(kin):
             side = "right" if cmd.vy > 0.0 else "left"
-            s = replace(s, mode=Mode.WALKING, side=side, step_start=t, t_ss=cmd.step_time, idle_steps=0)
+            if self.weight_shift:
+                s = replace(s, side=side, shift_until=t + self._shift_time(cmd))
+            else:
+                s = replace(s, mode=Mode.WALKING, side=side, step_start=t, t_ss=cmd.step_time, idle_steps=0)
         elif s.mode == Mode.WALKING and self._retime(s, t, plan):
             s = replace(s, t_ss=plan.t_ss)
         if s.mode == Mode.WALKING and self.contact_touchdown:
@@ -311,6 +331,13 @@ class GaitStateMachine(LeafSystem):
         if max(float(np.ptp(z)) for z in points) >= self.touchdown_height:
             return False
         return bool(on.all() or abs(points[0].min() - points[1].min()) < self.touchdown_height)
+
+    def _shift_time(self, cmd: WalkCommand) -> float:
+        """How long the weight shift before the first step lasts (class docstring):
+        ln(1 + tanh(λT/2)) / λ, λ² = g / z0, T the command's step time."""
+        height = cmd.com_height if cmd.com_height > 0.0 else self.robot.config.walking.z0
+        lam = math.sqrt(GRAVITY / height)
+        return math.log(1.0 + math.tanh(0.5 * lam * cmd.step_time)) / lam
 
     def _balanced(self, kin: RobotKinematics) -> bool:
         return float(np.linalg.norm(kin.v_com)) < self.balance_speed
