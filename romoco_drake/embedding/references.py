@@ -239,15 +239,15 @@ class EmbeddingCore:
         under the foot about to swing and moves the CoM toward the stance foot.
 
         Why: from rest midway between the feet, a step lifting off at once lets the CoM fall
-        away from the stance foot, (w/2) λ sinh(λT) by the end of the step (0.56 m/s on G1)
+        away from the stance foot, (w/2) λ sinh(λT) by the end of the step (0.56 m/s on G1's LIP)
         against the lateral period-2 orbit's (w/2) λ tanh(λT/2) (0.20 m/s). Flowing about the
         swing foot until the DCM ξ = p + ṗ/λ reaches the orbit's lift-off value,
         ξ* = (w/2)(1 − tanh(λT/2)) inside the stance foot, starts the first step on the orbit:
         measured from the swing foot, (ξ* + w)/(w/2) = e^{λ t}, so the shift lasts
-        t = ln(1 + tanh(λT/2)) / λ (0.11 s on G1; the state machine's ``_shift_time``), the
-        gait initiation of the DCM walking literature (Englsberger, Ott and Albu-Schäffer,
-        "Three-dimensional bipedal walking control based on divergent component of motion",
-        IEEE T-RO 31(2), 2015: the DCM led to the next support before the step)."""
+        t = ln(1 + tanh(λT/2)) / λ (0.11 s on G1; the state machine's ``_shift_time``). DCM
+        walking plans its start alike, the DCM led toward the first support in an initial
+        double support (Englsberger, Ott and Albu-Schäffer, "Three-dimensional bipedal walking
+        control based on divergent component of motion", IEEE T-RO 31(2), 2015)."""
         pivot = self.contact.sole_center(kin, other_side(stance_side))
         height = max(float(kin.p_com[2] - pivot[2]), 1e-3)
         lam = math.sqrt(GRAVITY / height)
