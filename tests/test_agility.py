@@ -2,7 +2,15 @@
 
 import numpy as np
 
-from romoco_drake.bench.agility import GIVE_UP_S, MOTIONS, START_S, TOLERANCE, ramp, tracked_speed
+from romoco_drake.bench.agility import (
+    GIVE_UP_S,
+    MOTIONS,
+    START_S,
+    TOLERANCE,
+    ramp,
+    reached_speed,
+    tracked_speed,
+)
 from romoco_drake.metrics import AVERAGE_WINDOW_S, moving_average
 
 
@@ -55,3 +63,19 @@ def test_a_lurch_before_a_fall_counts_in_tracked_but_not_in_settled():
     lurch, _ = tracked_speed(times, measured, wanted, direction, 8.0)
     settled, _ = tracked_speed(times, measured, wanted, direction, 8.0 - AVERAGE_WINDOW_S)
     assert lurch > 0.6 and settled < 0.6
+
+
+def test_reached_is_the_slowest_commanded_component_before_the_last_window():
+    """A diagonal walked at vx = 0.5 s, vy = s under command s (vx 50 % behind: tracking lost, nothing
+    settled), then a lurch to 2.0 in the window before a fall at 9 s: reached is the slower vx's
+    0.5 × 0.7, tracked or not, and the lurch counts only without the fall."""
+    times = np.arange(0.0, 10.0, 0.01)
+    speed = np.clip(0.1 * (times - START_S), 0.0, None)
+    measured = np.stack([0.5 * speed, speed, np.zeros_like(speed)], axis=1)
+    measured[times >= 8.0, :2] = 2.0
+    direction = MOTIONS["diagonal"]
+    settled, reason = tracked_speed(times, measured, speed[:, None] * np.array(direction), direction,
+                                    9.0 - AVERAGE_WINDOW_S)
+    assert settled == 0.0 and reason == "lost tracking"
+    assert abs(reached_speed(times, measured, direction, 9.0 - AVERAGE_WINDOW_S) - 0.5 * 0.7) < 0.011
+    assert reached_speed(times, measured, direction, None) == 2.0
