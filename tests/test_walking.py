@@ -180,6 +180,8 @@ def test_the_first_step_starts_on_the_lateral_orbit():
         peak = max(peak, abs(plant.CalcCenterOfMassTranslationalVelocityInWorld(context)[1]))
     machine = built.walking.state_machine
     assert machine.schedule(machine.GetMyContextFromRoot(root)).steps >= 2
+    assert not built.monitor.summary(built.monitor.GetMyContextFromRoot(root))["fell"]
+    assert plant.CalcCenterOfMassPositionInWorld(context)[0] > 0.05  # walked forward under vx 0.2 from 1 s
     assert peak < 1.2 * orbit, (peak, orbit)
 
 

@@ -325,7 +325,7 @@ class EmbeddingCore:
                 y_d[i], yd_d[i] = lift + progress * (land - lift), rate * (land - lift)
 
     def _standing(self, kin: RobotKinematics, stand: StandState | None, t: float,
-                  tau: float = 0.0) -> TaskReferences:
+                  tau: float) -> TaskReferences:
         """Standing references; while a weight shift runs (``tau`` < 0, the time to lift-off),
         the horizontal CoM follows its LIP flow (:meth:`start_shift`)."""
         out = self.standing.evaluate(kin)
