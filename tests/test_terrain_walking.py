@@ -9,6 +9,15 @@ from walk_support import walk
 from romoco_drake.rom.terrain import Terrain
 from romoco_drake.scenario import load_scenario, with_overrides
 
+
+def assert_landed_supported(summary: dict) -> None:
+    """Every step's landed sole audited (the fall monitor's touchdown audit, from the true state)
+    and fully supported: no sole over an edge, a riser or a seam's drop."""
+    landed = summary["landed_soles"]
+    assert landed["audited"] >= summary["steps"] - 2
+    assert landed["unsupported"] == 0 and landed["worst_margin_m"] > 0.0
+
+
 # 16 s of g1_slope: up the 2 m ramp from x = 1 m, over the 1 m plateau at 0.353 m and about
 # halfway down the ramp beyond it (x ≈ 4.7 m).
 DURATION_S = 16.0
@@ -18,7 +27,8 @@ DURATION_S = 16.0
 def test_g1_walks_up_a_ten_degree_slope_and_down_onto_the_next():
     """No fall, no QP failure; past the plateau, on the ramp down, by the end; the commanded
     0.3 m/s tracked; every step counted as planned or adjusted onto supported ground, none taken
-    in place; the base at its nominal height above the ground under it."""
+    in place, and every landed sole fully supported; the base at its nominal height above the
+    ground under it."""
     run = walk(load_scenario("g1_slope"), duration=DURATION_S)
     s = run.summary
     assert not s["fell"] and s["qp_failures"] == 0
@@ -26,6 +36,7 @@ def test_g1_walks_up_a_ten_degree_slope_and_down_onto_the_next():
     assert x[-1] > 4.2
     footholds = s["footholds"]
     assert footholds["in_place"] == 0 and footholds["planned"] + footholds["adjusted"] >= s["steps"] - 2
+    assert_landed_supported(s)
     check("terrain.g1_slope.vx_rms", s["velocity_rms_error"][0])
     assert abs(s["mean_velocity"][0] - 0.3) <= 0.1 * 0.3
     assert s["final_base_height_m"] == pytest.approx(run.robot.nominal.base_height, abs=0.05)
@@ -35,13 +46,15 @@ def test_g1_walks_up_a_ten_degree_slope_and_down_onto_the_next():
 def test_cassie_walks_the_ten_degree_slope_with_its_line_feet_across_the_seams():
     """Cassie on cassie_slope, up the ramp, over the plateau and down: no fall, no QP failure,
     0.3 m/s tracked within the issue's vx rms 0.05 (0.063 when every line-foot step was moved off
-    the ramp's seams), every step planned or adjusted onto supported ground, none in place."""
+    the ramp's seams), every step planned or adjusted onto supported ground, none in place, every
+    landed sole supported (across the seams too)."""
     run = walk(load_scenario("cassie_slope"), duration=DURATION_S)
     s = run.summary
     assert not s["fell"] and s["qp_failures"] == 0
     assert run.states[run.robot.base_q_start + 4][-1] > 4.2
     footholds = s["footholds"]
     assert footholds["in_place"] == 0 and footholds["planned"] > 10 * footholds["adjusted"]
+    assert_landed_supported(s)
     check("terrain.cassie_slope.vx_rms", s["velocity_rms_error"][0])
     x = run.states[run.robot.base_q_start + 4]
     walking = run.times >= 3.0  # the command has ramped to 0.3 m/s and settled
@@ -85,7 +98,8 @@ def test_g1_walks_down_the_slope_on_the_invariant_ekf():
 def test_g1_climbs_the_five_steps_onto_the_landing(controller):
     """g1_stairs up to its 0.5 m landing (16 s; the way down does not pass yet) under the TSC-QP and
     the velocity IK: no fall, no QP failure, the base over the landing at its nominal height above
-    it, every step onto supported ground (none in place). Each step keeps the tread it committed
+    it, every step onto supported ground (none in place) and every landed sole fully on its tread
+    (the issue's "no foot placed on an edge"). Each step keeps the tread it committed
     to (SURFACE_COMMIT): without that, a plan between two treads flipped the step time and G1 fell
     at the fourth riser."""
     run = walk(with_overrides(load_scenario("g1_stairs"), controller=controller), duration=16.0)
@@ -96,6 +110,7 @@ def test_g1_climbs_the_five_steps_onto_the_landing(controller):
     assert run.states[b + 6][-1] - 0.5 == pytest.approx(run.robot.nominal.base_height, abs=0.03)
     footholds = s["footholds"]
     assert footholds["in_place"] == 0 and footholds["planned"] + footholds["adjusted"] >= s["steps"] - 2
+    assert_landed_supported(s)
 
 
 def test_terrain_overlay_is_a_ramp_pair():

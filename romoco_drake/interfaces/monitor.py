@@ -10,6 +10,7 @@ Heights are above the terrain's ground under the base or the body, not above z =
 standing on a landing has not fallen. Over a floor the feet may not step on (a stepping-stone
 pit) the ground is the lowest surface's top, so a robot down in the pit has fallen. The recorded
 heights are the base's above the ground under it; on the default flat ground, its world z.
+On terrain the monitor also audits where each foot landed (:mod:`~romoco_drake.interfaces.foothold_audit`).
 """
 
 from __future__ import annotations
@@ -17,10 +18,11 @@ from __future__ import annotations
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
+from romoco_drake.interfaces import foothold_audit
 from romoco_drake.robots.kinematics import RobotKinematics, declare_kinematics_cache
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.robots.posture import base_fault
-from romoco_drake.rom.terrain import EDGE_TOLERANCE, Terrain
+from romoco_drake.rom.terrain import Terrain
 
 FALL_REASONS = ("", "base_low", "base_tilt", "body_contact", "invalid_state")
 
@@ -30,7 +32,7 @@ FELL, FALL_TIME, REASON, MIN_HEIGHT, MAX_HEIGHT, LAST_HEIGHT = range(6)
 
 class FallMonitor(LeafSystem):
     """Records the first fall and the base height range up to it, at ``period`` from ``offset``
-    (no outputs).
+    (no outputs); on terrain, also audits the touchdowns up to it (module docstring).
 
     | port  | dir | size    | meaning                       |
     |-------|-----|---------|-------------------------------|
@@ -61,6 +63,8 @@ class FallMonitor(LeafSystem):
                                                     {self.state_input.ticket()})
         h0 = self._nominal_height
         self._state_index = self.DeclareDiscreteState([0.0, np.nan, 0.0, h0, h0, h0])
+        self._audit_index = (None if terrain.is_flat
+                             else self.DeclareDiscreteState(foothold_audit.initial_state()))
         self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
 
     def check(self, x: np.ndarray) -> tuple[str, float]:
@@ -68,16 +72,8 @@ class FallMonitor(LeafSystem):
         return self._check(RobotKinematics(self._robot, x))
 
     def _grounds(self, xy: np.ndarray) -> np.ndarray:
-        """The ground's z (module docstring) under each row of ``xy`` (n, 2): the highest surface
-        holding the point, else the floor (over a pit, the lowest surface top); vectorised
-        :meth:`Terrain.height` for the bodies checked every period."""
-        best = np.full(len(xy), -np.inf)
-        for s in self._terrain.surfaces:
-            A, b = s.halfplanes()
-            inside = np.all(xy @ A.T <= b + EDGE_TOLERANCE, axis=1)
-            h = (s.offset - xy @ s.normal[:2]) / s.normal[2]
-            best = np.where(inside & (h > best), h, best)
-        return np.where(np.isfinite(best), best, self._off_surface)
+        """The ground's z (module docstring) under each row of ``xy`` (n, 2)."""
+        return foothold_audit.ground_under(self._terrain, xy, self._off_surface)
 
     def _check(self, kin: RobotKinematics) -> tuple[str, float]:
         r = self._robot
@@ -101,7 +97,11 @@ class FallMonitor(LeafSystem):
         s = discrete_state.get_mutable_vector(self._state_index).get_mutable_value()
         if s[FELL]:  # the height range and last height stay those up to the fall
             return
-        reason, height = self._check(self._kinematics.Eval(context))
+        kin = self._kinematics.Eval(context)
+        reason, height = self._check(kin)
+        if self._audit_index is not None and kin.finite:
+            self._audit(kin, discrete_state.get_mutable_vector(self._audit_index).get_mutable_value(),
+                        context.get_time())
         s[LAST_HEIGHT] = height
         if np.isfinite(height):
             s[MIN_HEIGHT] = min(s[MIN_HEIGHT], height)
@@ -111,7 +111,18 @@ class FallMonitor(LeafSystem):
             s[FALL_TIME] = context.get_time()
             s[REASON] = FALL_REASONS.index(reason)
 
+    def _audit(self, kin: RobotKinematics, state: np.ndarray, t: float) -> None:
+        """One sample of each foot for the touchdown audit (module docstring)."""
+        r = self._robot
+        for k, side in enumerate(("left", "right")):
+            body = r.foot_frames[side].body()
+            v_WF = r.plant.EvalBodySpatialVelocityInWorld(kin.context, body).translational()
+            foothold_audit.audit(self._terrain, state, k, r.sole_points_in_world(kin.context, side),
+                                 float(np.linalg.norm(v_WF)), t)
+
     def summary(self, context) -> dict:
+        audit = {} if self._audit_index is None else foothold_audit.summary(
+            context.get_discrete_state(self._audit_index).value())
         s = context.get_discrete_state(self._state_index).value()
         h0 = self._nominal_height
         fell = bool(s[FELL])
@@ -121,4 +132,4 @@ class FallMonitor(LeafSystem):
             "fall_reason": FALL_REASONS[int(s[REASON])] if fell else None,
             "base_height_drift_m": float(max(h0 - s[MIN_HEIGHT], s[MAX_HEIGHT] - h0)),
             "final_base_height_m": float(s[LAST_HEIGHT]),
-        }
+        } | audit
