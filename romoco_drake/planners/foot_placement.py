@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import os
+from dataclasses import replace
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -10,6 +12,8 @@ from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.embedding.terrain import TerrainSteps
 from romoco_drake.modes import Mode
+from romoco_drake.planners.foothold_mpc import FootholdMpc
+from romoco_drake.planners.footsteps import FootstepSequencer
 from romoco_drake.planners.state_machine import GaitSchedule
 from romoco_drake.rom.planners import FootPlacementLaw
 from romoco_drake.rom.step_adapt import StepAdapter
@@ -59,6 +63,7 @@ class FootPlacementPlanner(LeafSystem):
         super().__init__()
         self.law, self.adapter = law, adapter
         self.terrain: TerrainSteps | None = None
+        self.sequencer: FootstepSequencer | None = None
         # What the loop wires (planners/registry.py): the swing foot and the adapted step times
         # only with an adapter.
         self.t_ds = law.t_ds
@@ -92,6 +97,8 @@ class FootPlacementPlanner(LeafSystem):
         do: the output embedding still moves each foothold onto supported ground."""
         if self.adapter is not None:
             self.terrain = terrain
+            self.sequencer = FootstepSequencer(terrain, self.t_ds)
+            self.mpc = FootholdMpc(terrain, self.adapter.bounds, self.adapter.mass, self.t_ds)
             self.loop_inputs += ("stance_frame", "swing_surface")
 
     def summary(self, context) -> dict:
@@ -107,7 +114,7 @@ class FootPlacementPlanner(LeafSystem):
         phase = self.gait_phase_port.Eval(context).tolist()
         command = self.command_port.Eval(context).tolist()
         rom_state = self.rom_state_port.Eval(context).tolist()
-        swing = step_t_ss = frame = surface = None
+        swing = step_t_ss = frame = surface = step_start = None
         walking = True
         if self.terrain is not None:
             frame = self.stance_frame_port.Eval(context).tolist()
@@ -124,24 +131,48 @@ class FootPlacementPlanner(LeafSystem):
             if self.schedule_port.HasValue(context):
                 schedule = self.schedule_port.Eval(context)
                 step_t_ss, walking = schedule.t_ss, schedule.mode == Mode.WALKING
+                step_start = schedule.step_start
         swing_key = None if swing is None else [round(x, _SWING_KEY_DIGITS) for x in swing]
-        key = (phase, command, rom_state, swing_key, step_t_ss, frame, surface, walking)
+        key = (phase, command, rom_state, swing_key, step_t_ss, frame, surface, walking, step_start)
         if key != self._last[0]:
             self._last = (key, self._plan(phase, command, rom_state, swing, step_t_ss, frame, surface,
-                                          walking))
+                                          walking, step_start))
         value.set_value(self._last[1])
 
     def _plan(self, phase: list[float], command: list[float], rom_state: list[float],
               swing: list[float] | None, step_t_ss: float | None, frame: list[float] | None,
-              surface: int | None, walking: bool) -> PlannerOutput:
+              surface: int | None, walking: bool, step_start: float | None) -> PlannerOutput:
         """The law's plan, adapted while ``walking``: standing, no step is being taken (H1's plan
         from rest asks a 0.70 m first step, beyond its 0.68 reach, and the adapter's search ran
-        on every standing tick, 0.6 ms each)."""
+        on every standing tick, 0.6 ms each). On terrain, walking, the law aims at the footstep
+        sequence planned at the step's start (:mod:`~romoco_drake.planners.footsteps`), and the
+        adaptation keeps the step on its first foothold's surface until the swing commits."""
         sign, t_in_step = phase
-        plan = self.law.plan(rom_state, side_from_sign(sign), t_in_step, WalkCommand(*command))
+        side, cmd = side_from_sign(sign), WalkCommand(*command)
+        on_terrain = frame is not None and all(map(math.isfinite, frame))
+        plan = self.law.plan(rom_state, side, t_in_step, cmd)
+        if self.sequencer is not None and walking and on_terrain and plan.valid:
+            origin, heading = np.array(frame[:3]), frame[3]
+
+            def cost(seq):
+                if os.environ.get("NOMPC"):
+                    return 0.0
+                found = self.mpc.step(side, rom_state, t_in_step, seq, origin, heading, cmd)
+                return None if found is None else found.cost
+
+            steps = self.sequencer.plan(origin, heading, side, cmd, step_start, cost)
+            if os.environ.get("NOMPC") and steps is not None:
+                surface = steps[0].surface if surface is None else surface
+                steps = None
+            mpc = None if steps is None else self.mpc.step(side, rom_state, t_in_step, steps, origin, heading, cmd)
+            if mpc is not None and __import__("os").environ.get("PRED") and (os.environ.get("PRED") == "all" or abs(t_in_step - 0.05) < 0.0011 or t_in_step < 0.0011):
+                print(f"PRED t{t_in_step:.3f} now {np.round(self.mpc._dbg[1], 3)} pre(T={mpc.t_ss:.2f}) {np.round(self.mpc._dbg[0], 3)} x1 {np.round(self.mpc._dbg[2], 3)} u {np.round(mpc.target, 3)}")
+            if mpc is not None:
+                return replace(plan, swing_target=np.array([*mpc.target, 0.0]), t_ss=mpc.t_ss,
+                               time_to_touchdown=max(mpc.t_ss - t_in_step, 0.0), timing_adapted=True)
         if self.adapter is not None and walking:
             region = None
-            if frame is not None and plan.valid and all(map(math.isfinite, frame)):
+            if on_terrain and plan.valid:
                 region = self.terrain.region(np.array(frame[:3]), frame[3], plan.swing_target, plan.swing_yaw,
                                              other_side(plan.stance_side), surface)
             plan = self.adapter.adapt(plan, rom_state, t_in_step, swing, step_t_ss, region)
