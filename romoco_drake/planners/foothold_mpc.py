@@ -1,22 +1,24 @@
-"""The current step's foothold from a short-horizon step-to-step MPC over a footstep sequence's
-foothold regions.
+"""The current step's foothold and timing from a short-horizon step-to-step MPC over a footstep
+sequence's foothold regions.
 
 A foot-placement law aims each step at its orbit from the predicted end-of-step state, and the
 step adapter then clips the step into the supported ground. Over stepping stones that loses the
 law's feedback exactly where it is needed: at a platform's edge the step is cut short, and the
-next, forced long by the gap, is planned only once it is too late. Here the steps of the whole
-sequence (:mod:`~romoco_drake.planners.footsteps`) are chosen together, as in the ALIP model
-predictive footstep control of Acosta & Posa ("Bipedal walking on constrained footholds with MPC
-footstep control", T-RO 2025; the footholds' regions fixed by the sequence, not by mixed-integer
-choice, and per plane the H-LIP step-to-step map instead of ALIP's), per plane:
+next, forced long by the gap, is planned only once it is too late; and on the stones, where each
+foothold may move by a few centimetres only, the pace is left to timing. Here the steps of the
+whole sequence (:mod:`~romoco_drake.planners.footsteps`) are chosen together, as in the ALIP
+model predictive footstep control of Acosta & Posa ("Bipedal walking on constrained footholds
+with MPC footstep control", T-RO 2025; the footholds' regions fixed by the sequence, not by
+mixed-integer choice, and the H-LIP step-to-step map instead of ALIP's), both planes at once:
 
-    x_k = A x_{k-1} + B u_k,  x_0 the law's predicted end-of-step state (p, L/m),
-    min Σ_k ‖x_k − x*_k‖² + r ‖u_k − u*_k‖²
-    s.t. Σ_{j≤k} u_j in step k's foothold region, u_k in the leg's reach,
+    x_k = A x_{k-1} + B u_k,  x_0 the state at the end of the current single support T_1,
+    min Σ_k ‖x_k − x*_k‖² (the last × TERMINAL_WEIGHT) + r ‖u_k − u*_k‖² + w_T (T_1 − T)²
+    s.t. Σ_{j≤k} u_j in step k's foothold region (half-planes in the stance yaw frame),
+         u_k in the swing leg's reach,
 
-with x*_k the law's orbit (period-1 sagittally, period-2 laterally) and u*_k its nominal steps.
-The first step is taken; the rest are planned again at the next step. The planes decouple
-because the regions are boxes in the stance yaw frame (:meth:`TerrainSteps.box`).
+with x = (p, L/m) per plane, x*_k the law's orbit (period-1 sagittally, period-2 laterally) and
+u*_k its nominal steps. Each QP (daqp) is solved for ``TIMING_SAMPLES`` first-step times T_1; the
+least-cost first step and its T_1 are taken, and the rest are planned again at the next tick.
 """
 
 from __future__ import annotations
@@ -42,11 +44,11 @@ STEP_WEIGHT = 0.01
 # The last state's weight against the others' (the orbit is where the horizon must end up).
 TERMINAL_WEIGHT = 10.0
 # Weight of the first step's single-support time's deviation from the command's (per s²).
-TIMING_WEIGHT = float(__import__("os").environ.get("TWT", "1.0"))
+TIMING_WEIGHT = 1.0
 # How far (m) inside its region's edges the MPC keeps each foothold, beyond the terrain's own
 # edge margin: room for the landing error (H1 on h1_stepping_stones landed a sole planned at a
 # stone's outer edge 3 mm over it, rolled off and stalled).
-REGION_MARGIN = float(__import__("os").environ.get("RM", "0.02"))
+REGION_MARGIN = 0.02
 # First-step single-support times tried, evenly over the robot's range (step_reach t_ss_min..max).
 TIMING_SAMPLES = 7
 
@@ -63,10 +65,11 @@ class MpcStep:
 
 
 @functools.lru_cache(maxsize=16)
-def _prediction(z0: float, t_ss: float, t_ds: float, horizon: int) -> tuple[StepToStep, np.ndarray, np.ndarray]:
+def _prediction(z0: float, t_ss: float, t_ds: float, horizon: int
+                ) -> tuple[StepToStep, np.ndarray, np.ndarray]:
     """(map, Φ, Γ): the stacked states X = Φ x_0 + Γ U of ``horizon`` steps of the H-LIP map."""
     s2s = hlip_s2s(z0, t_ss, t_ds, GRAVITY)
-    A, B = s2s.A @ np.diag([1.0, float(__import__('os').environ.get('RHO', 1.0))]), s2s.B
+    A, B = s2s.A, s2s.B
     phi = np.vstack([np.linalg.matrix_power(A, k) for k in range(1, horizon + 1)])
     gamma = np.zeros((2 * horizon, horizon))
     for k in range(horizon):
@@ -107,11 +110,13 @@ class FootholdMpc:
         H_all = np.block([[H, np.zeros((n, n))], [np.zeros((n, n)), H]])
         t_lo = max(self.bounds.t_ss_min, t_in_step / SWING_COMMIT_FRACTION)
         best = None
-        for t_ss in np.linspace(t_lo, max(float(__import__('os').environ.get('TMAX', self.bounds.t_ss_max)), t_lo), TIMING_SAMPLES):
+        for t_ss in np.linspace(t_lo, max(self.bounds.t_ss_max, t_lo), TIMING_SAMPLES):
             x0 = now @ ss_flow(t_ss - t_in_step, z0).T
             residual = [phi @ x0[plane] - x_star[plane] for plane in (0, 1)]
-            f = np.concatenate([gamma.T @ W @ residual[plane] - STEP_WEIGHT * u_star[plane] for plane in (0, 1)])
-            u, value, flag, _ = daqp.solve(H_all, f, A_all, upper, lower, np.zeros(len(A_all), dtype=np.int32))
+            f = np.concatenate([gamma.T @ W @ residual[plane] - STEP_WEIGHT * u_star[plane]
+                                for plane in (0, 1)])
+            sense = np.zeros(len(A_all), dtype=np.int32)
+            u, value, flag, _ = daqp.solve(H_all, f, A_all, upper, lower, sense)
             if flag < 0:
                 continue
             # The objective without the constant daqp leaves out (it changes with t_ss).
@@ -120,7 +125,6 @@ class FootholdMpc:
                 for plane in (0, 1))
             if best is None or cost < best.cost:
                 best = MpcStep((float(u[0]), float(u[n])), float(t_ss), cost)
-                self._dbg = (x0[0].copy(), now[0].copy(), (phi @ x0[0] + gamma @ u[:n])[:2])
         return best
 
     def _constraints(self, stance_side: str, sequence: list[PlannedStep], origin: np.ndarray, heading: float
@@ -131,12 +135,14 @@ class FootholdMpc:
         rows, upper, lower = [], [], []
         cumulative = np.tril(np.ones((n, n)))
         for k, step in enumerate(sequence):
-            A, b = self.steps.halfplanes(origin, heading, step.foothold, step.heading, step.side, REGION_MARGIN)
+            A, b = self.steps.halfplanes(origin, heading, step.foothold, step.heading, step.side,
+                                         REGION_MARGIN)
             rows.append(np.hstack([np.outer(A[:, 0], cumulative[k]), np.outer(A[:, 1], cumulative[k])]))
             upper.append(b)
             lower.append(np.full(len(b), -1e9))
         for k in range(n):
-            (x_lo, x_hi), (y_lo, y_hi) = self.bounds.box(stance_side if k % 2 == 0 else other_side(stance_side))
+            support = stance_side if k % 2 == 0 else other_side(stance_side)
+            (x_lo, x_hi), (y_lo, y_hi) = self.bounds.box(support)
             unit = np.zeros((2, 2 * n))
             unit[0, k], unit[1, n + k] = 1.0, 1.0
             rows.append(unit)

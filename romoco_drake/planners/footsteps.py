@@ -1,26 +1,24 @@
-"""Footstep sequences on terrain: the next few footholds chosen together, and the walk command
-under which a foot-placement law aims at the first of them.
+"""Footstep sequences on terrain: the next few footholds' surfaces chosen together.
 
 A law alone plans one step at a time from the commanded velocity; on terrain each step was then
 moved to the nearest supported ground. Where the ground is broken that choice can leave the next
 step no foothold in reach: H1 stepped short on h1_stepping_stones' start platform and then had
 0.49 m to the first stone it could take. Here the footholds of ``HORIZON`` steps are chosen
-together, by a beam search over the supported footholds nearest each step's nominal one (the
-command's step from the foothold before it), at the least summed squared deviation from the
-nominal steps. This is the discrete half of footstep planning on convex foothold regions
-(Deits & Tedrake, "Footstep planning on uneven terrain with mixed-integer convex optimization",
-Humanoids 2014; per step, the region is fixed here by the search and the point by projection,
-instead of a mixed-integer program). The law then tracks the chosen steps: the walk command is
-replaced by the one whose nominal steps (u*_x, u*_y, next u*_y) are the first two planned steps,
-so an S2S law's orbit is the one through them (the varying desired step of H-LIP stepping,
-Xiong & Ames, T-RO 2022), and the step adapter keeps the step on the first foothold's surface.
+together: a beam search over the supported footholds nearest each step's nominal one (the
+command's step from the foothold before it) keeps the ``BEAM`` sequences of least summed
+squared deviation from the nominal steps, and a caller's score (the foothold MPC's cost,
+:mod:`~romoco_drake.planners.foothold_mpc`) picks one of them. This is the discrete half of
+footstep planning on convex foothold regions (Deits & Tedrake, "Footstep planning on uneven
+terrain with mixed-integer convex optimization", Humanoids 2014; per step, the region is fixed
+here by the search instead of a mixed-integer program); the MPC then places each foothold
+inside its sequence's regions.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -65,14 +63,13 @@ class FootstepSequencer:
         ``cmd``: of the search's ``BEAM`` best sequences, the one of least ``score`` (None:
         infeasible); None when none is. Planned once a step (the step starting at ``step_start``,
         s): the measured stance frame moves by millimetres within a step, and replanning on it
-        would only cost time."""
+        would only cost time (a search and ``BEAM`` MPC scores, about 8 ms on H1). The memo is
+        a cache of the step's first evaluation, as the planner's last plan is of its inputs."""
         key = (step_start, stance_side)
         if step_start is None or key != self._last[0]:
             best, best_score = None, math.inf
             for seq in self._search(np.asarray(origin, dtype=float), heading, stance_side, cmd):
                 value = score(seq)
-                if __import__("os").environ.get("SEQDBG"):
-                    print("  seq", step_start, [(q.surface, round(float(q.position[0]), 3)) for q in seq], value)
                 if value is not None and value < best_score:
                     best, best_score = seq, value
             self._last = (key, best)
@@ -100,29 +97,10 @@ class FootstepSequencer:
                                                       parent.position[:2] + R @ nominal, yaw, side):
                     d = R.T @ (foothold.position[:2] - parent.position[:2]) - nominal
                     step_cost = SAGITTAL_WEIGHT * d[0] ** 2 + LATERAL_WEIGHT * d[1] ** 2
-                    grown.append((cost + step_cost,
-                                  seq + [PlannedStep(foothold.position, yaw, side, foothold.surface, foothold)]))
+                    step = PlannedStep(foothold.position, yaw, side, foothold.surface, foothold)
+                    grown.append((cost + step_cost, seq + [step]))
             if not grown:
                 return []
             grown.sort(key=lambda item: item[0])
             beam = grown[:BEAM]
         return [seq[1:] for _, seq in beam]
-
-    def command(self, plan: list[PlannedStep], origin: np.ndarray, heading: float, stance_side: str,
-                cmd: WalkCommand) -> WalkCommand:
-        """The walk command whose nominal steps (:meth:`FootPlacementLaw.nominal_steps`) from the
-        stance at ``origin``/``heading`` are ``plan``'s first two: u*_x = vx T, and the lateral
-        period-2 pair (own, next) = (∓w + vy T, ±w + vy T), solved for w and vy."""
-        t = cmd.step_time + self.t_ds
-        first, second = plan[0], plan[1]
-        own = _in_frame(first.position - origin, heading)
-        nxt = _in_frame(second.position - first.position, first.heading)
-        sign = 1.0 if stance_side == "left" else -1.0
-        return replace(cmd, vx=own[0] / t, vy=(own[1] + nxt[1]) / (2.0 * t),
-                       step_width=sign * (nxt[1] - own[1]) / 2.0)
-
-
-def _in_frame(d: np.ndarray, heading: float) -> np.ndarray:
-    """The horizontal vector ``d`` in the yaw frame of ``heading``."""
-    c, s = math.cos(heading), math.sin(heading)
-    return np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1]])
