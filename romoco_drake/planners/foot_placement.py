@@ -156,7 +156,7 @@ class FootPlacementPlanner(LeafSystem):
         on_terrain = frame is not None and all(map(math.isfinite, frame))
         plan = self.law.plan(rom_state, side, t_in_step, cmd)
         if self.mpc is not None and walking and on_terrain and plan.valid:
-            found = self._mpc_plan(side, cmd, rom_state, t_in_step, frame, step_start)
+            found = self._mpc_plan(side, cmd, rom_state, t_in_step, frame, step_start, step_t_ss)
             if found is not None:
                 return replace(plan, swing_target=np.array([*found.target, 0.0]), t_ss=found.t_ss,
                                time_to_touchdown=max(found.t_ss - t_in_step, 0.0), timing_adapted=True)
@@ -169,9 +169,10 @@ class FootPlacementPlanner(LeafSystem):
         return plan
 
     def _mpc_plan(self, side: str, cmd: WalkCommand, rom_state: list[float], t_in_step: float,
-                  frame: list[float], step_start: float | None) -> MpcStep | None:
+                  frame: list[float], step_start: float | None, latched: float | None) -> MpcStep | None:
         """The foothold MPC's first step over the footstep sequence planned at the step's start
-        (of the search's sequences, the one of least MPC cost), or None when none is feasible."""
+        (of the search's sequences, the one of least MPC cost), or None when none is feasible;
+        ``latched``: the schedule's single-support time of this step."""
         origin, heading = np.array(frame[:3]), frame[3]
 
         def cost(sequence: list[PlannedStep]) -> float | None:
@@ -181,4 +182,4 @@ class FootPlacementPlanner(LeafSystem):
         steps = self.sequencer.plan(origin, heading, side, cmd, step_start, cost)
         if steps is None:
             return None
-        return self.mpc.step(side, rom_state, t_in_step, steps, origin, heading, cmd)
+        return self.mpc.step(side, rom_state, t_in_step, steps, origin, heading, cmd, latched)

@@ -12,7 +12,8 @@ with MPC footstep control", T-RO 2025; the footholds' regions fixed by the seque
 mixed-integer choice, and the H-LIP step-to-step map instead of ALIP's), both planes at once:
 
     x_k = A x_{k-1} + B u_k,  x_0 the state at the end of the current single support T_1,
-    min Σ_k ‖x_k − x*_k‖² (the last × TERMINAL_WEIGHT) + r ‖u_k − u*_k‖² + w_T (T_1 − T)²
+    min Σ_k ‖x_k − x*_k‖² (the last × TERMINAL_WEIGHT) + r ‖u_k − u*_k‖²
+        + w_T (T_1 − T)² + w_R (T_1 − T_latched)²
     s.t. Σ_{j≤k} u_j in step k's foothold region (half-planes in the stance yaw frame),
          u_k in the swing leg's reach,
 
@@ -24,6 +25,7 @@ least-cost first step and its T_1 are taken, and the rest are planned again at t
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import daqp
@@ -51,6 +53,12 @@ TIMING_WEIGHT = 1.0
 REGION_MARGIN = 0.02
 # First-step single-support times tried, evenly over the robot's range (step_reach t_ss_min..max).
 TIMING_SAMPLES = 7
+# Weight (per s²) of the first step's time's change from the step's current single-support time
+# (the state machine's, which the last plans set): the cost is flat over the times, and the
+# choice jumped between samples late in the step, where the state machine commits it (H1 on
+# the stones ended a step at 0.30 s that the plans a few ticks before and after ended at
+# 0.33-0.35 s; the CoM stopped short of the next stone and fell back).
+RETIMING_WEIGHT = 1.0
 
 
 @dataclass(frozen=True)
@@ -86,10 +94,12 @@ class FootholdMpc:
         self.steps, self.bounds, self.mass, self.t_ds = steps, bounds, mass, t_ds
 
     def step(self, stance_side: str, rom_state: list[float], t_in_step: float, sequence: list[PlannedStep],
-             origin: np.ndarray, heading: float, cmd: WalkCommand) -> MpcStep | None:
+             origin: np.ndarray, heading: float, cmd: WalkCommand, latched: float | None = None
+             ) -> MpcStep | None:
         """The first step of the least-cost plan over the first step's single-support times, from
         the ``rom_state`` (the port's six numbers) ``t_in_step`` s into the step, or None when the
-        regions and the reach leave no solution or the state is not finite."""
+        regions and the reach leave no solution or the state is not finite. ``latched``: the
+        step's current single-support time (s), which a change of timing is weighed against."""
         n = len(sequence)
         z0, t_nominal = cmd.com_height, cmd.step_time
         s2s, phi, gamma = _prediction(z0, t_nominal, self.t_ds, n)
@@ -120,6 +130,8 @@ class FootholdMpc:
             if flag < 0:
                 continue
             # The objective without the constant daqp leaves out (it changes with t_ss).
+            if latched is not None and math.isfinite(latched):
+                value += RETIMING_WEIGHT * (t_ss - latched) ** 2
             cost = float(value) + TIMING_WEIGHT * (t_ss - t_nominal) ** 2 + 0.5 * sum(
                 residual[plane] @ W @ residual[plane] + STEP_WEIGHT * u_star[plane] @ u_star[plane]
                 for plane in (0, 1))
