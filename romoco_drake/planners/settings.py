@@ -77,8 +77,8 @@ class FootPlacementConfig(PlannerSettings):
     every law at 0, ALIP's only gait). ``footstep_mpc``: on terrain, each step and its timing
     from a footstep sequence over the supported surfaces and a step-to-step MPC over its regions
     (planners/foothold_mpc.py) instead of the law and the step adapter; it needs the step
-    adapter's reach. Off by default: on, G1 fell on g1_stairs at 6.49 s (off: 20.63 s) and on
-    g1_slope at 7.34 s (off: no fall); h1_stepping_stones turns it on."""
+    adapter's reach. Off by default: on, G1 fell on g1_stairs at 7.55 s (off: 20.63 s) and on
+    g1_slope tracked worse (vx rms 0.044, off 0.032); h1_stepping_stones turns it on."""
 
     gain: Literal["deadbeat", "converging", "lqr"] = "deadbeat"
     alpha: float = 0.5
