@@ -32,7 +32,7 @@ import numpy as np
 
 from romoco_drake.embedding.outputs import sole_frame
 from romoco_drake.robots.model import RobotModel
-from romoco_drake.rom.terrain import Foothold, Terrain
+from romoco_drake.rom.terrain import Foothold, Terrain, project_inside
 from romoco_drake.rom.types import other_side
 
 # How far (m) a planned foothold may move to reach supported ground: beyond it, the step is taken
@@ -164,6 +164,39 @@ class TerrainSteps:
         return StepGround(origin, heading, rel, liftoff, lift_tilt, sole_tilt(foothold.normal, yaw), slope,
                           status, STEP_DIP * abs(float(rel[2])), foothold.surface)
 
+    def candidates(self, origin: np.ndarray, heading: float, nominal: np.ndarray, yaw: float,
+                   swing_side: str) -> list[Foothold]:
+        """The supported footholds for a step from a stance sole at ``origin`` (3,, world) with
+        ``heading`` toward the world point ``nominal`` (2,), the landing sole turned to ``yaw``:
+        on each surface in reach, the one nearest ``nominal`` (within ``FOOTHOLD_REACH`` of it,
+        inside the leg's reach, within the step-height band of the stance ground)."""
+        c, s = math.cos(heading), math.sin(heading)
+        R = np.array([[c, -s], [s, c]])
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        footprint = self.footprint[swing_side] @ np.array([[cy, sy], [-sy, cy]])
+        W_A, W_b = self._reachable(origin, R, swing_side)
+        band = self._height_band(self.ground_under(origin, heading, other_side(swing_side)))
+        found = []
+        for j, surface in enumerate(self.terrain.surfaces):
+            if not surface.steppable or _distance_to(surface, nominal) > FOOTHOLD_REACH:
+                continue
+            A, b = surface.halfplanes()
+            c_j = project_inside(nominal, np.vstack([A, W_A]),
+                                  np.concatenate([b - np.max(footprint @ A.T, axis=0), W_b]))
+            shift = float(np.linalg.norm(c_j - nominal))
+            if shift > FOOTHOLD_REACH or np.any(W_A @ c_j > W_b + 1e-7):
+                continue
+            if self.terrain.supports(c_j, footprint, self.seam) != j:
+                continue
+            z = surface.height(c_j)
+            if band[0] <= z <= band[1]:
+                found.append(Foothold(np.array([c_j[0], c_j[1], z]), surface.normal.copy(), j, shift))
+        if self.terrain.floor_steppable:
+            floor = self.terrain.foothold(nominal, footprint, FOOTHOLD_REACH, (W_A, W_b), self.seam, -1, band)
+            if floor is not None:
+                found.append(floor)
+        return found
+
     def _clear_of_drop(self, foothold: Foothold, lift_W: np.ndarray, planned: np.ndarray,
                        footprint: np.ndarray, reachable) -> Foothold:
         """``foothold`` moved on along the step from ``lift_W`` until the sole is ``DROP_MARGIN``
@@ -280,6 +313,23 @@ class TerrainSteps:
                                   self._reachable(origin, R, swing_side), surface, 0.0, band)
         if foothold is None:
             return None
+        return self._box(origin, R, footprint, foothold)
+
+    def halfplanes(self, origin: np.ndarray, heading: float, foothold: Foothold, yaw: float, swing_side: str,
+                   margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """(A, b): where a ``swing_side`` sole turned to ``yaw`` is supported ``margin`` (m) inside
+        the edges of ``foothold``'s surface, A q ≤ b, for q in the yaw frame of ``heading``
+        relative to ``origin``; no rows on the floor (its ground is everywhere but under the
+        patches, which :meth:`place` keeps it off)."""
+        if foothold.surface < 0:
+            return np.zeros((0, 2)), np.zeros(0)
+        c, s = math.cos(heading), math.sin(heading)
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        footprint = self.footprint[swing_side] @ np.array([[cy, sy], [-sy, cy]])
+        A, b = self.terrain.surfaces[foothold.surface].halfplanes()
+        return A @ np.array([[c, -s], [s, c]]), b - A @ origin[:2] - np.max(footprint @ A.T, axis=0) - margin
+
+    def _box(self, origin: np.ndarray, R: np.ndarray, footprint: np.ndarray, foothold: Foothold):
         q = R.T @ (foothold.position[:2] - origin[:2])
         lo, hi = np.full(2, -np.inf), np.full(2, np.inf)
         surfaces = self.terrain.surfaces
@@ -321,3 +371,10 @@ def _bound_outside(A: np.ndarray, b: np.ndarray, q: np.ndarray, lo: np.ndarray, 
             lo[axis] = max(lo[axis], box_hi[axis])
         elif box_lo[axis] >= q[axis] - 1e-9:
             hi[axis] = min(hi[axis], box_lo[axis])
+
+
+def _distance_to(surface, xy: np.ndarray) -> float:
+    """The largest violation (m) of the surface outline's half-planes at ``xy``: 0 inside, and a
+    lower bound on the distance outside (a cheap filter before the projection)."""
+    A, b = surface.halfplanes()
+    return max(0.0, float(np.max(A @ xy - b)))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -10,6 +11,8 @@ from pydrake.systems.framework import LeafSystem
 
 from romoco_drake.embedding.terrain import TerrainSteps
 from romoco_drake.modes import Mode
+from romoco_drake.planners.foothold_mpc import FootholdMpc, MpcStep
+from romoco_drake.planners.footsteps import FootstepSequencer, PlannedStep
 from romoco_drake.planners.state_machine import GaitSchedule
 from romoco_drake.rom.planners import FootPlacementLaw
 from romoco_drake.rom.step_adapt import StepAdapter
@@ -40,7 +43,10 @@ class FootPlacementPlanner(LeafSystem):
     (:class:`~romoco_drake.embedding.terrain.TerrainSteps`) and an adapter, the step is also kept
     where the ground supports the sole, its timing adapted to match (a step over a riser lands
     later, so the CoM arrives over it), on the surface the embedding's swing has committed to
-    (``swing_surface``, :data:`~romoco_drake.embedding.terrain.SURFACE_COMMIT`).
+    (``swing_surface``, :data:`~romoco_drake.embedding.terrain.SURFACE_COMMIT`). With
+    ``footstep_mpc`` as well (the planner setting), walking on terrain, the step and its timing
+    come instead from a footstep sequence (:mod:`~romoco_drake.planners.footsteps`) and the
+    foothold MPC over its regions (:mod:`~romoco_drake.planners.foothold_mpc`).
 
     | port | kind | size | meaning |
     |---|---|---|---|
@@ -55,10 +61,12 @@ class FootPlacementPlanner(LeafSystem):
     | ``planner_output`` | out | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` |
     """
 
-    def __init__(self, law: FootPlacementLaw, adapter: StepAdapter | None = None):
+    def __init__(self, law: FootPlacementLaw, adapter: StepAdapter | None = None, footstep_mpc: bool = False):
         super().__init__()
-        self.law, self.adapter = law, adapter
+        self.law, self.adapter, self.footstep_mpc = law, adapter, footstep_mpc
         self.terrain: TerrainSteps | None = None
+        self.sequencer: FootstepSequencer | None = None
+        self.mpc: FootholdMpc | None = None
         # What the loop wires (planners/registry.py): the swing foot and the adapted step times
         # only with an adapter.
         self.t_ds = law.t_ds
@@ -92,6 +100,9 @@ class FootPlacementPlanner(LeafSystem):
         do: the output embedding still moves each foothold onto supported ground."""
         if self.adapter is not None:
             self.terrain = terrain
+            if self.footstep_mpc:
+                self.sequencer = FootstepSequencer(terrain, self.t_ds)
+                self.mpc = FootholdMpc(terrain, self.adapter.bounds, self.adapter.mass, self.t_ds)
             self.loop_inputs += ("stance_frame", "swing_surface")
 
     def summary(self, context) -> dict:
@@ -107,7 +118,7 @@ class FootPlacementPlanner(LeafSystem):
         phase = self.gait_phase_port.Eval(context).tolist()
         command = self.command_port.Eval(context).tolist()
         rom_state = self.rom_state_port.Eval(context).tolist()
-        swing = step_t_ss = frame = surface = None
+        swing = step_t_ss = frame = surface = step_start = None
         walking = True
         if self.terrain is not None:
             frame = self.stance_frame_port.Eval(context).tolist()
@@ -124,25 +135,51 @@ class FootPlacementPlanner(LeafSystem):
             if self.schedule_port.HasValue(context):
                 schedule = self.schedule_port.Eval(context)
                 step_t_ss, walking = schedule.t_ss, schedule.mode == Mode.WALKING
+                step_start = schedule.step_start
         swing_key = None if swing is None else [round(x, _SWING_KEY_DIGITS) for x in swing]
-        key = (phase, command, rom_state, swing_key, step_t_ss, frame, surface, walking)
+        key = (phase, command, rom_state, swing_key, step_t_ss, frame, surface, walking, step_start)
         if key != self._last[0]:
             self._last = (key, self._plan(phase, command, rom_state, swing, step_t_ss, frame, surface,
-                                          walking))
+                                          walking, step_start))
         value.set_value(self._last[1])
 
     def _plan(self, phase: list[float], command: list[float], rom_state: list[float],
               swing: list[float] | None, step_t_ss: float | None, frame: list[float] | None,
-              surface: int | None, walking: bool) -> PlannerOutput:
+              surface: int | None, walking: bool, step_start: float | None) -> PlannerOutput:
         """The law's plan, adapted while ``walking``: standing, no step is being taken (H1's plan
         from rest asks a 0.70 m first step, beyond its 0.68 reach, and the adapter's search ran
-        on every standing tick, 0.6 ms each)."""
+        on every standing tick, 0.6 ms each). With the footstep MPC, on terrain, walking, the
+        MPC's first step and its timing replace the law's (:meth:`_mpc_plan`) and are not
+        adapted further."""
         sign, t_in_step = phase
-        plan = self.law.plan(rom_state, side_from_sign(sign), t_in_step, WalkCommand(*command))
+        side, cmd = side_from_sign(sign), WalkCommand(*command)
+        on_terrain = frame is not None and all(map(math.isfinite, frame))
+        plan = self.law.plan(rom_state, side, t_in_step, cmd)
+        if self.mpc is not None and walking and on_terrain and plan.valid:
+            found = self._mpc_plan(side, cmd, rom_state, t_in_step, frame, step_start, step_t_ss)
+            if found is not None:
+                return replace(plan, swing_target=np.array([*found.target, 0.0]), t_ss=found.t_ss,
+                               time_to_touchdown=max(found.t_ss - t_in_step, 0.0), timing_adapted=True)
         if self.adapter is not None and walking:
             region = None
-            if frame is not None and plan.valid and all(map(math.isfinite, frame)):
+            if on_terrain and plan.valid:
                 region = self.terrain.region(np.array(frame[:3]), frame[3], plan.swing_target, plan.swing_yaw,
                                              other_side(plan.stance_side), surface)
             plan = self.adapter.adapt(plan, rom_state, t_in_step, swing, step_t_ss, region)
         return plan
+
+    def _mpc_plan(self, side: str, cmd: WalkCommand, rom_state: list[float], t_in_step: float,
+                  frame: list[float], step_start: float | None, latched: float | None) -> MpcStep | None:
+        """The foothold MPC's first step over the footstep sequence planned at the step's start
+        (of the search's sequences, the one of least MPC cost), or None when none is feasible;
+        ``latched``: the schedule's single-support time of this step."""
+        origin, heading = np.array(frame[:3]), frame[3]
+
+        def cost(sequence: list[PlannedStep]) -> float | None:
+            found = self.mpc.step(side, rom_state, t_in_step, sequence, origin, heading, cmd)
+            return None if found is None else found.cost
+
+        steps = self.sequencer.plan(origin, heading, side, cmd, step_start, cost)
+        if steps is None:
+            return None
+        return self.mpc.step(side, rom_state, t_in_step, steps, origin, heading, cmd, latched)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from romoco_drake.config import LINK_TICK_OFFSET
 from romoco_drake.embedding.references import contact_model
+from romoco_drake.errors import RomocoError
 from romoco_drake.planners.foot_placement import FootPlacementPlanner
 from romoco_drake.planners.settings import FootPlacementConfig
 from romoco_drake.planners.vimpc import VimpcConfig, VimpcPlanner
@@ -36,7 +37,11 @@ def foot_placement_planner(robot: RobotModel, config: FootPlacementConfig) -> Fo
     t_ds = robot.config.walking.t_ds if config.t_ds is None else config.t_ds
     law = make_planner(config.name, PlannerParams(mass=robot.total_mass, t_ds=t_ds, gain=config.gain,
                                                   alpha=config.alpha))
-    return FootPlacementPlanner(law, step_adapter(robot, config))
+    adapter = step_adapter(robot, config)
+    if config.footstep_mpc and adapter is None:
+        raise RomocoError(f"planner.footstep_mpc needs the step adapter: planner.step_adaptation.enabled "
+                          f"and walking.step_reach in {robot.yaml_path}")
+    return FootPlacementPlanner(law, adapter, config.footstep_mpc)
 
 
 PLANNERS = Registry("planner")

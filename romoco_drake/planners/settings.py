@@ -74,11 +74,16 @@ class FootPlacementConfig(PlannerSettings):
     """A foot-placement law (alip, hlip, mlip, dcm, alip_general), its feedback gain, step
     adaptation and velocity trim. ``t_ds``: double-support time (s) of the laws whose ROM has
     one; None: the robot's ``walking.t_ds`` (the RoMoCo paper's planner comparison, Fig. 8, runs
-    every law at 0, ALIP's only gait)."""
+    every law at 0, ALIP's only gait). ``footstep_mpc``: on terrain, each step and its timing
+    from a footstep sequence over the supported surfaces and a step-to-step MPC over its regions
+    (planners/foothold_mpc.py) instead of the law and the step adapter; it needs the step
+    adapter's reach. Off by default: on, G1 fell on g1_stairs at 7.55 s (off: 20.63 s) and on
+    g1_slope tracked worse (vx rms 0.044, off 0.032); h1_stepping_stones turns it on."""
 
     gain: Literal["deadbeat", "converging", "lqr"] = "deadbeat"
     alpha: float = 0.5
     t_ds: float | None = None
+    footstep_mpc: bool = False
     step_adaptation: StepAdaptationConfig = dataclasses.field(default_factory=StepAdaptationConfig)
     velocity_trim: VelocityTrimConfig = dataclasses.field(default_factory=VelocityTrimConfig)
 

@@ -329,11 +329,11 @@ class Terrain:
         xy = np.asarray(xy, dtype=float)[:2]
         footprint = np.asarray(footprint, dtype=float)
         W_A, W_b = within if within is not None else (np.zeros((0, 2)), np.zeros(0))
-        candidates = [xy, _project_inside(xy, W_A, W_b)]
+        candidates = [xy, project_inside(xy, W_A, W_b)]
         for s in self.surfaces:
             A, b = s.halfplanes()
             reach = np.max(footprint @ A.T, axis=0)
-            candidates.append(_project_inside(xy, np.vstack([A, W_A]), np.concatenate([b - reach, W_b])))
+            candidates.append(project_inside(xy, np.vstack([A, W_A]), np.concatenate([b - reach, W_b])))
             if self.floor_steppable:
                 candidates.extend(_push_outside(xy, A, b - np.min(footprint @ A.T, axis=0)))
         best: Foothold | None = None
@@ -375,7 +375,7 @@ def _higher(other: Surface, mine: Surface, corners: np.ndarray) -> bool:
     return any(other.height(c) > mine.height(c) + 1e-6 for c in corners)
 
 
-def _project_inside(xy: np.ndarray, A: np.ndarray, b: np.ndarray) -> np.ndarray:
+def project_inside(xy: np.ndarray, A: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The nearest point to ``xy`` with A p ≤ b (a convex polygon of unit-row half-planes), or
     ``xy`` itself when the set is empty. Exact: the nearest point of a polygon is ``xy``, its foot
     on an edge's line, or a vertex (two lines' intersection), whichever feasible one is nearest."""
