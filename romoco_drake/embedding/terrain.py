@@ -132,6 +132,12 @@ class TerrainSteps:
         line_foot = np.linalg.matrix_rank(points - points.mean(axis=1, keepdims=True), tol=1e-6) <= 1
         self.seam = SEAM if line_foot else 0.0
 
+    def turned_footprint(self, side: str, yaw: float) -> np.ndarray:
+        """The ``side`` sole's corners, grown by the edge margin, turned to ``yaw`` (k, 2; world
+        axes, relative to the sole's centre)."""
+        c, s = math.cos(yaw), math.sin(yaw)
+        return self.footprint[side] @ np.array([[c, s], [-s, c]])
+
     def place(self, origin: np.ndarray, heading: float, target, swing_yaw: float, swing_side: str,
               liftoff: np.ndarray, surface: int | None = None) -> StepGround:
         """The step's ground from stance ``origin``/``heading``, the plan's ``target`` (x, y rel.
@@ -141,8 +147,7 @@ class TerrainSteps:
         c, s = math.cos(heading), math.sin(heading)
         R = np.array([[c, -s], [s, c]])
         yaw = heading + swing_yaw
-        cy, sy = math.cos(yaw), math.sin(yaw)
-        footprint = self.footprint[swing_side] @ np.array([[cy, sy], [-sy, cy]])
+        footprint = self.turned_footprint(swing_side, yaw)
         planned = origin[:2] + R @ np.asarray(target, dtype=float)[:2]
         reachable = self._reachable(origin, R, swing_side)
         stance_z = self.ground_under(origin, heading, other_side(swing_side))
@@ -172,13 +177,12 @@ class TerrainSteps:
         inside the leg's reach, within the step-height band of the stance ground)."""
         c, s = math.cos(heading), math.sin(heading)
         R = np.array([[c, -s], [s, c]])
-        cy, sy = math.cos(yaw), math.sin(yaw)
-        footprint = self.footprint[swing_side] @ np.array([[cy, sy], [-sy, cy]])
+        footprint = self.turned_footprint(swing_side, yaw)
         W_A, W_b = self._reachable(origin, R, swing_side)
         band = self._height_band(self.ground_under(origin, heading, other_side(swing_side)))
         found = []
         for j, surface in enumerate(self.terrain.surfaces):
-            if not surface.steppable or _distance_to(surface, nominal) > FOOTHOLD_REACH:
+            if not surface.steppable or surface.outside(nominal) > FOOTHOLD_REACH:
                 continue
             A, b = surface.halfplanes()
             c_j = project_inside(nominal, np.vstack([A, W_A]),
@@ -306,8 +310,7 @@ class TerrainSteps:
         c, s = math.cos(heading), math.sin(heading)
         R = np.array([[c, -s], [s, c]])
         yaw = heading + swing_yaw
-        cy, sy = math.cos(yaw), math.sin(yaw)
-        footprint = self.footprint[swing_side] @ np.array([[cy, sy], [-sy, cy]])
+        footprint = self.turned_footprint(swing_side, yaw)
         band = self._height_band(self.ground_under(origin, heading, other_side(swing_side)))
         foothold = self._foothold(origin[:2] + R @ np.asarray(target, dtype=float)[:2], footprint,
                                   self._reachable(origin, R, swing_side), surface, 0.0, band)
@@ -324,8 +327,7 @@ class TerrainSteps:
         if foothold.surface < 0:
             return np.zeros((0, 2)), np.zeros(0)
         c, s = math.cos(heading), math.sin(heading)
-        cy, sy = math.cos(yaw), math.sin(yaw)
-        footprint = self.footprint[swing_side] @ np.array([[cy, sy], [-sy, cy]])
+        footprint = self.turned_footprint(swing_side, yaw)
         A, b = self.terrain.surfaces[foothold.surface].halfplanes()
         return A @ np.array([[c, -s], [s, c]]), b - A @ origin[:2] - np.max(footprint @ A.T, axis=0) - margin
 
@@ -372,9 +374,3 @@ def _bound_outside(A: np.ndarray, b: np.ndarray, q: np.ndarray, lo: np.ndarray, 
         elif box_lo[axis] >= q[axis] - 1e-9:
             hi[axis] = min(hi[axis], box_lo[axis])
 
-
-def _distance_to(surface, xy: np.ndarray) -> float:
-    """The largest violation (m) of the surface outline's half-planes at ``xy``: 0 inside, and a
-    lower bound on the distance outside (a cheap filter before the projection)."""
-    A, b = surface.halfplanes()
-    return max(0.0, float(np.max(A @ xy - b)))

@@ -83,7 +83,7 @@ def sole_support(terrain: Terrain, points_W: np.ndarray) -> tuple[bool, float]:
         return supported, float(np.min(b[None, :] - xy @ A.T)) if len(b) else math.inf
     if terrain.floor_steppable or not terrain.surfaces:
         return supported, math.inf
-    return supported, -min(_outside(surface, centre) for surface in terrain.surfaces)
+    return supported, -min(surface.outside(centre) for surface in terrain.surfaces)
 
 
 def _drop_edges(terrain: Terrain, index: int) -> tuple[np.ndarray, np.ndarray]:
@@ -95,13 +95,6 @@ def _drop_edges(terrain: Terrain, index: int) -> tuple[np.ndarray, np.ndarray]:
     plane = (surface.offset - middles @ surface.normal[:2]) / surface.normal[2]
     drop = np.abs(ground_under(terrain, middles) - plane) > SUPPORT_GAP
     return A[drop], b[drop]
-
-
-def _outside(surface, xy: np.ndarray) -> float:
-    """The largest violation (m) of the surface outline's half-planes at ``xy``: the distance
-    outside it across its nearest edge (a lower bound past a corner)."""
-    A, b = surface.halfplanes()
-    return float(np.max(A @ xy - b))
 
 
 def audit(terrain: Terrain, s: np.ndarray, side: int, points_W: np.ndarray, speed: float, t: float) -> None:

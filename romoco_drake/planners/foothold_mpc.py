@@ -118,6 +118,8 @@ class FootholdMpc:
         W = np.diag(np.r_[np.ones(2 * n - 2), TERMINAL_WEIGHT, TERMINAL_WEIGHT])
         H = gamma.T @ W @ gamma + STEP_WEIGHT * np.eye(n)
         H_all = np.block([[H, np.zeros((n, n))], [np.zeros((n, n)), H]])
+        sense = np.zeros(len(A_all), dtype=np.int32)
+        retime = latched is not None and math.isfinite(latched)
         t_lo = max(self.bounds.t_ss_min, t_in_step / SWING_COMMIT_FRACTION)
         best = None
         for t_ss in np.linspace(t_lo, max(self.bounds.t_ss_max, t_lo), TIMING_SAMPLES):
@@ -125,16 +127,14 @@ class FootholdMpc:
             residual = [phi @ x0[plane] - x_star[plane] for plane in (0, 1)]
             f = np.concatenate([gamma.T @ W @ residual[plane] - STEP_WEIGHT * u_star[plane]
                                 for plane in (0, 1)])
-            sense = np.zeros(len(A_all), dtype=np.int32)
             u, value, flag, _ = daqp.solve(H_all, f, A_all, upper, lower, sense)
             if flag < 0:
                 continue
-            # The objective without the constant daqp leaves out (it changes with t_ss).
-            if latched is not None and math.isfinite(latched):
-                value += RETIMING_WEIGHT * (t_ss - latched) ** 2
-            cost = float(value) + TIMING_WEIGHT * (t_ss - t_nominal) ** 2 + 0.5 * sum(
-                residual[plane] @ W @ residual[plane] + STEP_WEIGHT * u_star[plane] @ u_star[plane]
-                for plane in (0, 1))
+            # daqp's objective leaves out the constant, which changes with t_ss: added back.
+            constant = 0.5 * sum(residual[plane] @ W @ residual[plane]
+                                 + STEP_WEIGHT * u_star[plane] @ u_star[plane] for plane in (0, 1))
+            cost = (float(value) + constant + TIMING_WEIGHT * (t_ss - t_nominal) ** 2
+                    + (RETIMING_WEIGHT * (t_ss - latched) ** 2 if retime else 0.0))
             if best is None or cost < best.cost:
                 best = MpcStep((float(u[0]), float(u[n])), float(t_ss), cost)
         return best

@@ -124,6 +124,11 @@ class Surface:
         object.__setattr__(self, "_A", outward)
         object.__setattr__(self, "_b", np.einsum("ij,ij->i", outward, self.polygon))
 
+    def outside(self, xy: np.ndarray) -> float:
+        """How far (m) ``xy`` lies outside the outline across its nearest edge (the largest
+        half-plane violation; a lower bound past a corner), 0 inside."""
+        return max(0.0, float(np.max(self._A @ xy - self._b)))
+
     def halfplanes(self) -> tuple[np.ndarray, np.ndarray]:
         """(A, b): the outline as A xy ≤ b, one outward unit row per edge."""
         return self._A, self._b
