@@ -408,7 +408,8 @@ def _add_tracking(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel
     (embedding, controller, gate or None)."""
     period, offset = 1.0 / scenario.controller.rate_hz, LINK_TICK_OFFSET
     embedding = builder.AddNamedSystem("embedding", OutputEmbedding(
-        robot, period, EmbeddingCore(robot, contact_model(robot), steps), offset))
+        robot, period, EmbeddingCore(robot, contact_model(robot), steps), offset,
+        latch_plan=isinstance(planner, FootPlacementPlanner)))
     solver = CONTROLLERS[scenario.controller.name].factory(robot, scenario.controller)
     controller = builder.AddNamedSystem("controller",
                                         WholeBodyController(robot, period, solver, offset=offset))

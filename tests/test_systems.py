@@ -10,6 +10,7 @@ from pydrake.multibody.tree import JacobianWrtVariable, MultibodyForces
 from pydrake.systems.analysis import Simulator
 from walk_support import closed_loop
 
+from romoco_drake import runner
 from romoco_drake.control.gravity import contact_gravity_compensation
 from romoco_drake.control.standing import StandingController
 from romoco_drake.embedding.outputs import sole_frame
@@ -22,6 +23,7 @@ from romoco_drake.planners.heading import HeadingHold, base_yaw
 from romoco_drake.robots import kinematics as kinematics_module
 from romoco_drake.robots.kinematics import RobotKinematics, RobotKinematicsSystem
 from romoco_drake.robots.model import load_robot
+from romoco_drake.rom import step_adapt
 from romoco_drake.rom.types import WalkCommand
 from romoco_drake.scenario import load_scenario
 
@@ -137,11 +139,13 @@ def test_closed_loop_evaluates_the_kinematics_once_per_tick(monkeypatch):
     assert ticks <= len(calls) <= ticks + 1  # (+1: the interval's end may fall between a step and a tick)
 
 
-def test_closed_loop_plans_once_per_tick_but_at_step_switches(monkeypatch):
+def test_closed_loop_plans_once_per_tick(monkeypatch):
     """The planner's memo holds across the embedding's swing replan within a tick (which gives the
-    swing's state back only to rounding): one plan a tick while walking, two only in the ticks
-    around a step switch (the new step's plans from the measured foot, then from its latched swing).
-    Before the memo held, about two ticks in three planned twice."""
+    swing's state back only to rounding), and the references follow the plan the embedding's
+    update latched: one plan a tick while walking, at the step switches too. Before the memo held,
+    about two ticks in three planned twice; before the references followed the latched plan, the
+    ticks around each step switch did (the new step's plans from the measured foot, then from its
+    latched swing)."""
     plan_times = []
     original = FootPlacementPlanner._plan
 
@@ -156,9 +160,37 @@ def test_closed_loop_plans_once_per_tick_but_at_step_switches(monkeypatch):
     plan_times.clear()
     ticks = 300  # 0.6 s: two steps of 0.3 s
     simulator.AdvanceTo(2.0 + ticks / scenario.controller.rate_hz)
-    twice = sum(1 for t in set(plan_times) if plan_times.count(t) > 1)
     assert ticks <= len(set(plan_times)) <= ticks + 1
-    assert 1 <= twice <= 6  # two a step; 0.6 s holds parts of three steps
+    assert len(plan_times) == len(set(plan_times))
+
+
+def test_the_link_controller_adapts_a_step_once_per_tick(monkeypatch):
+    """Over the LCM link the tick's updates change the planner's inputs (a new measurement, the
+    command), so a second evaluation of the plan after them is a second step adaptation. H1's
+    first step from rest is out of its reach: each of its adapting ticks searches once (the
+    walking references follow the plan the embedding's update latched). It fails on the old
+    embedding: 2 searches a tick in 38 of its 39 adapting ticks."""
+    ticks = []
+    original = step_adapt.solve_step_qp
+
+    def counting(*args, **kwargs):
+        ticks.append(round(holder["context"].get_time(), 6))
+        return original(*args, **kwargs)
+
+    holder = {}
+    build = runner._simulator
+
+    def keeping(built, scenario, realtime):
+        simulator = build(built, scenario, realtime)
+        holder["context"] = simulator.get_context()
+        return simulator
+
+    monkeypatch.setattr(step_adapt, "solve_step_qp", counting)
+    monkeypatch.setattr(runner, "_simulator", keeping)
+    summary = runner.run_scenario(load_scenario("h1_walk"), duration=1.3, link="via_lcm")
+    assert not summary["fell"]
+    assert len(set(ticks)) >= 20  # the first step adapts for about 0.08 s
+    assert len(ticks) == len(set(ticks))
 
 
 def test_heading_hold_integrates_the_command_and_corrects_the_heading():

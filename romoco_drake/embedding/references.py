@@ -121,6 +121,7 @@ class SwingState(SharedValue):
     # {c} origin x, y, heading, time into the step, and (p_x, p_y, L_cx, L_cy) in {c}, at the latch
     com_start: tuple[float, ...] | None = None
     ground: StepGround | None = None  # the step's footholds and tilt on terrain (None: flat floor)
+    plan: PlannerOutput | None = None  # the plan the last update followed (the references use it)
 
 
 @dataclass(frozen=True)
@@ -201,7 +202,7 @@ class EmbeddingCore:
                 float(out.y[self._swing_yaw_index]) if self._swing_yaw_index is not None else 0.0)
         p_x, p_y, _, l_cx, l_cy, _ = contact_frame_state(kin, origin, heading).tolist()
         com_start = (float(origin[0]), float(origin[1]), heading, tau, p_x, p_y, l_cx, l_cy)
-        return SwingState(stance_side, t, yaws, trajectory, float(out.y[0]), com_start, ground)
+        return SwingState(stance_side, t, yaws, trajectory, float(out.y[0]), com_start, ground, plan)
 
     def update_swing(self, swing: SwingState, tau: float, plan: PlannerOutput) -> SwingState:
         """Replans the swing toward the plan's latest target, from the trajectory's own state at
@@ -210,16 +211,17 @@ class EmbeddingCore:
         On terrain the foothold keeps its surface once the step is committed to it
         (:func:`~romoco_drake.embedding.terrain.committed_surface`)."""
         if swing.trajectory is None or tau >= self.swing_freeze * swing.trajectory.duration:
-            return swing
+            return replace(swing, plan=plan)
         duration = plan.t_ss if plan.timing_adapted and plan.t_ss > tau else swing.trajectory.duration
         if swing.ground is None:
-            return replace(swing, trajectory=swing.trajectory.replan(tau, self._target(plan), duration))
+            trajectory = swing.trajectory.replan(tau, self._target(plan), duration)
+            return replace(swing, trajectory=trajectory, plan=plan)
         g, side = swing.ground, other_side(swing.stance_side)
         ground = self.terrain.place(g.origin, g.heading, plan.swing_target, plan.swing_yaw, side, g.liftoff,
                                     committed_surface(g, tau, duration))
         apex = self.swing_height + self.terrain.apex_raise(ground, side)
         trajectory = swing.trajectory.replan(tau, ground.target, duration, apex)
-        return replace(swing, trajectory=trajectory, ground=ground)
+        return replace(swing, trajectory=trajectory, ground=ground, plan=plan)
 
     @staticmethod
     def _target(plan: PlannerOutput) -> np.ndarray:
