@@ -55,9 +55,10 @@ class OutputEmbedding(LeafSystem):
     was replanned toward), not a second evaluation after the updates: on the hardware link the
     tick's updates change the planner's inputs (a new measurement, the command), and in a tick
     where the step adapter searches (a step out of reach) H1 planned twice, 1.3-1.4 ms, and
-    missed 2.1 % of its 2 ms deadlines (0.06 % with one plan; ``romoco bench realtime``). In
-    simulation the two plans are equal. With ``latch_plan`` False (the VI-MPC's loop) the plan is
-    read after the updates, which is when a wrench MPC's new solution arrives.
+    missed 2.1 % of its 2 ms deadlines (0.06 % with one plan; ``romoco bench realtime``). The
+    simulated walks did not change (the 36-run matrix and every robot's headline run are
+    identical). With ``latch_plan`` False (the VI-MPC's loop) the plan is read after the updates,
+    which is when a wrench MPC's new solution arrives.
 
     Abstract state: the current step's :class:`SwingState` when walking, the
     :class:`StandState` latched on entering standing (with the weight shift before a first step
