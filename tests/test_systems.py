@@ -170,15 +170,13 @@ def test_the_link_controller_adapts_a_step_once_per_tick(monkeypatch):
     first step from rest is out of its reach: each of its adapting ticks searches once (the
     walking references follow the plan the embedding's update latched). It fails on the old
     embedding: 2 searches a tick in 38 of its 39 adapting ticks."""
-    ticks = []
-    original = step_adapt.solve_step_qp
+    ticks, holder = [], {}
+    original, build = step_adapt.solve_step_qp, runner._simulator
 
     def counting(*args, **kwargs):
         ticks.append(round(holder["context"].get_time(), 6))
         return original(*args, **kwargs)
 
-    holder = {}
-    build = runner._simulator
 
     def keeping(built, scenario, realtime):
         simulator = build(built, scenario, realtime)
