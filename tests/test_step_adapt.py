@@ -146,12 +146,14 @@ def test_step_time_never_ends_before_the_step_is_committed():
 
 
 def test_two_step_axis_is_the_exact_box_qp_minimum():
-    """Each axis' (u₁, u₂) box QP against scipy's bounded least squares (BVLS, exact)."""
+    """Each axis' (u₁, u₂) box QP against scipy's bounded least squares (BVLS, exact), over cases
+    that reach every piece of the closed form: u₂ free, at either bound, and u₁ at a bound."""
     from scipy.optimize import lsq_linear
 
     rng = np.random.default_rng(5)
     w_u, w_b = 1.0, 10.0
-    for _ in range(40):
+    pieces = set()
+    for _ in range(300):
         a, g, e, c = rng.uniform(-0.6, 0.6, 4)
         s2 = rng.uniform(1.5, 6.0)
         lo1, lo2 = rng.uniform(-0.4, 0.0, 2)
@@ -165,6 +167,9 @@ def test_two_step_axis_is_the_exact_box_qp_minimum():
         assert lo1 - 1e-12 <= u1[0, 0] <= hi1 + 1e-12
         assert cost[0, 0] == pytest.approx(2.0 * ref.cost, abs=1e-9)
         assert u1[0, 0] == pytest.approx(ref.x[0], abs=1e-6)
+        u2 = "lo2" if ref.x[1] <= lo2 + 1e-9 else "hi2" if ref.x[1] >= hi2 - 1e-9 else "free"
+        pieces |= {u2, "u1 bound" if not lo1 + 1e-9 < ref.x[0] < hi1 - 1e-9 else "u1 free"}
+    assert pieces == {"lo2", "hi2", "free", "u1 bound", "u1 free"}
 
 
 def test_qp_solution_matches_a_dense_search():
