@@ -333,3 +333,31 @@ def test_run_summary_height_and_tilt_errors():
     assert errors["tilt_error_max"] == pytest.approx(max(expected), abs=1e-4)
     assert errors["tilt_error_end"] == pytest.approx(expected[-1], abs=1e-4)
     assert estimate_errors(robot, times, truth, truth)["tilt_error_max"] == pytest.approx(0.0, abs=1e-6)
+
+
+@pytest.mark.parametrize("name", ["kalman", "invariant_ekf"])
+def test_filters_start_at_the_simulations_start_position(name):
+    """The registry's filters start where the simulation starts the robot (a drop test 0.3 m above
+    the nominal pose, as wiring passes it), and at the nominal height without one (hardware)."""
+    from romoco_drake.estimation.registry import ESTIMATORS
+    from romoco_drake.interfaces.receiver import nominal_measurements
+    from romoco_drake.modes import LinkStage
+    from romoco_drake.robots.model import load_robot
+
+    robot = load_robot("g1")
+    measured = nominal_measurements(robot)
+    b = robot.base_q_start
+    nominal = robot.nominal.q[b + 4:b + 7]
+    entry = ESTIMATORS[name]
+    config = entry.config(name=name, rate_hz=500.0)
+    for start in (nominal + [0.0, 0.0, 0.3], None):
+        system = entry.factory(robot, config, start, None)
+        context = system.CreateDefaultContext()
+        for port in entry.facts["inputs"]:  # the robot standing still in its nominal pose
+            values = [float(LinkStage.FRESH)] if port == "link_stage" else measured[port]
+            system.GetInputPort(port).FixValue(context, values)
+        position = system.state_output.Eval(context)[b + 4:b + 7]
+        if start is None:  # horizontally each filter's own frame
+            assert position[2] == pytest.approx(nominal[2], abs=1e-6)
+        else:
+            np.testing.assert_allclose(position, start, atol=1e-12)

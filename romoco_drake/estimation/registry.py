@@ -26,10 +26,11 @@ ESTIMATORS.add("kalman", lambda robot, config, start, terrain: KalmanEstimator(
     "switches; stance feet on the flat floor or the scenario's terrain map",
     config=EstimatorSettings, inputs=("joint_state", "imu", "foot_contact"))
 ESTIMATORS.add("invariant_ekf", lambda robot, config, start, terrain: InvariantEkfEstimator(
-    robot, 1.0 / config.rate_hz, offset=LINK_TICK_OFFSET,
+    robot, 1.0 / config.rate_hz, initial_base_position=start, offset=LINK_TICK_OFFSET,
     start_offset=(config.start_offset_xyz, config.start_offset_rpy),
     terrain=terrain, terrain_anchor_s=config.terrain_anchor_s),
     "contact-aided right-invariant EKF on encoders, IMU rates and contact switches; starts at the nominal "
-    "pose (or start_offset_xyz/rpy off it), yaw and position in its own start frame; on terrain, its "
-    "height anchored to the scenario's map",
+    "orientation and the simulation's start position (the nominal one on hardware), or "
+    "start_offset_xyz/rpy off them, yaw and position in its own start frame; on terrain, its height "
+    "anchored to the scenario's map",
     config=InvariantEkfSettings, inputs=("joint_state", "imu", "foot_contact", "link_stage"))

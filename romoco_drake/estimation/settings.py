@@ -28,8 +28,9 @@ declare_ranges(EstimatorSettings, rate_hz=RATE_HZ)
 class InvariantEkfSettings(EstimatorSettings):
     """The ``invariant_ekf`` entry's settings. ``start_offset_xyz`` (m, world axes) and
     ``start_offset_rpy`` (rad: roll, pitch, yaw about the world axes): how far the pose the filter
-    starts from is off the nominal pose the robot starts at, as for a robot set down by hand
-    (zero: the filter starts at the nominal pose). Tilt converges from gravity and the stance
+    starts from is off the pose the robot starts at, as for a robot set down by hand (zero: the
+    filter starts at that pose: in simulation the scenario's start, raised onto its terrain or by
+    ``initial_height_offset``; on hardware the nominal pose). Tilt converges from gravity and the stance
     feet; yaw and horizontal position are unobservable, so their offset stays as the estimate's
     frame, and what matters is their drift from it (the run summary's ``yaw_drift_rad_per_min``,
     ``position_drift_per_m``). ``terrain_anchor_s`` (s): on terrain (not on the flat floor, where
