@@ -32,7 +32,7 @@ a slot not in contact carries no correlation and a unit placeholder variance.
 
 Yaw and the absolute position are unobservable (no heading sensor, no map): they are estimated in
 the frame the filter starts in and drift with the integrated gyro bias and noise. The filter starts
-where the caller says (the estimator: the robot's start), and finds roll and pitch from gravity.
+where the caller says (the estimator: the nominal pose), and finds roll and pitch from gravity.
 Given a terrain map, the estimator anchors the height to it (:meth:`InvariantEkf.raised`).
 """
 
@@ -240,19 +240,6 @@ class InvariantEkf:
                 s = self.touchdown(self.liftoff(s, i), i, h_B[i])
         return s
 
-    def turning(self, speed: float) -> bool:
-        """Whether a stance foot turning at ``speed`` (m/s: its sole points' largest speed relative
-        to its contact point) has no still contact point, to the kinematics' velocity accuracy."""
-        return speed > self.params.kinematic_velocity_noise
-
-    def reanchor(self, s: InekfState, i: int, h_B: np.ndarray) -> InekfState:
-        """Foot ``i`` anew at p̂ + R̂ h_B: a foot rolling or spinning on the ground carries its contact
-        point (the sole points' mean) along, so the place it landed is no longer where it is.
-        Kept anchored there, a G1 dropped 0.1 m, landing on its heels and rolling flat for 0.1 s,
-        held the base up against the IMU: its height estimate ended 4-6 cm off (vertical velocity
-        0.3 m/s slow as the legs gave), with nothing on the flat floor to correct it."""
-        return self.touchdown(self.liftoff(s, i), i, h_B)
-
     def liftoff(self, s: InekfState, i: int) -> InekfState:
         s = _copy(s)
         s.active[i] = False
@@ -282,7 +269,7 @@ class InvariantEkf:
             H.append(h)
             z.append(s.R @ h_B[i] - (s.d[i] - s.p))
             var.append(np.full(3, p.kinematic_position_noise**2))
-            if not math.isfinite(p.kinematic_velocity_noise) or self.turning(turning[i]):
+            if not math.isfinite(p.kinematic_velocity_noise) or turning[i] > p.kinematic_velocity_noise:
                 continue
             var_v = p.kinematic_velocity_noise**2 * (1.0 + (1.0 - min(confidence[i], 1.0)) * SUSPECT_GAIN)
             innovation = s.R @ -np.asarray(v_rel_B[i]) - s.v

@@ -39,9 +39,8 @@ class InvariantEkfEstimator(ContactEstimator):
     Rate: one update every ``period`` s (discrete state: the packed filter, each foot's time in
     contact, a started flag and the rejection count). The foot's contact point is the mean of its
     sole points; while the foot turns (:meth:`~.contact_estimator.ContactEstimator.turn_speeds`) that
-    point moves, so its velocity is not fused and it is re-anchored where it now is every update
-    (:meth:`~.invariant_ekf.InvariantEkf.reanchor`): it says where the base is only once it stands
-    still. A foot joins the filter on its switch's rising edge and leaves on the falling one.
+    point moves, and its velocity is not fused. A foot joins the filter on its switch's rising edge
+    and leaves on the falling one.
 
     Link gaps: while the station's ``link_stage`` is past FRESH its measurements are the link's
     prediction: the filter propagates at constant velocity (the predicted accelerometer is not
@@ -133,18 +132,15 @@ class InvariantEkfEstimator(ContactEstimator):
         discrete_state.get_mutable_vector(self._blind_index).SetFromVector([float(blind)])
         if was_blind and not blind:
             s = ekf.reacquire(s, h_B)
-        omega_B = gyro - s.gyro_bias
-        turning = self.turn_speeds(self._legs.Eval(context), omega_B)
         for i in range(2):
             if contact[i] and not s.active[i]:
                 s = ekf.touchdown(s, i, h_B[i])
             elif not contact[i] and s.active[i]:
                 s = ekf.liftoff(s, i)
-            elif s.active[i] and ekf.turning(turning[i]):
-                s = ekf.reanchor(s, i, h_B[i])
+        omega_B = gyro - s.gyro_bias
         v_rel_B = np.cross(omega_B, h_B) + v_joint_B
         confidence = ekf.contact_confidence(contact_time)
-        s = ekf.correct(s, h_B, v_rel_B, confidence, turning)
+        s = ekf.correct(s, h_B, v_rel_B, confidence, self.turn_speeds(self._legs.Eval(context), omega_B))
         settled = np.flatnonzero(s.active & (confidence >= 1.0))
         if self._terrain is not None and len(settled):
             gap = np.mean([self._terrain.height(s.d[i][:2]) - s.d[i][2] for i in settled])
