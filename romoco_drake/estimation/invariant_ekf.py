@@ -32,7 +32,7 @@ a slot not in contact carries no correlation and a unit placeholder variance.
 
 Yaw and the absolute position are unobservable (no heading sensor, no map): they are estimated in
 the frame the filter starts in and drift with the integrated gyro bias and noise. The filter starts
-where the caller says (the estimator: the nominal pose), and finds roll and pitch from gravity.
+where the caller says (the estimator: the robot's start), and finds roll and pitch from gravity.
 Given a terrain map, the estimator anchors the height to it (:meth:`InvariantEkf.raised`).
 """
 
