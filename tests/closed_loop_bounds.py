@@ -117,12 +117,14 @@ BOUNDS: dict[str, Bound] = {
     "headline.xo.segment2.rms": ceiling(0.044, 0.02981),
     "headline.xo.segment3.rms": ceiling(0.092, 0.06139),
     "headline.xo.segment4.rms": ceiling(0.044, 0.02982),
-    # The stop after the lateral walk is scored over its last 0.55 s, while the 1 s average still
-    # holds the last sideways steps: it varies with the step phase at the stop, which round-off moves
-    # between hosts (0.0343 on the host that recorded the others, 0.0700 on an AVX-512 EPYC).
+    # The stops after the lateral and the backward walks (segments 5, 7) are scored over their last
+    # 0.55 s, while the 1 s average still holds the last steps: they vary with the step phase at the
+    # stop, which round-off moves between hosts, and with them the BLAS kernel numpy picks for the CPU
+    # (segment 5: 0.0343 on the host that recorded the others, 0.0700 on an AVX-512 EPYC; segment 7:
+    # 0.0436 there, 0.0670 on an AVX2 EPYC, OPENBLAS_CORETYPE Haswell or Zen, 0.0558 with Sandybridge).
     "headline.xo.segment5.rms": ceiling(0.104, 0.06998),
     "headline.xo.segment6.rms": ceiling(0.067, 0.04504),
-    "headline.xo.segment7.rms": ceiling(0.065, 0.04358),
+    "headline.xo.segment7.rms": ceiling(0.1, 0.06699),
     "headline.xo.segment8.rms": ceiling(0.057, 0.03841),
     "headline.xo.step_end_L_error": ceiling(0.046, 0.031),
     "headline.xo.steps": floor(78, 87),
