@@ -2,12 +2,15 @@
 
 import dataclasses
 import functools
+from pathlib import Path
 
 import daqp
 import numpy as np
 import pytest
 from closed_loop_bounds import check
+from pydrake.solvers import ClarabelSolver, MathematicalProgram
 
+from romoco_drake.control import hqp
 from romoco_drake.control.controller import WholeBodyController
 from romoco_drake.control.hqp import Level, solve_hierarchy
 from romoco_drake.control.momentum import MomentumHqp
@@ -122,6 +125,53 @@ def test_hierarchy_reports_an_infeasible_first_level():
     result = solve_hierarchy(np.zeros((0, 2)), np.zeros(0), G, np.full(2, -np.inf), np.array([-1.0, -1.0]),
                              [Level("any", np.eye(2), np.zeros(2), np.ones(2))])
     assert result.failed == "any"
+
+
+def test_daqp_breaks_down_on_an_ill_conditioned_level_that_its_proximal_mode_solves():
+    """A task level of XO's Table I (captured under OpenBLAS's Nehalem kernel), conditioned near
+    2.7e9: w = 0 is feasible, yet DAQP's plain iterations report it infeasible (DAQP's arithmetic is
+    its own, so this holds on every host). The proximal mode at the hierarchy's weight solves it to
+    Clarabel's minimum."""
+    d = np.load(Path(__file__).parent / "data" / "xo_ill_conditioned_level.npz")
+    H, f, A, upper, lower = (d[k] for k in ("H", "f", "A", "upper", "lower"))
+    sense = np.zeros(len(A), dtype=np.int32)
+    assert np.all(lower <= 0.0) and np.all(upper >= 0.0)
+    assert daqp.solve(H, f, A, upper, lower, sense)[2] < 0
+    w, _, flag, _ = daqp.solve(H, f, A, upper, lower, sense, eps_prox=hqp.PROX_EPS * H.diagonal().max())
+    assert flag == 1
+    assert np.all(A @ w <= upper + 1e-9) and np.all(A @ w >= lower - 1e-9)
+    program = MathematicalProgram()
+    v = program.NewContinuousVariables(len(H))
+    program.AddQuadraticCost(H, f, v, is_convex=True)
+    absent = 1e29  # DAQP's ±1e30: no bound
+    program.AddLinearConstraint(A, np.where(lower <= -absent, -np.inf, lower),
+                                np.where(upper >= absent, np.inf, upper), v)
+    reference = ClarabelSolver().Solve(program).GetSolution(v)
+
+    def cost(x):
+        return 0.5 * x @ H @ x + f @ x
+
+    assert cost(w) == pytest.approx(cost(reference), rel=1e-6)
+
+
+def test_a_level_daqp_gives_up_on_is_solved_again_in_the_proximal_mode(monkeypatch):
+    """Every plain DAQP solve made to fail: each level is solved again in the proximal mode, and the
+    hierarchy still finds its optimum (the three-level example above)."""
+    daqp_solve, modes = daqp.solve, []
+
+    def solve(*args, **settings):
+        modes.append("proximal" if "eps_prox" in settings else "plain")
+        return daqp_solve(*args, **settings) if "eps_prox" in settings else (None, None, -1, None)
+
+    monkeypatch.setattr(hqp.daqp, "solve", solve)
+    G, lower, upper = np.array([[0.0, 1.0, 0.0]]), np.array([-np.inf]), np.array([-0.5])
+    levels = [Level("sum", np.array([[1.0, 1.0, 0.0]]), np.array([1.0]), np.ones(1)),
+              Level("point", np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), np.array([3.0, 0.0]), np.ones(2)),
+              Level("free", np.array([[0.0, 0.0, 1.0]]), np.array([5.0]), np.ones(1))]
+    result = solve_hierarchy(np.zeros((0, 3)), np.zeros(0), G, lower, upper, levels)
+    assert modes == ["plain", "proximal"] * 3
+    assert result.failed is None and result.skipped is None
+    np.testing.assert_allclose(result.x, [2.0, -1.0, 5.0], atol=1e-6)
 
 
 def _walking(name="xo", tau=0.1, v=None):
