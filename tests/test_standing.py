@@ -61,3 +61,26 @@ def test_fall_monitor_detects_each_kind_of_fall():
     bad = x.copy()
     bad[0] = np.nan
     assert monitor.check(bad)[0] == "invalid_state"
+
+
+def test_fall_monitor_counts_joint_speeds_past_the_model_limits():
+    """Four samples: at rest, one joint at 0.9 of its URDF limit, then twice at 1.5 (and the base
+    spinning, which has no limit): half the samples over, the peak 1.5 on that joint."""
+    robot = load_robot("xo")
+    monitor = FallMonitor(robot)
+    context = monitor.CreateDefaultContext()
+    x = np.concatenate([robot.nominal.q, np.zeros(robot.nv)])
+    joint = robot.plant.GetJointByName("right_shoulder_yaw", robot.model_instance)
+    i, limit = robot.nq + joint.velocity_start(), joint.velocity_upper_limits()[0]
+    assert monitor.summary(context)["joint_speed_worst"] is None
+    for factor in (0.0, 0.9, 1.5, 1.5):
+        state = x.copy()
+        state[i] = factor * limit
+        state[robot.nq + robot.base_v_start + 2] = 30.0  # base yaw rate (rad/s)
+        monitor.state_input.FixValue(context, state)
+        context.SetDiscreteState(monitor.EvalUniquePeriodicDiscreteUpdate(context))
+    summary = monitor.summary(context)
+    assert summary["fell"] is False
+    assert summary["joint_speed_over_limit"] == 0.5
+    assert summary["joint_speed_peak_ratio"] == pytest.approx(1.5)
+    assert summary["joint_speed_worst"] == "right_shoulder_yaw"

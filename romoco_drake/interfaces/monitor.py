@@ -11,6 +11,11 @@ standing on a landing has not fallen. Over a floor the feet may not step on (a s
 pit) the ground is the lowest surface's top, so a robot down in the pit has fallen. The recorded
 heights are the base's above the ground under it; on the default flat ground, its world z.
 On terrain the monitor also audits where each foot landed (:mod:`~romoco_drake.interfaces.foothold_audit`).
+
+The monitor also counts joint speeds beyond the model's velocity limits (``MultibodyPlant``'s,
+from the robot's model file), up to a fall: a controller can walk well on motions the robot
+cannot make, which neither the tracking errors nor the fall criteria show. (XO's arms swung at
+up to 27 rad/s through Table I, against 6-8 rad/s, while every tracking number looked fine.)
 """
 
 from __future__ import annotations
@@ -65,6 +70,12 @@ class FallMonitor(LeafSystem):
         self._state_index = self.DeclareDiscreteState([0.0, np.nan, 0.0, h0, h0, h0])
         self._audit_index = (None if terrain.is_flat
                              else self.DeclareDiscreteState(foothold_audit.initial_state()))
+        limits = plant.GetVelocityUpperLimits()
+        self._speed_limited = np.flatnonzero(np.isfinite(limits) & (limits > 0.0))
+        self._speed_limits = limits[self._speed_limited]
+        self._speed_names = _velocity_names(plant, robot.model_instance)
+        # Samples with a joint over its limit, samples, the largest |v| / limit, that joint's v index.
+        self._speed_index = self.DeclareDiscreteState([0.0, 0.0, 0.0, -1.0])
         self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
 
     def check(self, x: np.ndarray) -> tuple[str, float]:
@@ -102,6 +113,9 @@ class FallMonitor(LeafSystem):
         if self._audit_index is not None and kin.finite:
             self._audit(kin, discrete_state.get_mutable_vector(self._audit_index).get_mutable_value(),
                         context.get_time())
+        if kin.finite and len(self._speed_limited):
+            counts = discrete_state.get_mutable_vector(self._speed_index).get_mutable_value()
+            self._count_speeds(kin.v, counts)
         s[LAST_HEIGHT] = height
         if np.isfinite(height):
             s[MIN_HEIGHT] = min(s[MIN_HEIGHT], height)
@@ -120,6 +134,24 @@ class FallMonitor(LeafSystem):
             foothold_audit.audit(self._terrain, state, k, r.sole_points_in_world(kin.context, side),
                                  float(np.linalg.norm(v_WF)), t)
 
+    def _count_speeds(self, v: np.ndarray, counts: np.ndarray) -> None:
+        """One sample of the joint speeds against their limits (module docstring)."""
+        ratio = np.abs(v[self._speed_limited]) / self._speed_limits
+        k = int(np.argmax(ratio))
+        counts[0] += float(ratio[k] > 1.0)
+        counts[1] += 1.0
+        if ratio[k] > counts[2]:
+            counts[2], counts[3] = ratio[k], float(self._speed_limited[k])
+
+    def speed_summary(self, context) -> dict:
+        """The run summary's joint-speed keys: ``joint_speed_over_limit`` (the fraction of samples
+        with a joint beyond its velocity limit), ``joint_speed_peak_ratio`` (the largest |v| / limit)
+        and ``joint_speed_worst`` (that joint; None while no joint passed its limit)."""
+        over, samples, peak, worst = context.get_discrete_state(self._speed_index).value()
+        return {"joint_speed_over_limit": round(over / samples, 4) if samples else 0.0,
+                "joint_speed_peak_ratio": round(float(peak), 3),
+                "joint_speed_worst": self._speed_names.get(int(worst)) if peak > 1.0 else None}
+
     def summary(self, context) -> dict:
         audit = {} if self._audit_index is None else foothold_audit.summary(
             context.get_discrete_state(self._audit_index).value())
@@ -132,4 +164,10 @@ class FallMonitor(LeafSystem):
             "fall_reason": FALL_REASONS[int(s[REASON])] if fell else None,
             "base_height_drift_m": float(max(h0 - s[MIN_HEIGHT], s[MAX_HEIGHT] - h0)),
             "final_base_height_m": float(s[LAST_HEIGHT]),
-        } | audit
+        } | self.speed_summary(context) | audit
+
+
+def _velocity_names(plant, instance) -> dict[int, str]:
+    """The joint name of each single-velocity joint of ``instance``, by velocity index."""
+    joints = (plant.get_joint(i) for i in plant.GetJointIndices(instance))
+    return {j.velocity_start(): j.name() for j in joints if j.num_velocities() == 1}
