@@ -146,9 +146,12 @@ class FallMonitor(LeafSystem):
     def speed_summary(self, context) -> dict:
         """The run summary's joint-speed keys: ``joint_speed_over_limit`` (the fraction of samples
         with a joint beyond its velocity limit), ``joint_speed_peak_ratio`` (the largest |v| / limit)
-        and ``joint_speed_worst`` (that joint; None while no joint passed its limit)."""
+        and ``joint_speed_worst`` (that joint; None while no joint passed its limit). All None
+        when the model gives no velocity limit (Cassie's) or nothing was sampled."""
         over, samples, peak, worst = context.get_discrete_state(self._speed_index).value()
-        return {"joint_speed_over_limit": round(over / samples, 4) if samples else 0.0,
+        if not samples:
+            return dict.fromkeys(("joint_speed_over_limit", "joint_speed_peak_ratio", "joint_speed_worst"))
+        return {"joint_speed_over_limit": round(over / samples, 4),
                 "joint_speed_peak_ratio": round(float(peak), 3),
                 "joint_speed_worst": self._speed_names.get(int(worst)) if peak > 1.0 else None}
 
