@@ -235,7 +235,7 @@ class TerrainSteps:
         n = int(math.ceil(float(np.linalg.norm(step)) / 0.01))
         if n == 0:
             return False
-        heights = [self.terrain.height(start + step * k / n) for k in range(n + 1)]
+        heights = self.terrain.heights(start + step * np.arange(n + 1)[:, None] / n)
         return bool(np.max(-np.diff(heights)) > DROP_STEP)
 
     def _foothold(self, planned: np.ndarray, footprint: np.ndarray, reachable, surface: int | None,
@@ -265,7 +265,7 @@ class TerrainSteps:
         corners = self.sole[side] @ np.array([[c, s], [-s, c]])
         if self.terrain.supports(origin[:2], corners) is not None:
             return self.terrain.height(origin[:2])
-        return max(self.terrain.height(origin[:2] + p) for p in corners)
+        return float(np.max(self.terrain.heights(origin[:2] + corners)))
 
     def _reachable(self, origin: np.ndarray, R: np.ndarray, swing_side: str) -> tuple[np.ndarray, np.ndarray]:
         """(A, b): the footholds (world x, y; A p ≤ b) the swing leg can take from the stance

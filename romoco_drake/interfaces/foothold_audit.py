@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from romoco_drake.rom.terrain import EDGE_TOLERANCE, Terrain
+from romoco_drake.rom.terrain import Terrain
 
 PLANTED_GAP, LIFTED_GAP = 0.01, 0.02  # m: lowest sole point above the ground
 PLANTED_SPEED = 0.2  # m/s: the foot frame's origin
@@ -54,15 +54,9 @@ def initial_state() -> list[float]:
 
 def ground_under(terrain: Terrain, xy: np.ndarray, off_surface: float | None = None) -> np.ndarray:
     """The ground's z under each row of ``xy`` (n, 2): the highest surface holding the point,
-    else ``off_surface`` (default: the floor, steppable or not). Vectorised
-    :meth:`Terrain.height`, for the points checked every monitor period."""
-    best = np.full(len(xy), -np.inf)
-    for s in terrain.surfaces:
-        A, b = s.halfplanes()
-        inside = np.all(xy @ A.T <= b + EDGE_TOLERANCE, axis=1)
-        h = (s.offset - xy @ s.normal[:2]) / s.normal[2]
-        best = np.where(inside & (h > best), h, best)
-    return np.where(np.isfinite(best), best, terrain.floor if off_surface is None else off_surface)
+    else ``off_surface`` (default: the floor, steppable or not)."""
+    index, z = terrain.surface_indices(xy)
+    return np.where(index >= 0, z, terrain.floor if off_surface is None else off_surface)
 
 
 def sole_support(terrain: Terrain, points_W: np.ndarray) -> tuple[bool, float]:

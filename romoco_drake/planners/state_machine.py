@@ -301,7 +301,7 @@ class GaitStateMachine(LeafSystem):
         points = self.robot.sole_points_in_world(kin.context, side)
         if self.terrain is None:
             return points[2]
-        return np.array([z - self.terrain.height((x, y)) for x, y, z in points.T])
+        return points[2] - self.terrain.heights(points[:2].T)
 
     @staticmethod
     def _retime(s: GaitSchedule, t: float, plan: PlannerOutput | None) -> bool:

@@ -195,6 +195,22 @@ class Terrain:
         self.solids: list[Solid] = []
         for piece in config.pieces:
             self._add(piece.kind())
+        self._stack()
+
+    def _stack(self) -> None:
+        """All patches' half-planes and planes in arrays (outlines padded with 0·p ≤ 1 rows), so a
+        query tests every patch for many points at once: the controller asks a few hundred
+        heights a tick on a staircase."""
+        k = max((len(s.polygon) for s in self.surfaces), default=0)
+        n = len(self.surfaces)
+        self._A = np.zeros((n, k, 2))
+        self._b = np.ones((n, k))
+        for i, s in enumerate(self.surfaces):
+            A, b = s.halfplanes()
+            self._A[i, :len(b)], self._b[i, :len(b)] = A, b
+        self._normals = np.array([s.normal for s in self.surfaces]).reshape(n, 3)
+        self._offsets = np.array([s.offset for s in self.surfaces])[:, None]
+        self._b_tol = (self._b + EDGE_TOLERANCE)[:, :, None]
 
     @property
     def is_flat(self) -> bool:
@@ -243,22 +259,33 @@ class Terrain:
                                  ramp.friction))
 
     # ------------------------------------------------------------------ queries
+    def surface_indices(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(index, z) for each row of ``xy`` (n, 2): the highest patch over it (-1: the floor) and
+        the ground's z there."""
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        if not self.surfaces:
+            return np.full(len(xy), -1), np.full(len(xy), self.floor)
+        inside = np.all(self._A @ xy.T <= self._b_tol, axis=1)  # (patches, points)
+        n = self._normals
+        h = (self._offsets - n[:, :1] * xy[:, 0] - n[:, 1:2] * xy[:, 1]) / n[:, 2:]
+        h[~inside] = -np.inf
+        index = np.argmax(h, axis=0)
+        z = h[index, np.arange(len(xy))]
+        on_floor = z == -np.inf
+        index[on_floor], z[on_floor] = -1, self.floor
+        return index, z
+
     def surface_index(self, xy: np.ndarray) -> int:
         """The index of the highest patch over ``xy``, or -1 for the floor."""
-        best, index = -math.inf, -1
-        for i, s in enumerate(self.surfaces):
-            A, b = s.halfplanes()
-            if np.all(A @ xy <= b + EDGE_TOLERANCE):
-                h = s.height(xy)
-                if h > best:
-                    best, index = h, i
-        return index
+        return int(self.surface_indices(xy[:2])[0][0]) if self.surfaces else -1
+
+    def heights(self, xy) -> np.ndarray:
+        """The ground's z (m) under each row of ``xy`` (n, 2)."""
+        return self.surface_indices(xy)[1]
 
     def height(self, xy) -> float:
         """The ground's z (m) under the horizontal point ``xy``."""
-        xy = np.asarray(xy, dtype=float)[:2]
-        i = self.surface_index(xy) if self.surfaces else -1
-        return self.floor if i < 0 else self.surfaces[i].height(xy)
+        return float(self.heights(np.asarray(xy, dtype=float)[:2])[0]) if self.surfaces else self.floor
 
     def normal(self, xy) -> np.ndarray:
         """The ground's upward unit normal under ``xy``."""
@@ -273,7 +300,7 @@ class Terrain:
         if not self.surfaces:
             return self.floor
         n = max(2, int(math.ceil(np.linalg.norm(b - a) / spacing)) + 1)
-        return max(self.height(a + s * (b - a)) for s in np.linspace(0.0, 1.0, n))
+        return float(np.max(self.heights(a + np.linspace(0.0, 1.0, n)[:, None] * (b - a))))
 
     def supports(self, xy: np.ndarray, footprint: np.ndarray, seam: float = 0.0) -> int | None:
         """The surface (-1: the floor) that holds the whole footprint (k, 2: sole corners
@@ -289,7 +316,7 @@ class Terrain:
                 return None
             if seam > 0.0:
                 return -1 if self._seamless(corners, lambda c: self.floor, seam) else None
-            return None if any(_overlaps(s, corners) for s in self.surfaces) else -1
+            return None if any(_overlaps(self.surfaces[j], corners) for j in self._near(corners)) else -1
         s = self.surfaces[index]
         if not s.steppable:
             return None
@@ -298,10 +325,19 @@ class Terrain:
         A, b = s.halfplanes()
         if np.any(corners @ A.T > b + EDGE_TOLERANCE):
             return None
-        for j, other in enumerate(self.surfaces):
+        for j in self._near(corners):
+            other = self.surfaces[j]
             if j != index and _overlaps(other, corners) and _higher(other, s, corners):
                 return None
         return index
+
+    def _near(self, corners: np.ndarray) -> np.ndarray:
+        """The patches whose own edges do not separate them from ``corners`` (the first test of
+        :func:`_overlaps`, for every patch at once): the only ones that can overlap the sole."""
+        if not self.surfaces:
+            return np.zeros(0, dtype=int)
+        beyond = self._A @ corners.T >= self._b[:, :, None] - EDGE_TOLERANCE  # (patches, edges, corners)
+        return np.flatnonzero(~np.any(np.all(beyond, axis=2), axis=1))
 
     def _seamless(self, corners: np.ndarray, plane, seam: float) -> bool:
         """Whether the ground all along the sole's outline (its corners and every ``SEAM_SPACING``
@@ -311,13 +347,12 @@ class Terrain:
         for a, b in zip(corners, np.roll(corners, -1, axis=0), strict=True):
             n = int(np.ceil(np.linalg.norm(b - a) / SEAM_SPACING))
             samples.append(a + np.linspace(0.0, 1.0, n + 1)[:, None] * (b - a))
-        for c in np.vstack(samples):
-            j = self.surface_index(c)
-            ground = self.floor_steppable if j < 0 else self.surfaces[j].steppable
-            z = self.floor if j < 0 else self.surfaces[j].height(c)
-            if not ground or abs(z - plane(c)) > seam:
-                return False
-        return True
+        points = np.vstack(samples)
+        index, z = self.surface_indices(points)
+        steppable = np.array([s.steppable for s in self.surfaces] + [self.floor_steppable])
+        if not np.all(steppable[index]):
+            return False
+        return all(abs(zi - plane(c)) <= seam for zi, c in zip(z, points, strict=True))
 
     def foothold(self, xy, footprint: np.ndarray, max_shift: float = math.inf,
                  within: tuple[np.ndarray, np.ndarray] | None = None, seam: float = 0.0,
@@ -337,15 +372,20 @@ class Terrain:
         candidates = [xy, project_inside(xy, W_A, W_b)]
         for s in self.surfaces:
             A, b = s.halfplanes()
-            reach = np.max(footprint @ A.T, axis=0)
-            candidates.append(project_inside(xy, np.vstack([A, W_A]), np.concatenate([b - reach, W_b])))
+            projection = footprint @ A.T
+            reach = np.max(projection, axis=0)
+            # A point of the shrunk outline is at least its largest half-plane violation away
+            # (unit rows); a patch that far out of range adds no candidate within max_shift.
+            if np.max(A @ xy - (b - reach)) <= max_shift:
+                candidates.append(project_inside(xy, np.vstack([A, W_A]), np.concatenate([b - reach, W_b])))
             if self.floor_steppable:
-                candidates.extend(_push_outside(xy, A, b - np.min(footprint @ A.T, axis=0)))
-        best: Foothold | None = None
-        for c in candidates:
-            shift = float(np.linalg.norm(c - xy))
-            if shift > max_shift or (best is not None and shift >= best.shift):
-                continue
+                candidates.extend(_push_outside(xy, A, b - np.min(projection, axis=0)))
+        shifts = [float(np.linalg.norm(c - xy)) for c in candidates]
+        # The nearest candidate that holds wins (the first listed among equally near ones).
+        for k in sorted(range(len(candidates)), key=shifts.__getitem__):
+            c, shift = candidates[k], shifts[k]
+            if shift > max_shift:
+                break
             if np.any(W_A @ c > W_b + 1e-7):
                 continue
             index = self.supports(c, footprint, seam)
@@ -354,8 +394,8 @@ class Terrain:
                 if not band[0] <= z <= band[1]:
                     continue
                 n = np.array([0.0, 0.0, 1.0]) if index < 0 else self.surfaces[index].normal.copy()
-                best = Foothold(np.array([c[0], c[1], z]), n, index, shift)
-        return best
+                return Foothold(np.array([c[0], c[1], z]), n, index, shift)
+        return None
 
 
 def _overlaps(surface: Surface, corners: np.ndarray) -> bool:
