@@ -24,6 +24,8 @@ import numpy as np
 SOLID_DEPTH_BELOW_FLOOR = 0.5
 # Where a point lies on a patch's boundary (m): inside up to this tolerance.
 EDGE_TOLERANCE = 1e-9
+# How far (m) outside a patch's grown outline a floor candidate is put (Terrain.foothold).
+PUSH_MARGIN = 1e-6
 # The spacing (m) at which a sole's outline is sampled for a seam (Terrain.supports).
 SEAM_SPACING = 0.02
 
@@ -370,16 +372,23 @@ class Terrain:
         footprint = np.asarray(footprint, dtype=float)
         W_A, W_b = within if within is not None else (np.zeros((0, 2)), np.zeros(0))
         candidates = [xy, project_inside(xy, W_A, W_b)]
-        for s in self.surfaces:
-            A, b = s.halfplanes()
-            projection = footprint @ A.T
-            reach = np.max(projection, axis=0)
-            # A point of the shrunk outline is at least its largest half-plane violation away
-            # (unit rows); a patch that far out of range adds no candidate within max_shift.
-            if np.max(A @ xy - (b - reach)) <= max_shift:
-                candidates.append(project_inside(xy, np.vstack([A, W_A]), np.concatenate([b - reach, W_b])))
+        if self.surfaces:
+            projection = footprint @ self._A.transpose(0, 2, 1)  # (patches, corners, edges)
+            shrunk = self._b - projection.max(axis=1)  # the outlines the whole sole fits in
+            grown = self._b - projection.min(axis=1)  # the outlines the sole clears outside
+            Axy = self._A @ xy
+            # A point of a shrunk outline is at least its largest half-plane violation away (unit
+            # rows): a patch that far out of range adds no candidate within max_shift.
+            near = np.max(Axy - shrunk, axis=1) <= max_shift
+        for j, s in enumerate(self.surfaces):
+            k = len(s.polygon)
+            if near[j]:
+                candidates.append(project_inside(xy, np.vstack([self._A[j, :k], W_A]),
+                                                 np.concatenate([shrunk[j, :k], W_b])))
             if self.floor_steppable:
-                candidates.extend(_push_outside(xy, A, b - np.min(projection, axis=0)))
+                # Just outside each edge the point is not already beyond: the sole clears the patch.
+                for i in np.flatnonzero(Axy[j, :k] < grown[j, :k] + PUSH_MARGIN):
+                    candidates.append(xy + (grown[j, i] - Axy[j, i] + PUSH_MARGIN) * self._A[j, i])
         shifts = [float(np.linalg.norm(c - xy)) for c in candidates]
         # The nearest candidate that holds wins (the first listed among equally near ones).
         for k in sorted(range(len(candidates)), key=shifts.__getitem__):
@@ -439,10 +448,3 @@ def project_inside(xy: np.ndarray, A: np.ndarray, b: np.ndarray) -> np.ndarray:
     if len(points) == 0:
         return xy
     return points[np.argmin(np.sum((points - xy) ** 2, axis=1))]
-
-
-def _push_outside(xy: np.ndarray, A: np.ndarray, b: np.ndarray) -> list[np.ndarray]:
-    """Points just outside the convex polygon A p ≤ b nearest ``xy`` across each edge (the
-    footprint then clears the patch on the floor)."""
-    margin = 1e-6
-    return [xy + (b[i] - A[i] @ xy + margin) * A[i] for i in range(len(b)) if A[i] @ xy < b[i] + margin]
