@@ -144,3 +144,30 @@ def test_foothold_is_the_nearest_supported_point_by_brute_force():
         nearest = np.min(np.abs(grid[supported, 0] - x))
         assert f.shift <= nearest + 1e-5  # the floor candidate clears an outline by 1 µm
         assert t.supports(f.position[:2], FOOT) is not None
+
+
+def test_batched_heights_match_each_patch_tested_on_its_own():
+    """Terrain.heights / surface_indices (all patches and points at once) against a plain loop
+    over the patches: the highest patch whose outline holds the point, else the floor. A yawed box
+    over a ramp over a flight of stairs, so patches overlap and outlines are not axis-aligned."""
+    pieces = [TerrainPiece(stairs=StairsPiece(start=[1.0, 0.0], steps=4, rise=0.1, run=0.3, width=1.0)),
+              TerrainPiece(ramp=RampPiece(start=[0.5, 0.3], length=1.5, width=0.6, slope_deg=8.0, yaw=0.3)),
+              TerrainPiece(box=BoxPiece(center=[1.6, -0.2], size=[0.5, 0.4], top=0.25, yaw=0.7))]
+    t = Terrain(TerrainConfig(floor=-0.05, pieces=pieces))
+    xy = np.random.default_rng(3).uniform([0.0, -1.0], [3.0, 1.0], size=(2000, 2))
+    expected_z, expected_i = [], []
+    for p in xy:
+        best, index = -math.inf, -1
+        for i, s in enumerate(t.surfaces):
+            A, b = s.halfplanes()
+            if np.all(A @ p <= b + 1e-9) and s.height(p) > best:
+                best, index = s.height(p), i
+        expected_i.append(index)
+        expected_z.append(t.floor if index < 0 else best)
+    index, z = t.surface_indices(xy)
+    assert index.tolist() == expected_i and len(set(expected_i)) == len(t.surfaces) + 1
+    assert z == pytest.approx(expected_z, abs=1e-15)
+    assert t.heights(xy) == pytest.approx(expected_z, abs=1e-15)
+    assert [t.height(p) for p in xy[:50]] == pytest.approx(expected_z[:50], abs=1e-15)
+    assert t.highest_along([0.0, 0.0], [3.0, 0.0]) == pytest.approx(
+        max(t.height([x, 0.0]) for x in np.linspace(0.0, 3.0, 301)), abs=1e-15)
