@@ -389,10 +389,10 @@ class Terrain:
                 # Just outside each edge the point is not already beyond: the sole clears the patch.
                 for i in np.flatnonzero(Axy[j, :k] < grown[j, :k] + PUSH_MARGIN):
                     candidates.append(xy + (grown[j, i] - Axy[j, i] + PUSH_MARGIN) * self._A[j, i])
-        shifts = [float(np.linalg.norm(c - xy)) for c in candidates]
+        shifts = np.hypot(*(np.array(candidates) - xy).T)
         # The nearest candidate that holds wins (the first listed among equally near ones).
-        for k in sorted(range(len(candidates)), key=shifts.__getitem__):
-            c, shift = candidates[k], shifts[k]
+        for k in np.argsort(shifts, kind="stable"):
+            c, shift = candidates[k], float(shifts[k])
             if shift > max_shift:
                 break
             if np.any(W_A @ c > W_b + 1e-7):
