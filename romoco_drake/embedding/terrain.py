@@ -32,7 +32,8 @@ import numpy as np
 
 from romoco_drake.embedding.outputs import sole_frame
 from romoco_drake.robots.model import RobotModel
-from romoco_drake.rom.terrain import Foothold, Terrain, project_inside
+from romoco_drake.rom.polygon import project_inside
+from romoco_drake.rom.terrain import Foothold, Terrain
 from romoco_drake.rom.types import other_side
 
 # How far (m) a planned foothold may move to reach supported ground: beyond it, the step is taken

@@ -20,6 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from romoco_drake.rom.polygon import project_inside
+
 # Solids reach this far below the floor, so no gap opens under a block or a ramp's low edge.
 SOLID_DEPTH_BELOW_FLOOR = 0.5
 # Where a point lies on a patch's boundary (m): inside up to this tolerance.
@@ -427,24 +429,3 @@ def _overlaps(surface: Surface, corners: np.ndarray) -> bool:
 def _higher(other: Surface, mine: Surface, corners: np.ndarray) -> bool:
     """Whether ``other`` rises above ``mine`` anywhere under the footprint's corners."""
     return any(other.height(c) > mine.height(c) + 1e-6 for c in corners)
-
-
-def project_inside(xy: np.ndarray, A: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The nearest point to ``xy`` with A p ≤ b (a convex polygon of unit-row half-planes), or
-    ``xy`` itself when the set is empty. Exact: the nearest point of a polygon is ``xy``, its foot
-    on an edge's line, or a vertex (two lines' intersection), whichever feasible one is nearest."""
-    if len(b) == 0 or np.all(A @ xy <= b + 1e-12):
-        return xy
-    candidates = [xy - (A @ xy - b)[:, None] * A]
-    i, j = np.triu_indices(len(b), 1)
-    pairs = np.stack([A[i], A[j]], axis=1)
-    det = pairs[:, 0, 0] * pairs[:, 1, 1] - pairs[:, 0, 1] * pairs[:, 1, 0]
-    ok = np.abs(det) > 1e-12
-    if ok.any():
-        rhs = np.stack([b[i][ok], b[j][ok]], axis=1)[..., None]
-        candidates.append(np.linalg.solve(pairs[ok], rhs)[..., 0])
-    points = np.vstack(candidates)
-    points = points[np.all(points @ A.T <= b + 1e-9, axis=1)]
-    if len(points) == 0:
-        return xy
-    return points[np.argmin(np.sum((points - xy) ** 2, axis=1))]
