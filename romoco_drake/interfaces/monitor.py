@@ -73,7 +73,7 @@ class FallMonitor(LeafSystem):
         limits = plant.GetVelocityUpperLimits()
         self._speed_limited = np.flatnonzero(np.isfinite(limits) & (limits > 0.0))
         self._speed_limits = limits[self._speed_limited]
-        self._speed_names = _velocity_names(plant, robot.model_instance)
+        self._speed_names = dict(zip(robot.joint_v_index.tolist(), robot.joint_names, strict=True))
         # Samples with a joint over its limit, samples, the largest |v| / limit, that joint's v index.
         self._speed_index = self.DeclareDiscreteState([0.0, 0.0, 0.0, -1.0])
         self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
@@ -169,8 +169,3 @@ class FallMonitor(LeafSystem):
             "final_base_height_m": float(s[LAST_HEIGHT]),
         } | self.speed_summary(context) | audit
 
-
-def _velocity_names(plant, instance) -> dict[int, str]:
-    """The joint name of each single-velocity joint of ``instance``, by velocity index."""
-    joints = (plant.get_joint(i) for i in plant.GetJointIndices(instance))
-    return {j.velocity_start(): j.name() for j in joints if j.num_velocities() == 1}

@@ -215,6 +215,8 @@ class Terrain:
         self._normals = np.array([s.normal for s in self.surfaces]).reshape(n, 3)
         self._offsets = np.array([s.offset for s in self.surfaces])[:, None]
         self._b_tol = (self._b + EDGE_TOLERANCE)[:, :, None]
+        # Whether the ground is steppable, by surface index (-1, the last: the floor).
+        self._steppable = np.array([s.steppable for s in self.surfaces] + [self.floor_steppable])
 
     @property
     def is_flat(self) -> bool:
@@ -353,8 +355,7 @@ class Terrain:
             samples.append(a + np.linspace(0.0, 1.0, n + 1)[:, None] * (b - a))
         points = np.vstack(samples)
         index, z = self.surface_indices(points)
-        steppable = np.array([s.steppable for s in self.surfaces] + [self.floor_steppable])
-        if not np.all(steppable[index]):
+        if not np.all(self._steppable[index]):
             return False
         return all(abs(zi - plane(c)) <= seam for zi, c in zip(z, points, strict=True))
 
