@@ -20,9 +20,10 @@ from romoco_drake.control.terms.mpc_tracking import MpcComTracking, MpcTrackingC
 from romoco_drake.control.terms.pivot_moment import PivotMoment, PivotMomentConfig
 from romoco_drake.control.terms.regularization import Regularization, RegularizationConfig
 from romoco_drake.control.terms.tasks import TaskTracking
-from romoco_drake.control.tscqp import TscQp
+from romoco_drake.control.tscqp import TscQp, TscqpConfig
 from romoco_drake.embedding.outputs import sole_frame
 from romoco_drake.embedding.references import EmbeddingCore
+from romoco_drake.errors import RomocoError
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import load_robot
 from romoco_drake.rom.planners import PlannerParams, make_planner
@@ -94,6 +95,19 @@ def test_task_rows_are_the_weighted_task_acceleration_errors():
     a_cmd = t.yddot_des - t.kp * t.error - t.kd * (t.J @ kin.v - t.ydot_des)
     expected = np.sqrt(t.weight) * (t.J @ x[:robot.nv] + t.Jdot_v - a_cmd)
     np.testing.assert_allclose(_residual(TaskTracking().rows(ctx), x), expected, atol=1e-9)
+
+
+def test_task_weights_set_the_named_outputs_weight_and_leave_the_others():
+    robot, contact, kin, refs, ctx = _tick("walking")
+    config = TscqpConfig(task_weights={"stance_hip_yaw": 0.1, "swing_foot_z": 30.0})
+    weights = TscQp(robot, contact, config).context(kin, refs).tasks.weight
+    names = [refs.names[i] for i in np.flatnonzero(refs.active)]
+    expected = ctx.tasks.weight.copy()
+    expected[names.index("stance_hip_yaw")], expected[names.index("swing_foot_z")] = 0.1, 30.0
+    assert ctx.tasks.weight[names.index("stance_hip_yaw")] == 1.0  # the shared table's
+    np.testing.assert_array_equal(weights, expected)
+    with pytest.raises(RomocoError, match="'stance_hip_jaw' is not an output of robot 'g1'"):
+        TscQp(robot, contact, TscqpConfig(task_weights={"stance_hip_jaw": 0.1}))
 
 
 def test_regularization_is_the_weighted_norms_of_vdot_torque_and_force():

@@ -30,9 +30,10 @@ import daqp
 import numpy as np
 from pydrake.solvers import ClarabelSolver, MathematicalProgram, SolverOptions
 
+from romoco_drake.config import Range, declare_ranges
 from romoco_drake.control.controller import SolverResult, torque_command
 from romoco_drake.control.settings import ControllerSettings
-from romoco_drake.control.tasks import DEFAULT_TASK_GAINS, TaskGain, TaskStack
+from romoco_drake.control.tasks import DEFAULT_TASK_GAINS, TaskGain, TaskStack, with_weight
 from romoco_drake.control.terms.angular_momentum import AngularMomentumConfig, AngularMomentumDamping
 from romoco_drake.control.terms.ankle import AnkleConfig, AnkleStrategy
 from romoco_drake.control.terms.joint_limits import JointLimitConfig, JointLimits
@@ -42,6 +43,7 @@ from romoco_drake.control.terms.regularization import Regularization, Regulariza
 from romoco_drake.control.terms.tasks import TaskTracking
 from romoco_drake.control.terms.term import ConstraintTerm, CostTerm, TermContext
 from romoco_drake.embedding.contact import ContactModel
+from romoco_drake.embedding.outputs import StandingOutputs, WalkingOutputs
 from romoco_drake.embedding.references import TaskReferences
 from romoco_drake.errors import RomocoError
 from romoco_drake.modes import Domain
@@ -62,17 +64,37 @@ class TscqpConfig(ControllerSettings):
     ``solver``: ``daqp`` (default), a dual active-set solver on a workspace kept across ticks,
     exact for this small dense QP and about 30× faster than ``clarabel``, the reference
     (``MathematicalProgram`` solved by Drake's Clarabel), which alone would not fit a 1 kHz tick
-    in Python. Each other section configures one term (:mod:`romoco_drake.control.terms`).
+    in Python. ``task_weights``: an output's task weight in place of the shared table's
+    (:data:`~romoco_drake.control.tasks.DEFAULT_TASK_GAINS`), by output name, measured per robot
+    and scenario (``diagrams/g1_walk.yaml`` says why it lowers ``stance_hip_yaw``). Each other
+    section configures one term (:mod:`romoco_drake.control.terms`).
     """
 
     name: str = "tscqp"
     solver: Literal["daqp", "clarabel"] = "daqp"
+    task_weights: dict[str, float] = dataclasses.field(default_factory=dict)
     regularization: RegularizationConfig = dataclasses.field(default_factory=RegularizationConfig)
     pivot_moment: PivotMomentConfig = dataclasses.field(default_factory=PivotMomentConfig)
     load_split: LoadSplitConfig = dataclasses.field(default_factory=LoadSplitConfig)
     angular_momentum: AngularMomentumConfig = dataclasses.field(default_factory=AngularMomentumConfig)
     ankle: AnkleConfig = dataclasses.field(default_factory=AnkleConfig)
     joint_limits: JointLimitConfig = dataclasses.field(default_factory=JointLimitConfig)
+
+
+declare_ranges(TscqpConfig, task_weights=Range(0.0, 1e4))  # the shared table's span is 1-100
+
+
+def weighted_gains(robot: RobotModel, gains: tuple[TaskGain, ...], weights: dict[str, float]
+                   ) -> tuple[TaskGain, ...]:
+    """``gains`` with each output named in ``weights`` at that weight; a name that is none of the
+    robot's walking or standing outputs is an error naming the outputs it has."""
+    known = WalkingOutputs(robot).names + StandingOutputs.names
+    for name, weight in weights.items():
+        if name not in known:
+            raise RomocoError(f"controller.task_weights: '{name}' is not an output of robot "
+                              f"'{robot.name}' (its outputs: {', '.join(dict.fromkeys(known))})")
+        gains = with_weight(gains, name, weight)
+    return gains
 
 
 @dataclass(frozen=True)
@@ -211,7 +233,7 @@ class TscQp:
         self._rows_a = np.argmax(B, axis=0)  # the velocity row each actuator drives, actuator order
         self._rows_u = np.flatnonzero(B.sum(axis=1) == 0.0)
         self._effort = robot.effort_limits
-        self._tasks = TaskStack(robot, gains)
+        self._tasks = TaskStack(robot, weighted_gains(robot, gains, config.task_weights))
         self.terms = self.make_terms(config)
         self._costs = [t for t in self.terms if isinstance(t, CostTerm)]
         self._limits = [t for t in self.terms if isinstance(t, ConstraintTerm) and t.size]
