@@ -142,11 +142,14 @@ def test_run_walking_overrides_json_and_plots(tmp_path):
     assert {p.rsplit("/", 1)[-1] for p in s["plots"]} == {"g1_walk_velocity.png", "g1_walk_tracking.png"}
 
 
-def test_bench_tick_json():
-    out = romoco("bench", "tick", "--scenario", "g1_walk", "--ticks", "20", "--json")
+@pytest.mark.parametrize(("controller", "solver"), [("tscqp", "daqp"), ("velik", None)])
+def test_bench_tick_json(controller, solver):
+    """A controller without a QP solver (the IKs, the momentum HQP) is timed too."""
+    out = romoco("bench", "tick", "--scenario", "g1_walk", "--controller", controller, "--ticks", "20", "--json")
     assert out.returncode == 0, out.stderr
     s = json.loads(out.stdout.strip().splitlines()[-1])
     assert s["mode"] == "walking" and s["ticks"] == 20
+    assert (s["controller"], s["solver"]) == (controller, solver)
     parts = ("estimator", "state_machine", "planner", "embedding", "controller")
     assert all(s["tick_ms"][p]["median"] > 0 for p in parts)
     assert s["tick_ms"]["total"]["median"] >= s["tick_ms"]["controller"]["median"]

@@ -112,7 +112,8 @@ def bench_tick(scenario: Scenario, warmup: float = 2.0, ticks: int = 500) -> dic
     result["total"] = {k: round(v / 1e3, 4) for k, v in percentiles(list(total)).items()}
     mode = machine.schedule(ctx["state_machine"]).mode
     return {"scenario": scenario.name, "planner": scenario.planner.name,
-            "controller": scenario.controller.name, "solver": scenario.controller.solver, "ticks": ticks,
+            "controller": scenario.controller.name, "solver": getattr(scenario.controller, "solver", None),
+            "ticks": ticks,
             "period_s": period, "mode": str(mode), "tick_ms": result,
             "controller_to_plant": round(result["total"]["median"] / result["plant_step"]["median"], 3)}
 
@@ -296,7 +297,8 @@ def _cmd_bench_tick(args) -> int:
     if args.json:
         print(json.dumps(s))
     else:
-        print(f"{s['scenario']}: {s['planner']} + {s['controller']} ({s['solver']}), {s['ticks']} ticks of "
+        solver = f" ({s['solver']})" if s["solver"] else ""
+        print(f"{s['scenario']}: {s['planner']} + {s['controller']}{solver}, {s['ticks']} ticks of "
               f"{s['period_s'] * 1e3:g} ms while {s['mode']}")
         for name, v in s["tick_ms"].items():
             print(f"  {name:14s} {v['median']:8.3f} ms median  {v['p99']:8.3f} ms p99")
