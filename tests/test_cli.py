@@ -145,7 +145,8 @@ def test_run_walking_overrides_json_and_plots(tmp_path):
 @pytest.mark.parametrize(("controller", "solver"), [("tscqp", "daqp"), ("velik", None)])
 def test_bench_tick_json(controller, solver):
     """A controller without a QP solver (the IKs, the momentum HQP) is timed too."""
-    out = romoco("bench", "tick", "--scenario", "g1_walk", "--controller", controller, "--ticks", "20", "--json")
+    out = romoco("bench", "tick", "--scenario", "g1_walk", "--controller", controller, "--ticks", "20",
+                 "--json")
     assert out.returncode == 0, out.stderr
     s = json.loads(out.stdout.strip().splitlines()[-1])
     assert s["mode"] == "walking" and s["ticks"] == 20
