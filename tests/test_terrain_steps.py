@@ -22,7 +22,15 @@ from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import load_robot
 from romoco_drake.rom.planners import PlannerParams, make_planner
 from romoco_drake.rom.step_adapt import StepAdapter, StepBounds
-from romoco_drake.rom.terrain import BoxPiece, RampPiece, StairsPiece, Terrain, TerrainConfig, TerrainPiece
+from romoco_drake.rom.terrain import (
+    BoxPiece,
+    Foothold,
+    RampPiece,
+    StairsPiece,
+    Terrain,
+    TerrainConfig,
+    TerrainPiece,
+)
 from romoco_drake.rom.types import WalkCommand
 
 RISE, RUN, EDGE = 0.1, 0.3, 1.0  # the flight's riser height, tread depth and first riser's x (m)
@@ -315,6 +323,57 @@ def test_region_on_the_floor_stops_the_toe_at_the_riser(g1):
     ground = steps.place(origin, 0.0, (0.45, -0.2), 0.0, "right", np.array([-0.3, -0.2, 0.0]))
     assert ground.status == "adjusted" and ground.target[2] == 0.0
     assert x_lo <= ground.target[0] <= x_hi + 1e-9
+
+
+def _floor_box_one_patch_at_a_time(steps, origin, R, footprint, q):
+    """The floor foothold's box, each patch bounding it on its own (the rule of
+    ``embedding.terrain._bound_outside``, one patch and one row at a time)."""
+    lo, hi = np.full(2, -np.inf), np.full(2, np.inf)
+    for surface in steps.terrain.surfaces:
+        A, b = surface.halfplanes()
+        AR, limit = A @ R, b - A @ origin[:2] - np.min(footprint @ A.T, axis=0)
+        box_lo, box_hi = np.full(2, -np.inf), np.full(2, np.inf)
+        for row, bound in zip(AR, limit, strict=True):
+            k = int(np.argmax(np.abs(row)))
+            if abs(row[k]) >= math.cos(math.radians(30.0)):
+                if row[k] > 0:
+                    box_hi[k] = min(box_hi[k], bound / row[k])
+                else:
+                    box_lo[k] = max(box_lo[k], bound / row[k])
+        for k in (0, 1):
+            if box_lo[1 - k] < q[1 - k] < box_hi[1 - k]:
+                if box_hi[k] <= q[k] + 1e-9:
+                    lo[k] = max(lo[k], box_hi[k])
+                elif box_lo[k] >= q[k] - 1e-9:
+                    hi[k] = min(hi[k], box_lo[k])
+    return (lo[0], hi[0]), (lo[1], hi[1])
+
+
+def test_floor_box_bounded_by_all_patches_at_once_matches_each_on_its_own(g1):
+    """The floor's box against every patch in one product equals the patches taken one at a time
+    (a yawed flight, a box yawed past 30°, a ramp), at 300 random floor footholds and headings."""
+    flight = StairsPiece(start=[1.0, 0.3], steps=3, rise=RISE, run=RUN, width=0.8, yaw=0.2)
+    pieces = [TerrainPiece(stairs=flight), TerrainPiece(box=BoxPiece(center=[0.2, -0.9], size=[0.4, 0.3],
+                                                                     top=0.1, yaw=0.9)),
+              TerrainPiece(ramp=RampPiece(start=[-1.2, 0.4], length=0.8, width=0.6, slope_deg=7.0, yaw=-0.1))]
+    steps = TerrainSteps(g1, _terrain(*pieces))
+    rng = np.random.default_rng(3)
+    checked = 0
+    for _ in range(300):
+        origin = np.array([*rng.uniform(-1.5, 2.0, 2), 0.0])
+        heading = rng.uniform(-math.pi, math.pi)
+        c, s = math.cos(heading), math.sin(heading)
+        R = np.array([[c, -s], [s, c]])
+        footprint = steps.turned_footprint("right", heading + rng.uniform(-0.3, 0.3))
+        position = np.array([*(origin[:2] + rng.uniform(-0.6, 0.6, 2)), 0.0])
+        if steps.terrain.surface_index(position[:2]) != -1:
+            continue
+        foothold = Foothold(position, np.array([0.0, 0.0, 1.0]), -1, 0.0)
+        q = R.T @ (position[:2] - origin[:2])
+        assert steps._box(origin, R, footprint, foothold) == _floor_box_one_patch_at_a_time(
+            steps, origin, R, footprint, q)
+        checked += 1
+    assert checked > 150
 
 
 # ------------------------------------------------------------------ StepAdapter with a region

@@ -335,14 +335,13 @@ class TerrainSteps:
     def _box(self, origin: np.ndarray, R: np.ndarray, footprint: np.ndarray, foothold: Foothold):
         q = R.T @ (foothold.position[:2] - origin[:2])
         lo, hi = np.full(2, -np.inf), np.full(2, np.inf)
-        surfaces = self.terrain.surfaces
         if foothold.surface >= 0:
-            A, b = surfaces[foothold.surface].halfplanes()
+            A, b = self.terrain.surfaces[foothold.surface].halfplanes()
             _bound_inside(A @ R, b - A @ origin[:2] - np.max(footprint @ A.T, axis=0), lo, hi)
         else:
-            for other in surfaces:
-                A, b = other.halfplanes()
-                _bound_outside(A @ R, b - A @ origin[:2] - np.min(footprint @ A.T, axis=0), q, lo, hi)
+            A, b = self.terrain.stacked_halfplanes()
+            _bound_outside(A @ R, b - A @ origin[:2] - np.min(footprint @ A.transpose(0, 2, 1), axis=1),
+                           q, lo, hi)
         return (float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1]))
 
 
@@ -362,16 +361,25 @@ def _bound_inside(A: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray) 
 
 
 def _bound_outside(A: np.ndarray, b: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
-    """Tightens (lo, hi) about ``q`` (outside the convex region A q ≤ b, a patch grown by the sole)
-    so the box stays clear of the region along the axis that separates them."""
-    box_lo, box_hi = np.full(2, -np.inf), np.full(2, np.inf)
-    _bound_inside(A, b, box_lo, box_hi)
-    for axis in (0, 1):
-        other = 1 - axis
-        if not box_lo[other] < q[other] < box_hi[other]:
-            continue
-        if box_hi[axis] <= q[axis] + 1e-9:
-            lo[axis] = max(lo[axis], box_hi[axis])
-        elif box_lo[axis] >= q[axis] - 1e-9:
-            hi[axis] = min(hi[axis], box_lo[axis])
-
+    """Tightens (lo, hi) about ``q`` (outside every convex region A[i] q ≤ b[i], the patches grown
+    by the sole; A (regions, rows, 2), b (regions, rows)) so the box stays clear of each region
+    along the axis that separates them. Each region's own box is its aligned half-planes'
+    (:func:`_bound_inside`); rows of zeros (padding) bound nothing."""
+    axis = np.argmax(np.abs(A), axis=2)
+    a = np.take_along_axis(A, axis[..., None], axis=2)[..., 0]
+    aligned = np.abs(a) >= _ALIGNED
+    limit = b / np.where(aligned, a, 1.0)
+    box_lo, box_hi = np.empty((len(A), 2)), np.empty((len(A), 2))
+    for k in (0, 1):
+        on_axis = aligned & (axis == k)
+        box_hi[:, k] = np.min(np.where(on_axis & (a > 0.0), limit, np.inf), axis=1)
+        box_lo[:, k] = np.max(np.where(on_axis & (a < 0.0), limit, -np.inf), axis=1)
+    for k in (0, 1):
+        other = 1 - k
+        beside = (box_lo[:, other] < q[other]) & (q[other] < box_hi[:, other])
+        behind = beside & (box_hi[:, k] <= q[k] + 1e-9)
+        ahead = beside & ~behind & (box_lo[:, k] >= q[k] - 1e-9)
+        if behind.any():
+            lo[k] = max(lo[k], box_hi[behind, k].max())
+        if ahead.any():
+            hi[k] = min(hi[k], box_lo[ahead, k].min())

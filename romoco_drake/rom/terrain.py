@@ -218,6 +218,11 @@ class Terrain:
         # Whether the ground is steppable, by surface index (-1, the last: the floor).
         self._steppable = np.array([s.steppable for s in self.surfaces] + [self.floor_steppable])
 
+    def stacked_halfplanes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(A, b) of every patch at once, (patches, k, 2) and (patches, k): outline i is
+        A[i] xy ≤ b[i], padded with 0·xy ≤ 1 rows to the longest outline's k."""
+        return self._A, self._b
+
     @property
     def is_flat(self) -> bool:
         """Whether the terrain is the steppable floor alone (the controller then skips it)."""
