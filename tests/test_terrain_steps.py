@@ -14,6 +14,7 @@ from romoco_drake.embedding.terrain import (
     FOOTHOLD_REACH,
     SURFACE_COMMIT,
     TerrainSteps,
+    _bound_outside,
     committed_surface,
     sole_tilt,
 )
@@ -374,6 +375,9 @@ def test_floor_box_bounded_by_all_patches_at_once_matches_each_on_its_own(g1):
             steps, origin, R, footprint, q)
         checked += 1
     assert checked > 150
+    lo, hi = np.full(2, -np.inf), np.full(2, np.inf)  # no patch at all: the floor is unbounded
+    _bound_outside(np.zeros((0, 0, 2)), np.zeros((0, 0)), np.zeros(2), lo, hi)
+    assert np.all(lo == -np.inf) and np.all(hi == np.inf)
 
 
 # ------------------------------------------------------------------ StepAdapter with a region

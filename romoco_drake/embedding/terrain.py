@@ -372,8 +372,8 @@ def _bound_outside(A: np.ndarray, b: np.ndarray, q: np.ndarray, lo: np.ndarray, 
     box_lo, box_hi = np.empty((len(A), 2)), np.empty((len(A), 2))
     for k in (0, 1):
         on_axis = aligned & (axis == k)
-        box_hi[:, k] = np.min(np.where(on_axis & (a > 0.0), limit, np.inf), axis=1)
-        box_lo[:, k] = np.max(np.where(on_axis & (a < 0.0), limit, -np.inf), axis=1)
+        box_hi[:, k] = np.min(np.where(on_axis & (a > 0.0), limit, np.inf), axis=1, initial=np.inf)
+        box_lo[:, k] = np.max(np.where(on_axis & (a < 0.0), limit, -np.inf), axis=1, initial=-np.inf)
     for k in (0, 1):
         other = 1 - k
         beside = (box_lo[:, other] < q[other]) & (q[other] < box_hi[:, other])
