@@ -206,3 +206,27 @@ def test_point_foot_is_a_force_with_friction_limits_in_the_base_yaw_frame():
         assert np.any(A @ (1.01 * mu * 10.0 * along + [0, 0, 10.0]) > b)
     rows = contact.constraints(kin, "double")
     assert rows.J.shape == (6, robot.nv) and np.linalg.matrix_rank(rows.J) == 6
+
+
+def test_a_cop_shift_tightens_the_torsion_limit():
+    """A yaw moment just inside μ (ρ − s) f_z passes with the CoP planned s off the centroid, one just
+    over it only without the shift (the even-load limit μ ρ f_z): G1's stance foot spun about its heel
+    on stairs under the looser limit."""
+    robot = load_robot("g1")
+    contact = ContactModel(robot)
+    kin = RobotKinematics(robot, np.concatenate([robot.nominal.q, np.zeros(robot.nv)]))
+    foot, shift, weight, mu = contact.feet["left"], 0.04, 340.0, robot.config.feet.friction
+    R_FS, p_FS = sole_frame(robot, "left")
+    r = (R_FS.T @ (foot.points_F - p_FS[:, None]))[:2].T  # the points about the centroid, sole frame
+    limit = mu * (foot.torsion_radius - shift) * weight
+
+    def feasible(m_z: float, cop_shift: float) -> bool:
+        # Even normal forces; tangential ones about the centroid with the net yaw moment m_z.
+        tangential = m_z / np.sum(r * r) * np.column_stack([-r[:, 1], r[:, 0]])
+        f_S = np.column_stack([tangential, np.full(len(r), weight / len(r))])
+        f_W = (contact.sole_rotation(kin, "left") @ f_S.T).T.ravel()
+        A, b = contact.friction_constraints(kin, "left", cop_shift)
+        return bool(np.all(A @ f_W <= b + 1e-9))
+
+    assert feasible(0.95 * limit, shift) and feasible(0.95 * limit, 0.0)
+    assert not feasible(1.05 * limit, shift) and feasible(1.05 * limit, 0.0)

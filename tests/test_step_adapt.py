@@ -183,7 +183,8 @@ def test_qp_solution_matches_a_dense_search():
     for _ in range(30):
         u_n = tuple(rng.uniform(-0.6, 0.6, 2))
         dcm0 = tuple(rng.uniform(-0.2, 0.2, 2))
-        sigma, u = solve_step_qp(u_n, sigma_n, dcm0, box, sigma_box, w, nxt)
+        sigma, u, shift = solve_step_qp(u_n, sigma_n, dcm0, box, sigma_box, w, nxt)
+        assert shift == 0.0
 
         def total(s1, u_n=u_n, dcm0=dcm0):
             s1 = np.atleast_1d(s1)[:, None]

@@ -10,6 +10,7 @@ from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 from romoco_drake.embedding.terrain import (
+    DROP_COP,
     DROP_MARGIN,
     FOOTHOLD_REACH,
     SURFACE_COMMIT,
@@ -208,7 +209,7 @@ def test_region_on_a_tread_is_supported_everywhere(g1):
     terrain = _stairs()
     steps = TerrainSteps(g1, terrain)
     origin = np.array([1.15, 0.1, RISE])
-    (x_lo, x_hi), (y_lo, y_hi) = steps.region(origin, 0.0, (0.35, -0.2), 0.0, "right")
+    (x_lo, x_hi), (y_lo, y_hi) = steps.region(origin, 0.0, (0.35, -0.2), 0.0, "right").box
     fp = steps.footprint["right"]
     assert x_lo == pytest.approx(EDGE + RUN - fp[:, 0].min() - origin[0])
     assert x_hi == pytest.approx(EDGE + 2 * RUN - fp[:, 0].max() - origin[0])
@@ -242,7 +243,7 @@ def test_a_committed_step_keeps_its_tread(g1):
         assert kept == ground.surface
         for d in (-0.01, 0.01):
             assert steps.place(origin, 0.0, (middle + d, -0.2), 0.0, "right", liftoff, kept).surface == kept
-            (x_lo, x_hi), _ = steps.region(origin, 0.0, (middle + d, -0.2), 0.0, "right", kept)
+            (x_lo, x_hi), _ = steps.region(origin, 0.0, (middle + d, -0.2), 0.0, "right", kept).box
             assert x_hi <= last_1 + 1e-9 if kept == 0 else x_lo >= first_2 - 1e-9
     assert SURFACE_COMMIT == pytest.approx(0.3)
 
@@ -266,6 +267,26 @@ def test_a_step_down_lands_clear_of_the_edge_it_steps_over(g1):
     up = steps.place(up_origin, 0.0, (0.16, -0.2), 0.0, "right", liftoff)
     up_nearest = terrain.foothold(_world(up_origin, 0.0, (0.16, -0.2)), _world_footprint(steps, "right", 0.0))
     assert _world(up_origin, 0.0, up.target) == pytest.approx(up_nearest.position[:2])
+
+
+def test_a_step_down_plans_where_it_lands_and_a_cop_toward_the_heel(g1):
+    """Down the flight from tread 2, the plan over the riser: the region's near edge is DROP_MARGIN past
+    the nearest supported foothold, where place() lands the step, and the step may plan its stance CoP
+    up to DROP_COP of the heel's distance back; up the flight the region is the nearest foothold's box
+    and the CoP stays at the pivot."""
+    terrain = _stairs()
+    steps = TerrainSteps(g1, terrain)
+    origin, liftoff, plan = np.array([1.45, 0.1, 2 * RISE]), np.array([0.0, -0.2, 0.0]), (0.18, -0.2)
+    region = steps.region(origin, math.pi, plan, 0.0, "right")
+    nearest = terrain.foothold(_world(origin, math.pi, plan), _world_footprint(steps, "right", math.pi))
+    (x_lo, x_hi), _ = region.box
+    assert x_lo == pytest.approx(origin[0] - nearest.position[0] + DROP_MARGIN) and x_lo < x_hi
+    landed = steps.place(origin, math.pi, plan, 0.0, "right", liftoff).target
+    assert landed[0] == pytest.approx(x_lo, abs=1e-9)
+    assert region.cop == pytest.approx((-DROP_COP * 0.085, 0.0))  # G1's heel: 0.085 m behind the centre
+    up = steps.region(np.array([1.15, 0.1, RISE]), 0.0, (0.16, -0.2), 0.0, "right")
+    assert up.cop is None
+    assert up.box[0][0] == pytest.approx(EDGE + RUN - steps.footprint["right"][:, 0].min() - 1.15)
 
 
 @pytest.mark.parametrize("plan_x, shift", [(0.33, 0.0), (0.27, DROP_MARGIN / 2)])
@@ -301,7 +322,7 @@ def test_region_on_a_stepping_stone_is_supported_everywhere(g1):
     terrain = _terrain(*stones, floor_steppable=False)
     steps = TerrainSteps(g1, terrain)
     origin = np.array([0.0, 0.1, 0.1])
-    box = steps.region(origin, 0.0, (0.6, -0.25), 0.0, "right")
+    box = steps.region(origin, 0.0, (0.6, -0.25), 0.0, "right").box
     ground = steps.place(origin, 0.0, (0.6, -0.25), 0.0, "right", np.array([0.0, -0.2, 0.0]))
     assert ground.status == "adjusted"
     (x_lo, x_hi), (y_lo, y_hi) = box
@@ -319,7 +340,7 @@ def test_region_on_the_floor_stops_the_toe_at_the_riser(g1):
     terrain = _stairs()
     steps = TerrainSteps(g1, terrain)
     origin = np.array([0.5, 0.1, 0.0])
-    (x_lo, x_hi), _ = steps.region(origin, 0.0, (0.45, -0.2), 0.0, "right")
+    (x_lo, x_hi), _ = steps.region(origin, 0.0, (0.45, -0.2), 0.0, "right").box
     assert origin[0] + x_hi + steps.footprint["right"][:, 0].max() == pytest.approx(EDGE)
     ground = steps.place(origin, 0.0, (0.45, -0.2), 0.0, "right", np.array([-0.3, -0.2, 0.0]))
     assert ground.status == "adjusted" and ground.target[2] == 0.0
@@ -497,3 +518,20 @@ def test_a_sole_half_over_an_edge_is_not_down(g1):
     assert not _feet_down(g1, q, block)
     whole = _terrain(TerrainPiece(box=BoxPiece(center=[0.0, 0.0], size=[1.0, 1.0], top=top)))
     assert _feet_down(g1, q, whole)
+
+
+def test_a_far_foothold_plans_the_cop_toward_the_heel_and_a_shorter_step():
+    """A region 0.3 m ahead, far past the law's step at 0.4 m/s (a step down stairs): with the CoP
+    free in [−5 cm, 0] the adapter moves it back and ends the step sooner than with the pivot, and
+    the DCM about that CoP, ξ(T) = d + (ξ(t) − d) e^{λ(T − t)}, still lands past the foothold."""
+    plan, state = _walking_plan()
+    adapter, region, tau = StepAdapter(BOUNDS, MASS), ((0.3, 0.36), (-0.3, -0.1)), 0.05
+    pivot = adapter.adapt(plan, state, tau, region=region)
+    shifted = adapter.adapt(plan, state, tau, region=region, cop=(-0.05, 0.0))
+    assert pivot.cop_shift == 0.0 and -0.05 - 1e-12 <= shifted.cop_shift < -0.01
+    assert shifted.t_ss < pivot.t_ss - 0.02
+    lam = math.sqrt(9.81 / Z0)
+    xi = state[0] + state[4] / (MASS * Z0 * lam)
+    d = shifted.cop_shift
+    landed = d + (xi - d) * math.exp(lam * (shifted.t_ss - tau))
+    assert landed > shifted.swing_target[0] >= region[0][0] - 1e-12

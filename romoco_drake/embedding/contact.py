@@ -137,6 +137,10 @@ class FootContact:
     b: np.ndarray
     motion_basis: np.ndarray  # 3k × r orthonormal: the point velocities a rigid foot can have, in S
     offsets_F: np.ndarray  # 3×k: the contact points relative to the sole centroid, foot frame
+    # The torsion rows' change per metre the CoP is moved off the centroid (2 × 3k; none for a point
+    # foot), and the radius ρ of the torsion limit, beyond which a shift takes no more.
+    torsion_per_shift: np.ndarray
+    torsion_radius: float
 
 
 def _foot_contact(robot: RobotModel, side: str, line_contact: bool, friction_margin: float, cop_margin: float,
@@ -179,10 +183,11 @@ def _foot_contact(robot: RobotModel, side: str, line_contact: bool, friction_mar
     U, sv, _ = np.linalg.svd(G.T, full_matrices=False)
     motion = U[:, sv > 1e-9 * sv[0]]
     offsets = points_F - p_FS[:, None]
-    arrays = (np.asfortranarray(points_F), R_FS, p_FS, G, A_w @ G, b, motion, offsets)
+    per_shift = np.zeros((0, G.shape[1])) if robot.is_point_foot else np.tile(mu * G[2], (2, 1))
+    arrays = (np.asfortranarray(points_F), R_FS, p_FS, G, A_w @ G, b, motion, offsets, per_shift)
     for a in arrays:
         a.setflags(write=False)
-    return FootContact(side, robot.foot_frames[side], names, *arrays)
+    return FootContact(side, robot.foot_frames[side], names, *arrays, rho)
 
 
 class ContactModel:
@@ -197,7 +202,8 @@ class ContactModel:
     |f_x|, |f_y| ≤ μ (1 − ``friction_margin``) f_z with μ = ``feet.friction``; the CoP
     (−m_y, m_x)/f_z at least ``cop_margin`` (m) inside the sole region; and the yaw moment
     |m_z| ≤ μ ρ f_z (torsional friction, ρ the sole points' mean distance from the centroid,
-    halved for line contacts). Point feet: the normal force and friction rows only.
+    halved for line contacts; less with a planned CoP shift, :meth:`friction_constraints`). Point
+    feet: the normal force and friction rows only.
     """
 
     def __init__(self, robot: RobotModel, *, friction_margin: float = 0.0, cop_margin: float = 0.0,
@@ -293,11 +299,21 @@ class ContactModel:
         R, p = kin.frame_pose(foot.frame)
         return R @ foot.p_FS + p
 
-    def friction_constraints(self, kin: RobotKinematics, side: str) -> tuple[np.ndarray, np.ndarray]:
-        """A, b with A f ≤ b on the foot's stacked point forces f expressed in world."""
+    def friction_constraints(self, kin: RobotKinematics, side: str, cop_shift: float = 0.0
+                             ) -> tuple[np.ndarray, np.ndarray]:
+        """A, b with A f ≤ b on the foot's stacked point forces f expressed in world. With the CoP
+        planned ``cop_shift`` (m) off the sole centroid, the torsion limit is μ (ρ − |shift|) f_z:
+        the load no longer spread evenly, friction resists less yaw moment, as the rectangle's
+        contact wrench cone lowers its yaw bound by μ |τ_y| (:mod:`~romoco_drake.rom.wrench_cone`).
+        Found on G1 stepping down stairs with its CoP toward the heel: under the even-load limit its
+        stance foot spun 10-15° about the heel as the swing leg reached forward."""
         foot = self.feet[side]
         R_WS = self.sole_rotation(kin, side)
-        rows, cols = foot.A_S.shape
+        A_S = foot.A_S
+        if cop_shift != 0.0 and len(foot.torsion_per_shift):
+            A_S = A_S.copy()
+            A_S[-2:] += min(abs(cop_shift), foot.torsion_radius) * foot.torsion_per_shift
+        rows, cols = A_S.shape
         # Per point: A_S,i f_S,i = A_S,i R_SW f_W,i.
-        A = (foot.A_S.reshape(rows, cols // 3, 3) @ R_WS.T).reshape(rows, cols)
+        A = (A_S.reshape(rows, cols // 3, 3) @ R_WS.T).reshape(rows, cols)
         return A, foot.b

@@ -40,7 +40,7 @@ from romoco_drake.embedding.terrain import StepGround, TerrainSteps, committed_s
 from romoco_drake.modes import Domain, Mode
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
-from romoco_drake.rom.types import MpcReference, PlannerOutput, other_side
+from romoco_drake.rom.types import SWING_COMMIT_FRACTION, MpcReference, PlannerOutput, other_side
 from romoco_drake.spatial import GRAVITY
 from romoco_drake.values import SharedValue
 
@@ -87,6 +87,9 @@ class TaskReferences(SharedValue):
     mpc: MpcReference | None = None
     # The plan's step was bounded by the step adapter: the robot is recovering from a push.
     recovering: bool = False
+    # The moment (N·m, world x, y) the stance forces are to have about the sole centre: the weight
+    # at the plan's shifted CoP (PlannerOutput.cop_shift), or None (the pivot).
+    pivot_moment: np.ndarray | None = None
 
     @functools.cached_property
     def com_plan(self) -> np.ndarray | None:
@@ -122,6 +125,10 @@ class SwingState(SharedValue):
     com_start: tuple[float, ...] | None = None
     ground: StepGround | None = None  # the step's footholds and tilt on terrain (None: flat floor)
     plan: PlannerOutput | None = None  # the plan the last update followed (the references use it)
+    # The plan's CoP shift (PlannerOutput.cop_shift), as it was before the step was committed, and
+    # the largest one this step has planned (m).
+    cop_shift: float = 0.0
+    cop_reach: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -202,7 +209,8 @@ class EmbeddingCore:
                 float(out.y[self._swing_yaw_index]) if self._swing_yaw_index is not None else 0.0)
         p_x, p_y, _, l_cx, l_cy, _ = contact_frame_state(kin, origin, heading).tolist()
         com_start = (float(origin[0]), float(origin[1]), heading, tau, p_x, p_y, l_cx, l_cy)
-        return SwingState(stance_side, t, yaws, trajectory, float(out.y[0]), com_start, ground, plan)
+        return SwingState(stance_side, t, yaws, trajectory, float(out.y[0]), com_start, ground, plan,
+                          plan.cop_shift, abs(plan.cop_shift))
 
     def update_swing(self, swing: SwingState, tau: float, plan: PlannerOutput) -> SwingState:
         """Replans the swing toward the plan's latest target, from the trajectory's own state at
@@ -210,6 +218,9 @@ class EmbeddingCore:
         adapted; both stay as they are once the robot's ``swing_target_freeze`` of the swing has passed.
         On terrain the foothold keeps its surface once the step is committed to it
         (:func:`~romoco_drake.embedding.terrain.committed_surface`)."""
+        if swing.trajectory is not None and tau < SWING_COMMIT_FRACTION * swing.trajectory.duration:
+            shift = plan.cop_shift
+            swing = replace(swing, cop_shift=shift, cop_reach=max(swing.cop_reach, abs(shift)))
         if swing.trajectory is None or tau >= self.swing_freeze * swing.trajectory.duration:
             return replace(swing, plan=plan)
         duration = plan.t_ss if plan.timing_adapted and plan.t_ss > tau else swing.trajectory.duration
@@ -301,11 +312,12 @@ class EmbeddingCore:
             y_d[i:i + 3], yd_d[i:i + 3], ydd_d[i:i + 3] = swing.trajectory.evaluate(tau)
         active = self._walking_active["single" if single else "double"]
         domain = _SINGLE_SUPPORT[stance] if single else Domain.DOUBLE
-        flow = None
+        flow, shift = None, (0.0, 0.0)
         if single and swing.com_start is not None:
             flow = (swing.com_start, tau, plan.com_height, self.robot.total_mass)
+            shift = swing.cop_shift, swing.cop_reach
         return self._pack(Mode.WALKING, domain, stance, out, y_d, yd_d, ydd_d, active, kin, flow, plan.mpc,
-                          plan.step_bounded)
+                          plan.step_bounded, *shift)
 
     def _follow_ground(self, kin: RobotKinematics, swing: SwingState, plan: PlannerOutput, tau: float,
                        t_ss: float, y_d, yd_d, ydd_d) -> None:
@@ -367,9 +379,14 @@ class EmbeddingCore:
 
     def _pack(self, mode: Mode, domain: Domain, stance: str, out: Output, y_d, yd_d, ydd_d, active,
               kin: RobotKinematics, com_flow: tuple | None = None,
-              mpc: MpcReference | None = None, recovering: bool = False) -> TaskReferences:
+              mpc: MpcReference | None = None, recovering: bool = False, cop_shift: float = 0.0,
+              cop_reach: float = 0.0) -> TaskReferences:
+        """The references of one tick; ``cop_shift``: the stance CoP's planned shift along the stance
+        heading in single support (``com_flow``'s), the pivot moment's target; ``cop_reach``: the
+        largest this step has planned, which tightens the stance foot's torsion limit for the rest
+        of it (the limit does not loosen as the shift eases off mid-step)."""
         holonomic = self.contact.constraints(kin, domain)
-        blocks = [self.contact.friction_constraints(kin, side) for side in domain.feet]
+        blocks = [self.contact.friction_constraints(kin, side, cop_reach) for side in domain.feet]
         if len(blocks) == 1:
             A_f, b_f = blocks[0]
         else:
@@ -380,8 +397,12 @@ class EmbeddingCore:
                 r, c = r + A.shape[0], c + A.shape[1]
             b_f = np.concatenate([b for _, b in blocks]) if blocks else np.zeros(0)
         n_f = A_f.shape[1]
+        moment = None
+        if cop_shift != 0.0:
+            heading, weight = com_flow[0][2], self.robot.total_mass * GRAVITY
+            moment = cop_shift * weight * np.array([math.sin(heading), -math.cos(heading)])
         return TaskReferences(mode, domain, stance, out.names, out.y, out.J, out.Jdot_v, y_d, yd_d, ydd_d,
-                              active, holonomic, n_f, A_f, b_f, com_flow, mpc, recovering)
+                              active, holonomic, n_f, A_f, b_f, com_flow, mpc, recovering, moment)
 
 
 def alip_com_flow(start: tuple[float, ...], tau: float, height: float, mass: float) -> np.ndarray:

@@ -5,6 +5,10 @@ when the ground is not the flat floor (:mod:`romoco_drake.rom.terrain`).
   the nearest foothold where the whole sole is supported (:meth:`Terrain.foothold`) within
   ``FOOTHOLD_REACH``; its height becomes the swing target's z. With none in reach the step is
   taken in place (the swing foot lands where it lifted off, ground it stood on) and counted.
+  The planner's step adaptation keeps its step in :meth:`TerrainSteps.region`; a step down an
+  edge there lands where this module puts it (``DROP_MARGIN`` past the edge) and may plan its
+  stance CoP toward the heel (``DROP_COP``): from a foot at the edge the step is about 0.3 m, and
+  with the pivot alone the DCM reached it only after a step of more than ``t_ss_max``.
 - **Swing clearance.** The apex rises above the highest ground under the sole's path, from the
   heel at lift-off to the toe at touchdown (a riser's edge between two treads).
 - **Sole tilt.** The swing sole turns from the tilt of the ground it lifted off to the tilt of
@@ -60,6 +64,10 @@ SURFACE_COMMIT = 0.3
 # ``edge_margin`` past the edge it steps over, and a swing lagging its path by a few centimetres
 # put G1's heel on the landing's edge with its toe still above the first tread (g1_stairs).
 DROP_STEP, DROP_MARGIN, DROP_QUARTERS = 0.02, 0.05, 4
+# On a step down an edge the stance CoP may move toward the heel by up to this fraction of the heel's
+# distance behind the sole centre (G1: 0.05 of 0.085 m), so the DCM reaches the far foothold at a
+# step time near the gait's (StepRegion, rom/step_adapt.py CopShift).
+DROP_COP = 0.6
 # The highest step up or down (m), as a fraction of the robot's CoM height z0 (G1: 0.2 m; the
 # stairs' 0.1 m risers well inside; a leg at z0 that reaches 0.3 z0 down still bends its knee).
 STEP_HEIGHT = 0.3
@@ -70,6 +78,17 @@ STEP_HEIGHT = 0.3
 # rose 0.032 -> 0.048 with it), so flat feet keep whole-surface footholds. The step adapter's
 # region (TerrainSteps.region) keeps whole-surface footholds for every foot.
 SEAM = 0.02
+
+
+@dataclass(frozen=True)
+class StepRegion:
+    """Where the planner's step adaptation keeps a step (:meth:`TerrainSteps.region`): ``box``
+    ((x_lo, x_hi), (y_lo, y_hi)) in the stance yaw frame relative to the stance sole's centre, and
+    ``cop``, the range of sagittal stance CoP shifts (m, from the sole centre) the step may plan,
+    or None (the pivot)."""
+
+    box: tuple[tuple[float, float], tuple[float, float]]
+    cop: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -122,13 +141,14 @@ class TerrainSteps:
         self.terrain = terrain
         self.reach = robot.config.walking.step_reach
         self.step_height = STEP_HEIGHT * robot.config.walking.z0
-        self.footprint, self.half_length, self.sole = {}, {}, {}
+        self.footprint, self.half_length, self.sole, self.heel = {}, {}, {}, {}
         for side in ("left", "right"):
             R_FS, p_FS = sole_frame(robot, side)
             corners = (R_FS.T @ (robot.feet[side].points - p_FS[:, None]))[:2].T
             self.sole[side] = corners
             self.footprint[side] = np.sign(corners) * np.maximum(np.abs(corners) + edge_margin, 0.0)
             self.half_length[side] = float(np.max(np.abs(corners[:, 0])))
+            self.heel[side] = float(max(-np.min(corners[:, 0]), 0.0))
         points = robot.feet["left"].points
         line_foot = np.linalg.matrix_rank(points - points.mean(axis=1, keepdims=True), tol=1e-6) <= 1
         self.seam = SEAM if line_foot else 0.0
@@ -301,23 +321,30 @@ class TerrainSteps:
         return max(0.0, highest - max(float(start[2]), float(ground.target[2])))
 
     def region(self, origin: np.ndarray, heading: float, target, swing_yaw: float, swing_side: str,
-               surface: int | None = None) -> tuple[tuple[float, float], tuple[float, float]] | None:
-        """The box ((x_lo, x_hi), (y_lo, y_hi)) in the stance yaw frame, relative to ``origin``,
-        of supported footholds around the one nearest the plan's ``target`` (None: none in reach):
-        what the planner's step adaptation keeps the step in, choosing its timing to match (a step
-        over a riser is longer, and later). Only the edges within 30° of the stance frame's axes
-        bound it; the embedding's own check (:meth:`place`) covers the rest. ``surface``: as for
-        :meth:`place`."""
+               surface: int | None = None) -> StepRegion | None:
+        """The supported footholds around the one nearest the plan's ``target`` (None: none in
+        reach): what the planner's step adaptation keeps the step in, choosing its timing to match
+        (a step over a riser is longer, and later). Only the edges within 30° of the stance frame's
+        axes bound it; the embedding's own check (:meth:`place`) covers the rest. ``surface``: as
+        for :meth:`place`. On a step down an edge, the box's near edge is ``DROP_MARGIN`` further
+        on (where :meth:`place` lands it) and the step may plan its stance CoP toward the heel
+        (:class:`StepRegion`)."""
         c, s = math.cos(heading), math.sin(heading)
         R = np.array([[c, -s], [s, c]])
         yaw = heading + swing_yaw
         footprint = self.turned_footprint(swing_side, yaw)
-        band = self._height_band(self.ground_under(origin, heading, other_side(swing_side)))
+        stance = other_side(swing_side)
+        stance_z = self.ground_under(origin, heading, stance)
         foothold = self._foothold(origin[:2] + R @ np.asarray(target, dtype=float)[:2], footprint,
-                                  self._reachable(origin, R, swing_side), surface, 0.0, band)
+                                  self._reachable(origin, R, swing_side), surface, 0.0,
+                                  self._height_band(stance_z))
         if foothold is None:
             return None
-        return self._box(origin, R, footprint, foothold)
+        (x_lo, x_hi), y = self._box(origin, R, footprint, foothold)
+        down = stance_z - foothold.position[2] > DROP_STEP and x_lo > 0.0
+        if not (down and self._drops(origin[:2], foothold.position[:2] - origin[:2])):
+            return StepRegion(((x_lo, x_hi), y))  # no step down an edge ahead (a slope has none)
+        return StepRegion(((min(x_lo + DROP_MARGIN, x_hi), x_hi), y), (-DROP_COP * self.heel[stance], 0.0))
 
     def halfplanes(self, origin: np.ndarray, heading: float, foothold: Foothold, yaw: float, swing_side: str,
                    margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:

@@ -161,11 +161,12 @@ class FootPlacementPlanner(LeafSystem):
                 return replace(plan, swing_target=np.array([*found.target, 0.0]), t_ss=found.t_ss,
                                time_to_touchdown=max(found.t_ss - t_in_step, 0.0), timing_adapted=True)
         if self.adapter is not None and walking:
-            region = None
+            box = cop = None
             if on_terrain and plan.valid:
                 region = self.terrain.region(np.array(frame[:3]), frame[3], plan.swing_target, plan.swing_yaw,
                                              other_side(plan.stance_side), surface)
-            plan = self.adapter.adapt(plan, rom_state, t_in_step, swing, step_t_ss, region)
+                box, cop = (None, None) if region is None else (region.box, region.cop)
+            plan = self.adapter.adapt(plan, rom_state, t_in_step, swing, step_t_ss, box, cop)
         return plan
 
     def _mpc_plan(self, side: str, cmd: WalkCommand, rom_state: list[float], t_in_step: float,

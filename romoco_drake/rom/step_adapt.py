@@ -23,7 +23,9 @@ buys that time. Whenever the law's step is reachable and its offset viable
 (:meth:`StepAdapter.viable_offset`), the law's own plan is returned, so adaptation changes
 nothing in normal walking; when a push asks for more, the footholds stop at their bounds and
 the step times move so that the DCM reaches the orbit over two steps: earlier when it runs away
-from the bound, later when it comes back.
+from the bound, later when it comes back. A step down an edge of terrain may also move its stance
+CoP along the heading (:class:`CopShift`), which carries the DCM past a far foothold without a
+longer step.
 
 The reachable box is in the stance yaw frame: forward/backward, and a lateral band on the swing
 foot's own side of the stance foot (at least ``lateral_min`` away), so a crossing step is never
@@ -96,11 +98,36 @@ class StepBounds:
 @dataclass(frozen=True)
 class StepAdaptWeights:
     """Weights of the QP (module docstring): foothold (per m²), σ = e^{λT} (dimensionless), DCM
-    offset (per m²). Only their ratios matter, and only once a bound is active."""
+    offset (per m²), CoP shift (per m², :class:`CopShift`). Only their ratios matter, and only
+    once a bound is active."""
 
     step: float = 1.0
     timing: float = 0.01
     offset: float = 10.0
+    # A tenth of the foothold's: a step down an edge moves its CoP before it lengthens its time.
+    # At the foothold's weight G1 on g1_stairs took its steps down in 0.34 s, each carrying it
+    # 7 cm sideways (the lateral DCM grows with the step time), until a foot met the stairs' side
+    # and it fell at 22.4 s; 0.05, 0.1 and 0.2 of it all walk down.
+    cop: float = 0.1
+
+
+@dataclass(frozen=True)
+class CopShift:
+    """The sagittal shifts d (m, stance yaw frame, from the sole centre) of the stance centre of
+    pressure a step may plan for the rest of its single support, in [``lo``, ``hi``], at ``weight``
+    per m² in the QP; ``decay`` is e^{−λt} at the step's time t. About a CoP at d the DCM runs as
+    ξ(T) = d + (ξ(t) − d) e^{λ(T − t)} (the capture point's dynamics about its CoP: Englsberger,
+    Ott, Roa, Albu-Schäffer and Hirzinger, "Bipedal walking control based on Capture Point
+    dynamics", IROS 2011): a CoP toward the heel carries the DCM forward faster, here chosen
+    with the step's location and timing (:func:`solve_step_qp`)."""
+
+    lo: float
+    hi: float
+    weight: float
+    decay: float
+
+    def grid(self) -> np.ndarray:
+        return np.linspace(self.lo, self.hi, _COP_GRID)
 
 
 class StepAdapter:
@@ -108,7 +135,7 @@ class StepAdapter:
 
     def __init__(self, bounds: StepBounds, mass: float, weights: StepAdaptWeights = StepAdaptWeights(),
                  g: float = GRAVITY):
-        if not (weights.step > 0.0 and weights.timing > 0.0 and weights.offset > 0.0):
+        if not (weights.step > 0.0 and weights.timing > 0.0 and weights.offset > 0.0 and weights.cop > 0.0):
             raise RomocoError(f"step adaptation weights must be positive, got {weights}")
         if not mass > 0.0:
             raise RomocoError(f"mass must be positive, got {mass}")
@@ -116,20 +143,20 @@ class StepAdapter:
 
     def adapt(self, plan: PlannerOutput, rom_state: Sequence[float], t_in_step: float,
               swing_foot: Sequence[float] | None = None, step_t_ss: float | None = None,
-              region: tuple[tuple[float, float], tuple[float, float]] | None = None) -> PlannerOutput:
-        """``plan`` with its foothold and single-support time adapted; ``rom_state`` is the six numbers
-        of the ``rom_state`` port (stance yaw frame, momentum about the stance contact);
-        ``swing_foot`` the swing sole's (x, y) relative to the stance contact, its velocity and its
-        acceleration in the same frame (None: the step is not bounded by what the swing can still
-        reach); ``step_t_ss`` the
-        current step's own single-support time as the state machine runs it (None: the law's),
-        whose ``SWING_COMMIT_FRACTION`` is the commit point. An adapted step longer than the law's
-        is still being adapted after the law's own commit point: with the law's, the adapter
-        handed the state machine and the swing the law's unbounded step (G1, pushed forward:
-        0.5 m asked 0.04 s before touchdown, the foot swung at 5-8 m/s and slid on landing).
-        ``region`` (same frame): where the ground supports the sole (terrain, from
-        :meth:`~romoco_drake.embedding.terrain.TerrainSteps.region`); the first step stays in it
-        and in reach (where they do not meet, in reach), and the timing follows."""
+              region: tuple[tuple[float, float], tuple[float, float]] | None = None,
+              cop: tuple[float, float] | None = None) -> PlannerOutput:
+        """``plan`` with its foothold and single-support time adapted; ``rom_state`` is the six numbers of
+        the ``rom_state`` port (stance yaw frame, momentum about the stance contact); ``swing_foot`` the
+        swing sole's (x, y) relative to the stance contact, its velocity and its acceleration in the same
+        frame (None: the step is not bounded by what the swing can still reach); ``step_t_ss`` the current
+        step's own single-support time as the state machine runs it (None: the law's), whose
+        ``SWING_COMMIT_FRACTION`` is the commit point. An adapted step longer than the law's is still being
+        adapted after the law's own commit point: with the law's, the adapter handed the state machine and
+        the swing the law's unbounded step (G1, pushed forward: 0.5 m asked 0.04 s before touchdown, the
+        foot swung at 5-8 m/s and slid on landing). ``region`` (same frame): where the ground supports the
+        sole (terrain, from :meth:`~romoco_drake.embedding.terrain.TerrainSteps.region`); the first step
+        stays in it and in reach (where they do not meet, in reach), and the timing follows. ``cop``: the
+        sagittal CoP shifts (lo, hi) it may plan (:class:`CopShift`; None: the pivot), as ``cop_shift``."""
         if not plan.valid or not math.isfinite(t_in_step):
             return plan
         b = self.bounds
@@ -167,13 +194,13 @@ class StepAdapter:
             return plan
         # The step may not end before it is committed (SWING_COMMIT_FRACTION of it passed).
         t_lo = max(b.t_ss_min, t_in_step / SWING_COMMIT_FRACTION)
-        t_hi = max(b.t_ss_max, t_lo)
-        sigma, u = solve_step_qp(u_n, sigma_n, dcm0, box, (math.exp(lam * t_lo), math.exp(lam * t_hi)),
-                                 self.weights, nxt, window)
+        sigmas = (math.exp(lam * t_lo), math.exp(lam * max(b.t_ss_max, t_lo)))
+        shifts = None if cop is None else CopShift(*cop, self.weights.cop, decay)
+        sigma, u, shift = solve_step_qp(u_n, sigma_n, dcm0, box, sigmas, self.weights, nxt, window, shifts)
         t_ss = math.log(sigma) / lam
         target = np.array([u[0], u[1], float(plan.swing_target[2])])
         return replace(plan, swing_target=target, t_ss=t_ss, time_to_touchdown=max(t_ss - t_in_step, 0.0),
-                       timing_adapted=True, step_bounded=pushed)
+                       timing_adapted=True, step_bounded=pushed, cop_shift=shift)
 
     def _window(self, swing_foot: Sequence[float] | None, t_in_step: float, lam: float) -> SwingWindow | None:
         """Where the swing can still land (None: no swing state, or no speed limit)."""
@@ -288,6 +315,8 @@ class SwingWindow:
 # The σ grid: points over the whole range, then rounds of points around the best one so far;
 # the second step's σ₂ takes _NEXT values over its range.
 _GRID, _REFINE, _ROUNDS, _NEXT = 121, 41, 3, 9
+# The CoP shifts searched (CopShift): 1 cm apart over G1's 5 cm.
+_COP_GRID = 6
 
 
 @dataclass(frozen=True)
@@ -335,10 +364,22 @@ def _two_step_axis(a, g, e, c: np.ndarray, s2: np.ndarray, lo1, hi1, lo2, hi2, w
     return cost, u1
 
 
+def _least_over_shifts(axis: tuple[np.ndarray, np.ndarray], shift_cost: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(cost, u₁, index) of the least cost over the CoP shifts on the last dimension of one axis'
+    (cost, u₁), each shift's cost added: the other axis does not depend on the shift."""
+    cost = axis[0] + shift_cost
+    best = np.argmin(cost, axis=-1)[..., None]
+    pick = np.take_along_axis
+    return pick(cost, best, axis=-1)[..., 0], pick(axis[1], best, axis=-1)[..., 0], best[..., 0]
+
+
 def solve_step_qp(u_n: tuple[float, float], sigma_n: float, dcm0: tuple[float, float], box,
                   sigma_box: tuple[float, float], w: StepAdaptWeights, nxt: NextStep,
-                  window: SwingWindow | None = None) -> tuple[float, tuple[float, float]]:
-    """(σ₁, (u_x, u_y)) of the current step minimising the module docstring's two-step QP.
+                  window: SwingWindow | None = None, cop: CopShift | None = None
+                  ) -> tuple[float, tuple[float, float], float]:
+    """(σ₁, (u_x, u_y), d) of the current step minimising the module docstring's two-step QP; d is
+    the sagittal CoP shift (0 without ``cop``; :class:`CopShift`).
 
     For fixed (σ₁, σ₂) each axis is a box-constrained convex QP in (u₁, u₂), solved exactly
     (:func:`_two_step_axis`); u₁'s box is the reach intersected with the swing ``window``; where
@@ -359,9 +400,10 @@ def solve_step_qp(u_n: tuple[float, float], sigma_n: float, dcm0: tuple[float, f
     timing2 = w_t * (s2 - nxt.sigma_n) ** 2
     if window is not None:  # the window's point nearest the box, where the two do not meet
         centre = np.minimum(np.maximum(np.array(window.s, dtype=float)[:, None, None], box_lo), box_hi)
+    shifts = np.zeros(1) if cop is None else cop.grid()
 
-    def evaluate(sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The cost over (σ₁ = ``sigma``, σ₂) and each axis' u₁, (2, σ₁, σ₂)."""
+    def evaluate(sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The cost over (σ₁ = ``sigma``, σ₂), each axis' u₁ (2, σ₁, σ₂) and the CoP shift's index."""
         s1 = sigma[:, None]
         lo, hi = box_lo, box_hi
         if window is not None:
@@ -370,14 +412,25 @@ def solve_step_qp(u_n: tuple[float, float], sigma_n: float, dcm0: tuple[float, f
             nearest = np.minimum(np.maximum(centre, w_lo), w_hi)
             lo = np.where(apart, nearest, np.maximum(lo, w_lo))
             hi = np.where(apart, nearest, np.minimum(hi, w_hi))
-        cost, u1 = _two_step_axis(a, g, e, xi0 * s1, s2, lo, hi, lo2, hi2, w_u, w_b)
-        return w_t * (s1 - sigma_n) ** 2 + timing2 + cost[0] + cost[1], u1
+        if cop is None:
+            cost, u1 = _two_step_axis(a, g, e, xi0 * s1, s2, lo, hi, lo2, hi2, w_u, w_b)
+            return w_t * (s1 - sigma_n) ** 2 + timing2 + cost[0] + cost[1], u1, np.zeros(cost[0].shape, int)
+        # Sagittally the DCM at touchdown, ξ(T) = d + (ξ(t) − d) e^{λ(T − t)}, for each shift d.
+        end = xi0[0, ..., None] * s1[..., None] + shifts * (1.0 - s1[..., None] * cop.decay)
+        cost_x, u1_x, best = _least_over_shifts(
+            _two_step_axis(a[0, ..., None], g[0, ..., None], e[0, ..., None], end, s2[..., None],
+                           np.asarray(lo[0])[..., None], np.asarray(hi[0])[..., None], lo2[0, ..., None],
+                           hi2[0, ..., None], w_u, w_b), cop.weight * shifts ** 2)
+        cost_y, u1_y = _two_step_axis(a[1], g[1], e[1], xi0[1] * s1, s2, lo[1], hi[1], lo2[1], hi2[1],
+                                      w_u, w_b)
+        u1 = np.stack(np.broadcast_arrays(u1_x, u1_y))
+        return w_t * (s1 - sigma_n) ** 2 + timing2 + cost_x + cost_y, u1, best
 
     lo_s, hi_s = sigma_box
     sigma = np.linspace(lo_s, hi_s, _GRID)
     for _ in range(_ROUNDS):
         k = int(np.argmin(evaluate(sigma)[0])) // s2.size  # the σ₁ row of the least cost
         sigma = np.linspace(sigma[max(k - 1, 0)], sigma[min(k + 1, len(sigma) - 1)], _REFINE)
-    cost, u1 = evaluate(sigma)
+    cost, u1, best = evaluate(sigma)
     k, j = divmod(int(np.argmin(cost)), s2.size)
-    return float(sigma[k]), (float(u1[0, k, j]), float(u1[1, k, j]))
+    return float(sigma[k]), (float(u1[0, k, j]), float(u1[1, k, j])), float(shifts[best[k, j]])

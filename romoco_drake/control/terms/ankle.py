@@ -47,11 +47,12 @@ class AnkleStrategy(PivotMoment):
         self.gain, self.weight = config.gain, total_mass * GRAVITY
 
     def target(self, ctx: TermContext) -> np.ndarray:
+        planned = super().target(ctx)
         plan = ctx.refs.com_plan
         if plan is None:
-            return np.zeros(2)
+            return planned
         p, v = ctx.kin.p_com, ctx.kin.v_com
         height = max(p[2] - self.contact.sole_center(ctx.kin, ctx.refs.stance_side)[2], 1e-3)
         lam = math.sqrt(GRAVITY / height)
         shift = self.gain * ((p[:2] + v[:2] / lam) - (plan[0] + plan[1] / lam))
-        return np.array([shift[1] * self.weight, -shift[0] * self.weight])
+        return planned + np.array([shift[1] * self.weight, -shift[0] * self.weight])

@@ -58,5 +58,6 @@ class PivotMoment(CostTerm):
         return ctx.force_rows(self._root * G), self._root * self.target(ctx)
 
     def target(self, ctx: TermContext) -> np.ndarray:
-        """The moment (N·m, world x, y) the stance forces are pulled toward."""
-        return np.zeros(2)
+        """The moment (N·m, world x, y) the stance forces are pulled toward: the plan's
+        (``TaskReferences.pivot_moment``, a planned CoP shift), else zero."""
+        return np.zeros(2) if ctx.refs.pivot_moment is None else ctx.refs.pivot_moment
