@@ -101,3 +101,39 @@ def test_replanning_after_touchdown_holds_position():
     p, v, a = held.evaluate(T)
     np.testing.assert_allclose(p, [0.3, 0.1, 0.0], atol=1e-12)
     np.testing.assert_allclose([v, a], 0.0)
+
+
+@pytest.mark.parametrize("t_replan", [None, 0.1, 0.34])
+def test_swing_with_an_early_lateral_end_is_at_rest_sideways_before_it_lands(t_replan):
+    """``lateral_end`` 0.85: y reaches the target at rest at 0.85 T (after a replan too, which
+    keeps it; one after 0.7 T takes half of the time left) while x still moves and z still
+    descends, so a fast sideways swing that touches down early or lags lands without sliding."""
+    target = np.array([0.3, 0.4, 0.0])
+    traj = plan_swing([0.0, 0.1, 0.0], [0.2, 0.3, 0.0], T, APEX, lateral_end=0.85)
+    if t_replan is not None:
+        traj = traj.replan(t_replan, target)
+        assert traj.lateral_end == 0.85
+    else:
+        traj = plan_swing([0.0, 0.1, 0.0], target, T, APEX, lateral_end=0.85)
+    y_end = 0.85 * T if t_replan is None or t_replan < 0.7 * T else t_replan + 0.5 * (T - t_replan)
+    for t in (y_end, 0.5 * (y_end + T)):
+        p, v, a = traj.evaluate(t)
+        assert p[1] == pytest.approx(target[1], abs=1e-12)
+        np.testing.assert_allclose([v[1], a[1]], 0.0, atol=1e-8)
+    p, v, _ = traj.evaluate(y_end)
+    assert p[2] > 1e-3 and v[2] < -0.05  # still descending
+    if t_replan != 0.34:  # x lands at T, as without lateral_end
+        assert v[0] > 0.05
+    p, v, a = traj.evaluate(T)
+    np.testing.assert_allclose(p, target, atol=1e-12)
+    np.testing.assert_allclose([v, a], 0.0, atol=1e-8)
+
+
+def test_swing_lateral_end_defaults_to_touchdown_and_is_range_checked():
+    from romoco_drake.config import ConfigError, check_ranges
+    from romoco_drake.robots.config import WalkingConfig
+    assert WalkingConfig(0.3, 0.0, 0.6, 0.2, 0.1).swing_lateral_end == 1.0
+    with pytest.raises(ConfigError, match="swing_lateral_end"):
+        check_ranges(WalkingConfig(0.3, 0.0, 0.6, 0.2, 0.1, swing_lateral_end=0.3), "g1.yaml")
+    traj = plan_swing([0.0, 0.1, 0.0], [0.3, 0.3, 0.0], T, APEX)
+    assert traj.lateral_end == 1.0 and traj.evaluate(0.9 * T)[1][1] > 0.01  # still moving at 0.9 T

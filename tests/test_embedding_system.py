@@ -161,3 +161,26 @@ def test_swing_reference_is_the_latched_swing_of_this_step_only():
     assert np.linalg.norm(v[:2]) > 0.1
     system.gait_phase_port.FixValue(context, [-1.0, 0.0])  # the next step, before its swing latches
     assert np.all(np.isnan(system.swing_reference_port.Eval(context)))
+
+
+def test_only_a_step_that_begins_bounded_ends_its_sideways_swing_early():
+    """G1's ``swing_lateral_end`` (0.85) applies to a step whose plan is bounded by the step adapter
+    when it begins (a push's recovery step) and stays with it; an unbounded step, and one that a push
+    bounds only mid-swing, keep the sideways motion to touchdown (README: push recovery)."""
+    from romoco_drake.embedding.references import EmbeddingCore
+
+    robot = load_robot("g1")
+    core = EmbeddingCore(robot)
+    kin = RobotKinematics(robot, np.concatenate([robot.nominal.q, np.zeros(robot.nv)]))
+    walk = robot.config.walking
+    cmd = WalkCommand(vx=0.3, step_width=walk.step_width, com_height=walk.z0, step_time=walk.t_ss)
+    plan = make_planner("hlip", PlannerParams(mass=robot.total_mass)).plan(
+        [0.0, -0.05, walk.z0, 0.0, 0.0, 0.0], "left", 0.0, cmd)
+    bounded = dataclasses.replace(plan, step_bounded=True)
+    assert walk.swing_lateral_end == 0.85
+    assert core.start_step(kin, "left", 0.0, plan).trajectory.lateral_end == 1.0
+    recovery = core.start_step(kin, "left", 0.0, bounded)
+    assert recovery.trajectory.lateral_end == 0.85
+    assert core.update_swing(recovery, 0.1, plan).trajectory.lateral_end == 0.85
+    pushed_mid_swing = core.update_swing(core.start_step(kin, "left", 0.0, plan), 0.1, bounded)
+    assert pushed_mid_swing.trajectory.lateral_end == 1.0

@@ -91,7 +91,9 @@ class SwingTrajectory(SharedValue):
     the lift-off and target heights, reached with zero vertical velocity and acceleration at
     mid-swing (``duration``/2), then descends to the target. Velocity and acceleration are zero
     at touchdown. Each piece is a quintic, so the reference is C²; planned from rest, z rises
-    and falls monotonically (no overshoot of the apex).
+    and falls monotonically (no overshoot of the apex). With ``lateral_end`` below 1, y (lateral
+    in the stance frame) reaches the target at rest at that fraction of ``duration``
+    (:func:`plan_swing`), and the foot lands moving only forward and down.
 
     :meth:`replan` starts a new trajectory from this one's own state at t, so the reference
     stays continuous in position, velocity and acceleration when the target moves. Replanning
@@ -104,34 +106,42 @@ class SwingTrajectory(SharedValue):
     liftoff_z: float
     target: np.ndarray
     t_start: float
-    horizontal: BezierCurve  # x, y over [t_start, duration]
+    # x and y over [t_start, duration] as one curve, or x then y when y ends sooner (``lateral_end``)
+    horizontal: tuple[BezierCurve, ...]
     vertical: tuple[tuple[float, BezierCurve], ...]  # (start time, z curve) pieces
+    lateral_end: float = 1.0
 
     def evaluate(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Desired position, velocity and acceleration (3,) each at swing time t (clipped)."""
         t = min(max(t, self.t_start), self.duration)
-        xy = self.horizontal.evaluate(t - self.t_start)
+        pieces = [curve.evaluate(t - self.t_start) for curve in self.horizontal]
         t0, curve = next(piece for piece in reversed(self.vertical) if t >= piece[0])
-        z = curve.evaluate(t - t0)
-        return tuple(np.concatenate([a, b]) for a, b in zip(xy, z, strict=True))
+        pieces.append(curve.evaluate(t - t0))
+        return tuple(np.concatenate(parts) for parts in zip(*pieces, strict=True))
 
     def replan(self, t: float, target: np.ndarray, duration: float | None = None,
-               apex_height: float | None = None) -> SwingTrajectory:
+               apex_height: float | None = None, lateral_end: float | None = None) -> SwingTrajectory:
         """A trajectory to a new ``target`` that continues this one from swing time t, landing at
         ``duration`` (default: this one's; a step whose timing is adapted lands earlier or later),
-        with a new ``apex_height`` if given (a moved target over other ground)."""
+        with a new ``apex_height`` if given (a moved target over other ground) and a new
+        ``lateral_end`` if given (:func:`plan_swing`)."""
         p, v, a = self.evaluate(t)
         return plan_swing(p, target, self.duration if duration is None else duration,
                           self.apex_height if apex_height is None else apex_height, t=t,
-                          v_start=v, a_start=a, liftoff_z=self.liftoff_z)
+                          v_start=v, a_start=a, liftoff_z=self.liftoff_z,
+                          lateral_end=self.lateral_end if lateral_end is None else lateral_end)
 
 
 def plan_swing(p_start, target, duration: float, apex_height: float, *, t: float = 0.0,
-               v_start=None, a_start=None, liftoff_z: float | None = None) -> SwingTrajectory:
+               v_start=None, a_start=None, liftoff_z: float | None = None,
+               lateral_end: float = 1.0) -> SwingTrajectory:
     """A swing trajectory from the state (p_start, v_start, a_start) at swing time t to ``target``.
 
     At lift-off (t = 0) the start velocity and acceleration default to zero and ``liftoff_z``
-    to p_start's height; :meth:`SwingTrajectory.replan` passes all of them mid-swing.
+    to p_start's height; :meth:`SwingTrajectory.replan` passes all of them mid-swing. y arrives at
+    rest at ``lateral_end``·``duration`` (a robot's ``walking.swing_lateral_end``), but takes at
+    least half of the time left, so a late replan asks for no unbounded acceleration: a fast
+    sideways recovery swing whose foot lags its reference then lands without sliding sideways.
     """
     p0 = np.asarray(p_start, dtype=float)
     p1 = np.asarray(target, dtype=float)
@@ -141,9 +151,14 @@ def plan_swing(p_start, target, duration: float, apex_height: float, *, t: float
     z_lift = z0 if liftoff_z is None else float(liftoff_z)
     remaining = duration - t
     if remaining < _MIN_DURATION:
-        return SwingTrajectory(duration, apex_height, z_lift, p1, t, BezierCurve(p0[None, :2], 1.0),
-                               ((t, BezierCurve([[z0]], 1.0)),))
-    horizontal = quintic_bezier(p0[:2], v0[:2], a0[:2], p1[:2], _ZERO3[:2], _ZERO3[:2], remaining)
+        return SwingTrajectory(duration, apex_height, z_lift, p1, t, (BezierCurve(p0[None, :2], 1.0),),
+                               ((t, BezierCurve([[z0]], 1.0)),), lateral_end)
+    lateral = max(lateral_end * duration - t, 0.5 * remaining)
+    if lateral >= remaining:
+        horizontal = (quintic_bezier(p0[:2], v0[:2], a0[:2], p1[:2], _ZERO3[:2], _ZERO3[:2], remaining),)
+    else:
+        horizontal = tuple(quintic_bezier(p0[i:i + 1], v0[i:i + 1], a0[i:i + 1], p1[i:i + 1], _ZERO3[:1],
+                                          _ZERO3[:1], time) for i, time in ((0, remaining), (1, lateral)))
     start = ([z0], [float(v0[2])], [float(a0[2])])
     t_apex = duration / 2
     if t_apex - t > _MIN_DURATION:
@@ -152,4 +167,4 @@ def plan_swing(p_start, target, duration: float, apex_height: float, *, t: float
                     (t_apex, quintic_bezier(apex, [0.0], [0.0], [z1], [0.0], [0.0], duration - t_apex)))
     else:
         vertical = ((t, quintic_bezier(*start, [z1], [0.0], [0.0], remaining)),)
-    return SwingTrajectory(duration, apex_height, z_lift, p1, t, horizontal, vertical)
+    return SwingTrajectory(duration, apex_height, z_lift, p1, t, horizontal, vertical, lateral_end)

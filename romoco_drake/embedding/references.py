@@ -168,6 +168,7 @@ class EmbeddingCore:
         self.contact = contact or contact_model(robot)
         self.swing_height = robot.config.walking.swing_height
         self.swing_freeze = robot.config.walking.swing_target_freeze
+        self.swing_lateral_end = robot.config.walking.swing_lateral_end
         self.nominal_com_height = float(robot.nominal.p_WCoM[2])
         self.nominal_joints = robot.nominal.q[robot.actuated_q_index]
         plant = robot.plant
@@ -199,12 +200,14 @@ class EmbeddingCore:
         origin, heading = contact_frame(self.robot, kin, stance_side)
         ground = None
         if self.terrain is None:
-            trajectory = plan_swing(start, self._target(plan), plan.t_ss, self.swing_height)
+            trajectory = plan_swing(start, self._target(plan), plan.t_ss, self.swing_height,
+                                    lateral_end=self._lateral_end(plan))
         else:
             side = other_side(stance_side)
             ground = self.terrain.place(origin, heading, plan.swing_target, plan.swing_yaw, side, start)
             trajectory = plan_swing(start, ground.target, plan.t_ss,
-                                    self.swing_height + self.terrain.apex_raise(ground, side))
+                                    self.swing_height + self.terrain.apex_raise(ground, side),
+                                    lateral_end=self._lateral_end(plan))
         yaws = (float(q[self._hip_yaw_q[stance_side]]) if self._stance_yaw_index is not None else 0.0,
                 float(out.y[self._swing_yaw_index]) if self._swing_yaw_index is not None else 0.0)
         p_x, p_y, _, l_cx, l_cy, _ = contact_frame_state(kin, origin, heading).tolist()
@@ -225,14 +228,25 @@ class EmbeddingCore:
             return replace(swing, plan=plan)
         duration = plan.t_ss if plan.timing_adapted and plan.t_ss > tau else swing.trajectory.duration
         if swing.ground is None:
-            trajectory = swing.trajectory.replan(tau, self._target(plan), duration)
+            trajectory = swing.trajectory.replan(tau, self._target(plan), duration,
+                                                 lateral_end=self._lateral_end(plan, swing.trajectory))
             return replace(swing, trajectory=trajectory, plan=plan)
         g, side = swing.ground, other_side(swing.stance_side)
         ground = self.terrain.place(g.origin, g.heading, plan.swing_target, plan.swing_yaw, side, g.liftoff,
                                     committed_surface(g, tau, duration))
         apex = self.swing_height + self.terrain.apex_raise(ground, side)
-        trajectory = swing.trajectory.replan(tau, ground.target, duration, apex)
+        trajectory = swing.trajectory.replan(tau, ground.target, duration, apex,
+                                             self._lateral_end(plan, swing.trajectory))
         return replace(swing, trajectory=trajectory, ground=ground, plan=plan)
+
+    def _lateral_end(self, plan: PlannerOutput, trajectory: SwingTrajectory | None = None) -> float:
+        """When the swing's lateral motion ends: at the robot's ``swing_lateral_end`` on a step that
+        began bounded by the step adapter (a push's recovery steps: a fast sideways swing that lags its
+        reference lands sliding and spinning on its sole), at touchdown otherwise, including the step a
+        push interrupts (an outward slide there still helped: G1 pushed right at 20 N·s fell without
+        it). A step keeps the setting it began with (``trajectory``: the step's latched swing)."""
+        bounded = plan.step_bounded if trajectory is None else trajectory.lateral_end < 1.0
+        return self.swing_lateral_end if bounded else 1.0
 
     @staticmethod
     def _target(plan: PlannerOutput) -> np.ndarray:

@@ -188,6 +188,9 @@ class WalkingConfig:
     # The fraction of single support after which the swing foot's target is no longer replanned
     # (late target moves need large swing accelerations just before touchdown).
     swing_target_freeze: float = 0.85
+    # The fraction of single support at which the swing foot's lateral motion ends (1: at
+    # touchdown); below 1 it lands without lateral speed (embedding/bezier.py plan_swing).
+    swing_lateral_end: float = 1.0
     step_reach: StepBounds | None = None
 
 
@@ -196,7 +199,7 @@ class WalkingConfig:
 # zero swing height drags the foot.
 declare_ranges(WalkingConfig, t_ss=Range(0.1, 2.0, "s"), t_ds=Range(0.0, 1.0, "s"), z0=Range(0.1, 3.0, "m"),
                step_width=Range(0.0, 1.0, "m"), swing_height=positive(0.5, "m"),
-               swing_target_freeze=Range(0.0, 1.0))
+               swing_target_freeze=Range(0.0, 1.0), swing_lateral_end=Range(0.5, 1.0))
 
 
 @dataclasses.dataclass
