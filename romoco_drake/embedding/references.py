@@ -221,8 +221,9 @@ class EmbeddingCore:
         adapted; both stay as they are once the robot's ``swing_target_freeze`` of the swing has passed.
         On terrain the foothold keeps its surface once the step is committed to it
         (:func:`~romoco_drake.embedding.terrain.committed_surface`)."""
-        if swing.trajectory is not None and tau < SWING_COMMIT_FRACTION * swing.trajectory.duration:
-            shift = plan.cop_shift
+        shift = plan.cop_shift
+        if (swing.trajectory is not None and tau < SWING_COMMIT_FRACTION * swing.trajectory.duration
+                and (shift != swing.cop_shift or abs(shift) > swing.cop_reach)):
             swing = replace(swing, cop_shift=shift, cop_reach=max(swing.cop_reach, abs(shift)))
         if swing.trajectory is None or tau >= self.swing_freeze * swing.trajectory.duration:
             return replace(swing, plan=plan)
