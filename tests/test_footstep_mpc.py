@@ -9,7 +9,7 @@ from romoco_drake.embedding.terrain import TerrainSteps
 from romoco_drake.errors import RomocoError
 from romoco_drake.planners.foot_placement import FootPlacementPlanner
 from romoco_drake.planners.foothold_mpc import REGION_MARGIN, FootholdMpc
-from romoco_drake.planners.footsteps import HORIZON, FootstepSequencer
+from romoco_drake.planners.footsteps import HORIZON, SWITCH_TOLERANCE, FootstepSequencer
 from romoco_drake.planners.registry import foot_placement_planner, step_adapter
 from romoco_drake.planners.settings import FootPlacementConfig, StepAdaptationConfig
 from romoco_drake.robots.model import load_robot
@@ -48,6 +48,32 @@ def test_the_sequence_takes_the_next_stones_in_turn(h1):
     assert plan is not None and len(plan) == HORIZON
     assert [q.surface for q in plan] == [3, 4, 5]
     assert [q.side for q in plan] == ["right", "left", "right"]
+
+
+def test_a_new_steps_plan_keeps_the_last_plans_surfaces_unless_another_scores_clearly_lower(h1):
+    """Two platforms meet along y = 0: from a right sole at y = -0.2 the left foot may take either.
+    The last step's plan put it on the left-hand platform (0); a sequence on the right-hand one (1)
+    scoring a little lower does not flip that choice, one scoring clearly lower does. A sequencer
+    with no plan behind it takes the least score."""
+    pieces = [TerrainPiece(box=BoxPiece(center=[0.0, y], size=[3.0, 0.5], top=0.0)) for y in (0.25, -0.25)]
+    steps = TerrainSteps(h1, Terrain(TerrainConfig(floor=-0.5, floor_steppable=False, edge_margin=0.0,
+                                                   pieces=pieces)))
+    cmd = WalkCommand(vx=0.3, step_width=0.2, com_height=0.8, step_time=0.3)
+    stance = np.array([0.0, -0.2, 0.0])
+
+    def planned(lower: float, earlier: bool) -> int:
+        sequencer = FootstepSequencer(steps, 0.0)
+        if earlier:
+            last = sequencer.plan(np.array([-0.09, 0.03, 0.0]), 0.0, "left", cmd, 1.0, lambda seq: 0.0)
+            assert [(q.side, q.surface) for q in last[1:]] == [("left", 0), ("right", 1)]
+        plan = sequencer.plan(stance, 0.0, "right", cmd, 1.3,
+                              lambda seq: 1.0 if seq[0].surface == 0 else lower)
+        return plan[0].surface
+
+    close = 1.0 / (1.0 + SWITCH_TOLERANCE) + 0.05
+    assert planned(close, earlier=True) == 0
+    assert planned(close - 0.1, earlier=True) == 1
+    assert planned(close, earlier=False) == 1
 
 
 def test_the_mpc_step_lands_inside_its_stone(h1):
