@@ -94,33 +94,17 @@ def test_g1_walks_down_the_slope_on_the_invariant_ekf():
 
 
 @pytest.mark.slow
-def test_g1_climbs_the_five_steps_onto_the_landing_on_the_velocity_ik():
-    """g1_stairs up to its 0.5 m landing (16 s) under the velocity IK (the TSC-QP walks the whole
-    course: the next test): no fall, no QP failure, the base over the landing at its nominal height
-    above it, every step onto supported ground (none in place) and every landed sole fully on its
-    tread (the issue's "no foot placed on an edge"). Each step keeps the tread it committed to
-    (SURFACE_COMMIT): without that, a plan between two treads flipped the step time and G1 fell at
-    the fourth riser."""
-    run = walk(with_overrides(load_scenario("g1_stairs"), controller="velik"), duration=16.0)
-    s = run.summary
-    assert not s["fell"] and s["qp_failures"] == 0
-    b = run.robot.base_q_start
-    assert 2.6 < run.states[b + 4][-1] < 3.4  # the landing spans x = 2.4 … 3.4 m
-    assert run.states[b + 6][-1] - 0.5 == pytest.approx(run.robot.nominal.base_height, abs=0.03)
-    footholds = s["footholds"]
-    assert footholds["in_place"] == 0 and footholds["planned"] + footholds["adjusted"] >= s["steps"] - 2
-    assert_landed_supported(s)
-
-
-@pytest.mark.slow
-def test_g1_walks_up_and_down_the_five_steps():
-    """The whole of g1_stairs under the TSC-QP (32 s): no fall, no QP failure, over the landing at its
-    nominal height above it at 16 s as the climb test asks, then on the floor past the flight down
-    (it ends at x = 4.8 m) at its nominal height, every step onto supported ground (none in place)
-    and every landed sole fully on its tread. Each step down an edge plans its stance CoP toward the
-    heel (rom/step_adapt.py CopShift): with the pivot alone the DCM fell behind the first tread's
-    foothold and G1 fell at 20.6 s."""
-    run = walk(load_scenario("g1_stairs"))
+@pytest.mark.parametrize("controller", ["tscqp", "posik"])
+def test_g1_walks_up_and_down_the_five_steps(controller):
+    """The whole of g1_stairs (32 s) under the TSC-QP and the position IK: no fall, no QP failure,
+    over the 0.5 m landing at its nominal height above it at 16 s, then on the floor past the flight
+    down (it ends at x = 4.8 m) at its nominal height, every step onto supported ground (none in
+    place) and every landed sole fully on its tread (the issue's "no foot placed on an edge"). Each
+    step keeps the tread it committed to (SURFACE_COMMIT): without that, a plan between two treads
+    flipped the step time and G1 fell at the fourth riser. Each step down an edge plans its stance
+    CoP toward the heel (rom/step_adapt.py CopShift): with the pivot alone the DCM fell behind the
+    first tread's foothold and G1 fell at 20.6 s."""
+    run = walk(with_overrides(load_scenario("g1_stairs"), controller=controller))
     s = run.summary
     assert not s["fell"] and s["qp_failures"] == 0
     b = run.robot.base_q_start
