@@ -68,10 +68,12 @@ class FootstepSequencer:
              ) -> list[PlannedStep] | None:
         """The footholds from the stance sole at ``origin`` (3,, world) with ``heading`` under
         ``cmd``: of the search's ``BEAM`` best sequences, the one of least ``score`` (None:
-        infeasible); None when none is. Planned once a step (the step starting at ``step_start``,
-        s): the measured stance frame moves by millimetres within a step, and replanning on it
-        would only cost time (a search and ``BEAM`` MPC scores, about 8 ms on H1). The memo is
-        a cache of the step's first evaluation, as the planner's last plan is of its inputs."""
+        infeasible), or the least-score one that keeps the last step's plan's surfaces when it is
+        within ``SWITCH_TOLERANCE`` of that; None when none is feasible. Planned once a step (the
+        step starting at ``step_start``, s): the measured stance frame moves by millimetres within
+        a step, and replanning on it would only cost time (a search and ``BEAM`` MPC scores, about
+        8 ms on H1). The memo is a cache of the step's first evaluation, as the planner's last plan
+        is of its inputs."""
         key = (step_start, stance_side)
         if step_start is None or key != self._last[0]:
             kept = _surfaces(self._last[1][1:]) if self._last[1] else ()
