@@ -168,3 +168,11 @@ def path_radius(times: np.ndarray, velocity: np.ndarray) -> float:
     direction = np.unwrap(np.arctan2(velocity[:, 1], velocity[:, 0]))
     rate = abs(np.polyfit(times, direction, 1)[0])
     return float(np.linalg.norm(velocity, axis=1).mean()) / rate if rate > 1e-9 else math.inf
+
+
+def assert_landed_supported(summary: dict) -> None:
+    """Every step's landed sole audited (the fall monitor's touchdown audit, from the true state)
+    and fully supported: no sole over an edge, a riser or a seam's drop."""
+    landed = summary["landed_soles"]
+    assert landed["audited"] >= summary["steps"] - 2
+    assert landed["unsupported"] == 0 and landed["worst_margin_m"] > 0.0
