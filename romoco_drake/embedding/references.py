@@ -223,7 +223,7 @@ class EmbeddingCore:
         (:func:`~romoco_drake.embedding.terrain.committed_surface`)."""
         shift = plan.cop_shift
         if (swing.trajectory is not None and tau < SWING_COMMIT_FRACTION * swing.trajectory.duration
-                and (shift != swing.cop_shift or abs(shift) > swing.cop_reach)):
+                and shift != swing.cop_shift):
             swing = replace(swing, cop_shift=shift, cop_reach=max(swing.cop_reach, abs(shift)))
         if swing.trajectory is None or tau >= self.swing_freeze * swing.trajectory.duration:
             return replace(swing, plan=plan)
