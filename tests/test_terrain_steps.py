@@ -347,9 +347,32 @@ def test_region_on_the_floor_stops_the_toe_at_the_riser(g1):
     assert x_lo <= ground.target[0] <= x_hi + 1e-9
 
 
+
+@pytest.mark.parametrize("heading", [-0.015, 0.015, -0.1, 0.1])
+def test_region_on_the_floor_yawed_ends_where_the_toe_meets_the_riser(g1, heading):
+    """The same from a stance yawed by a few degrees either way, its foothold 0.2 m aside (G1 on
+    g1_stairs at 6.4 s): the box's front is the riser along the foothold's own line, every point
+    of the box up to it keeps the sole on the floor, and a centimetre past it does not (when the
+    front was taken on the line through the stance origin, 3 mm off, the box ran on to the second
+    tread and the planner kept a step the embedding then cut by 10 cm)."""
+    terrain = _stairs()
+    steps = TerrainSteps(g1, terrain)
+    origin = np.array([0.879, 0.007, 0.0])
+    side = (0.1, -0.21)
+    (x_lo, x_hi), (y_lo, y_hi) = steps.region(origin, heading, side, 0.0, "right").box
+    ground = steps.place(origin, heading, side, 0.0, "right", np.array([-0.1, -0.21, 0.0]))
+    assert ground.surface == -1 and ground.status == "adjusted"
+    assert x_lo <= ground.target[0] <= x_hi + 1e-9 and y_lo <= ground.target[1] <= y_hi
+    footprint = _world_footprint(steps, "right", heading)
+    y = ground.target[1]
+    assert terrain.supports(_world(origin, heading, (x_hi, y)), footprint) == -1
+    assert terrain.supports(_world(origin, heading, (x_hi + 0.01, y)), footprint) is None
+    assert EDGE - (_world(origin, heading, (x_hi, y)) + footprint)[:, 0].max() == pytest.approx(0.0, abs=1e-5)
+
 def _floor_box_one_patch_at_a_time(steps, origin, R, footprint, q):
     """The floor foothold's box, each patch bounding it on its own (the rule of
-    ``embedding.terrain._bound_outside``, one patch and one row at a time)."""
+    ``embedding.terrain._bound_outside``, one patch and one row at a time: each aligned edge where
+    it crosses the line through the foothold ``q`` along its axis)."""
     lo, hi = np.full(2, -np.inf), np.full(2, np.inf)
     for surface in steps.terrain.surfaces:
         A, b = surface.halfplanes()
@@ -358,10 +381,11 @@ def _floor_box_one_patch_at_a_time(steps, origin, R, footprint, q):
         for row, bound in zip(AR, limit, strict=True):
             k = int(np.argmax(np.abs(row)))
             if abs(row[k]) >= math.cos(math.radians(30.0)):
+                crossing = (bound - row[1 - k] * q[1 - k]) / row[k]  # on the line through q
                 if row[k] > 0:
-                    box_hi[k] = min(box_hi[k], bound / row[k])
+                    box_hi[k] = min(box_hi[k], crossing)
                 else:
-                    box_lo[k] = max(box_lo[k], bound / row[k])
+                    box_lo[k] = max(box_lo[k], crossing)
         for k in (0, 1):
             if box_lo[1 - k] < q[1 - k] < box_hi[1 - k]:
                 if box_hi[k] <= q[k] + 1e-9:

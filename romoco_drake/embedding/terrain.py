@@ -364,7 +364,7 @@ class TerrainSteps:
         lo, hi = np.full(2, -np.inf), np.full(2, np.inf)
         if foothold.surface >= 0:
             A, b = self.terrain.surfaces[foothold.surface].halfplanes()
-            _bound_inside(A @ R, b - A @ origin[:2] - np.max(footprint @ A.T, axis=0), lo, hi)
+            _bound_inside(A @ R, b - A @ origin[:2] - np.max(footprint @ A.T, axis=0), q, lo, hi)
         else:
             A, b = self.terrain.stacked_halfplanes()
             _bound_outside(A @ R, b - A @ origin[:2] - np.min(footprint @ A.transpose(0, 2, 1), axis=1),
@@ -376,26 +376,38 @@ class TerrainSteps:
 _ALIGNED = math.cos(math.radians(30.0))
 
 
-def _bound_inside(A: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
-    """Tightens (lo, hi) to the aligned half-planes A q ≤ b of a convex region containing q."""
-    for row, limit in zip(A, b, strict=True):
-        axis = int(np.argmax(np.abs(row)))
-        if abs(row[axis]) >= _ALIGNED:
-            if row[axis] > 0:
-                hi[axis] = min(hi[axis], limit / row[axis])
+def _bound_inside(A: np.ndarray, b: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+    """Tightens (lo, hi) to the aligned half-planes A p ≤ b of a convex region containing ``q``,
+    each one's limit on its axis taken on the line through ``q`` along that axis (:func:`_limits`)."""
+    axis, a, limit = _limits(A, b, q)
+    for k, row_a, bound in zip(axis, a, limit, strict=True):
+        if abs(row_a) >= _ALIGNED:
+            if row_a > 0:
+                hi[k] = min(hi[k], bound)
             else:
-                lo[axis] = max(lo[axis], limit / row[axis])
+                lo[k] = max(lo[k], bound)
+
+
+def _limits(A: np.ndarray, b: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per half-plane A p ≤ b (rows on the last axis of ``A``): the axis it is nearest normal to,
+    its component a on that axis, and where it crosses the line through ``q`` along that axis,
+    (b − a' q') / a with a' and q' the other axis' (a's sign says which side it bounds). At the
+    line through the stance origin instead, an edge yawed by h sat |q'| tan h off: G1 yawed
+    0.015 rad with its foothold 0.22 m aside, 3 mm, past the floor foothold at a riser, so the
+    floor's box ran on to the second tread's riser (g1_stairs)."""
+    axis = np.argmax(np.abs(A), axis=-1)
+    a = np.take_along_axis(A, axis[..., None], axis=-1)[..., 0]
+    across = np.take_along_axis(A, 1 - axis[..., None], axis=-1)[..., 0]
+    return axis, a, (b - across * q[1 - axis]) / np.where(np.abs(a) >= _ALIGNED, a, 1.0)
 
 
 def _bound_outside(A: np.ndarray, b: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
     """Tightens (lo, hi) about ``q`` (outside every convex region A[i] q ≤ b[i], the patches grown
     by the sole; A (regions, rows, 2), b (regions, rows)) so the box stays clear of each region
     along the axis that separates them. Each region's own box is its aligned half-planes'
-    (:func:`_bound_inside`); rows of zeros (padding) bound nothing."""
-    axis = np.argmax(np.abs(A), axis=2)
-    a = np.take_along_axis(A, axis[..., None], axis=2)[..., 0]
+    (:func:`_bound_inside`), on the lines through ``q``; rows of zeros (padding) bound nothing."""
+    axis, a, limit = _limits(A, b, q)
     aligned = np.abs(a) >= _ALIGNED
-    limit = b / np.where(aligned, a, 1.0)
     box_lo, box_hi = np.empty((len(A), 2)), np.empty((len(A), 2))
     for k in (0, 1):
         on_axis = aligned & (axis == k)
