@@ -10,8 +10,8 @@ from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 from romoco_drake.embedding.terrain import (
-    DROP_COP,
     DROP_MARGIN,
+    EDGE_COP,
     FOOTHOLD_REACH,
     SURFACE_COMMIT,
     TerrainSteps,
@@ -269,11 +269,11 @@ def test_a_step_down_lands_clear_of_the_edge_it_steps_over(g1):
     assert _world(up_origin, 0.0, up.target) == pytest.approx(up_nearest.position[:2])
 
 
-def test_a_step_down_plans_where_it_lands_and_a_cop_toward_the_heel(g1):
+def test_a_step_over_an_edge_plans_a_cop_toward_the_heel_and_a_step_down_where_it_lands(g1):
     """Down the flight from tread 2, the plan over the riser: the region's near edge is DROP_MARGIN past
     the nearest supported foothold, where place() lands the step, and the step may plan its stance CoP
-    up to DROP_COP of the heel's distance back; up the flight the region is the nearest foothold's box
-    and the CoP stays at the pivot."""
+    up to EDGE_COP of the heel's distance back. Up the flight the region is the nearest foothold's box
+    and the CoP may move back as far; a step on the stance's own tread keeps it at the pivot."""
     terrain = _stairs()
     steps = TerrainSteps(g1, terrain)
     origin, liftoff, plan = np.array([1.45, 0.1, 2 * RISE]), np.array([0.0, -0.2, 0.0]), (0.18, -0.2)
@@ -283,10 +283,11 @@ def test_a_step_down_plans_where_it_lands_and_a_cop_toward_the_heel(g1):
     assert x_lo == pytest.approx(origin[0] - nearest.position[0] + DROP_MARGIN) and x_lo < x_hi
     landed = steps.place(origin, math.pi, plan, 0.0, "right", liftoff).target
     assert landed[0] == pytest.approx(x_lo, abs=1e-9)
-    assert region.cop == pytest.approx((-DROP_COP * 0.085, 0.0))  # G1's heel: 0.085 m behind the centre
+    assert region.cop == pytest.approx((-EDGE_COP * 0.085, 0.0))  # G1's heel: 0.085 m behind the centre
     up = steps.region(np.array([1.15, 0.1, RISE]), 0.0, (0.16, -0.2), 0.0, "right")
-    assert up.cop is None
+    assert up.cop == pytest.approx((-EDGE_COP * 0.085, 0.0))
     assert up.box[0][0] == pytest.approx(EDGE + RUN - steps.footprint["right"][:, 0].min() - 1.15)
+    assert steps.region(np.array([1.1, 0.1, RISE]), 0.0, (0.05, -0.2), 0.0, "right").cop is None
 
 
 @pytest.mark.parametrize("plan_x, shift", [(0.33, 0.0), (0.27, DROP_MARGIN / 2)])

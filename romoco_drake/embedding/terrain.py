@@ -6,9 +6,11 @@ when the ground is not the flat floor (:mod:`romoco_drake.rom.terrain`).
   ``FOOTHOLD_REACH``; its height becomes the swing target's z. With none in reach the step is
   taken in place (the swing foot lands where it lifted off, ground it stood on) and counted.
   The planner's step adaptation keeps its step in :meth:`TerrainSteps.region`; a step down an
-  edge there lands where this module puts it (``DROP_MARGIN`` past the edge) and may plan its
-  stance CoP toward the heel (``DROP_COP``): from a foot at the edge the step is about 0.3 m, and
-  with the pivot alone the DCM reached it only after a step of more than ``t_ss_max``.
+  edge there lands where this module puts it (``DROP_MARGIN`` past the edge). A step up or down
+  an edge may plan its stance CoP toward the heel (``EDGE_COP``): from a foot at the edge the
+  step down is about 0.3 m, and with the pivot alone the DCM reached it only after a step of more
+  than ``t_ss_max``; a step up the riser landed with the DCM barely past the foot, which then
+  stalled at the tread's back edge, where the law's step back is down the riser.
 - **Swing clearance.** The apex rises above the highest ground under the sole's path, from the
   heel at lift-off to the toe at touchdown (a riser's edge between two treads).
 - **Sole tilt.** The swing sole turns from the tilt of the ground it lifted off to the tilt of
@@ -64,10 +66,13 @@ SURFACE_COMMIT = 0.3
 # ``edge_margin`` past the edge it steps over, and a swing lagging its path by a few centimetres
 # put G1's heel on the landing's edge with its toe still above the first tread (g1_stairs).
 DROP_STEP, DROP_MARGIN, DROP_QUARTERS = 0.02, 0.05, 4
-# On a step down an edge the stance CoP may move toward the heel by up to this fraction of the heel's
-# distance behind the sole centre (G1: 0.05 of 0.085 m), so the DCM reaches the far foothold at a
-# step time near the gait's (StepRegion, rom/step_adapt.py CopShift).
-DROP_COP = 0.6
+# On a step up or down an edge the stance CoP may move toward the heel by up to this fraction of the
+# heel's distance behind the sole centre (G1: 0.05 of 0.085 m), so the DCM reaches the far foothold
+# at a step time near the gait's, and up a riser lands ahead of it (StepRegion, rom/step_adapt.py
+# CopShift). Up risers too, G1 climbs g1_stairs' flight in 8 of 9 command variants (speed 0.18-0.22
+# m/s, start 0.9-1.1 s) on ground truth and 9 of 9 on the invariant EKF, against 5 and 6 of 9
+# with the pivot; it stalled on a tread's back edge, the DCM 2 cm past the foot, and stepped down.
+EDGE_COP = 0.6
 # The highest step up or down (m), as a fraction of the robot's CoM height z0 (G1: 0.2 m; the
 # stairs' 0.1 m risers well inside; a leg at z0 that reaches 0.3 z0 down still bends its knee).
 STEP_HEIGHT = 0.3
@@ -231,7 +236,7 @@ class TerrainSteps:
         answer to a CoM behind the new stance foot) landed 5 cm ahead instead (g1_stairs)."""
         step = foothold.position[:2] - lift_W
         length = float(np.linalg.norm(step))
-        if self.terrain.height(lift_W) - foothold.position[2] <= DROP_STEP or not self._drops(lift_W, step):
+        if self.terrain.height(lift_W) - foothold.position[2] <= DROP_STEP or not self._edge(lift_W, step):
             return foothold
         u = step / length
         A, b = reachable
@@ -250,14 +255,14 @@ class TerrainSteps:
         return Foothold(np.array([moved[0], moved[1], self.terrain.height(moved)]), foothold.normal,
                         foothold.surface, float(np.linalg.norm(moved - planned)))
 
-    def _drops(self, start: np.ndarray, step: np.ndarray) -> bool:
-        """Whether the ground from ``start`` along ``step`` falls by more than ``DROP_STEP`` at an
-        edge (between samples 1 cm apart), not along a slope or across a seam."""
+    def _edge(self, start: np.ndarray, step: np.ndarray, up: bool = False) -> bool:
+        """Whether the ground from ``start`` along ``step`` falls (``up``: rises) by more than
+        ``DROP_STEP`` at an edge (between samples 1 cm apart), not along a slope or across a seam."""
         n = int(math.ceil(float(np.linalg.norm(step)) / 0.01))
         if n == 0:
             return False
         heights = self.terrain.heights(start + step * np.arange(n + 1)[:, None] / n)
-        return bool(np.max(-np.diff(heights)) > DROP_STEP)
+        return bool(np.max(np.diff(heights) * (1.0 if up else -1.0)) > DROP_STEP)
 
     def _foothold(self, planned: np.ndarray, footprint: np.ndarray, reachable, surface: int | None,
                   seam: float, band: tuple[float, float]):
@@ -327,8 +332,8 @@ class TerrainSteps:
         (a step over a riser is longer, and later). Only the edges within 30° of the stance frame's
         axes bound it; the embedding's own check (:meth:`place`) covers the rest. ``surface``: as
         for :meth:`place`. On a step down an edge, the box's near edge is ``DROP_MARGIN`` further
-        on (where :meth:`place` lands it) and the step may plan its stance CoP toward the heel
-        (:class:`StepRegion`)."""
+        on (where :meth:`place` lands it); on a step up or down an edge the step may plan its
+        stance CoP toward the heel (:class:`StepRegion`, ``EDGE_COP``)."""
         c, s = math.cos(heading), math.sin(heading)
         R = np.array([[c, -s], [s, c]])
         yaw = heading + swing_yaw
@@ -341,10 +346,11 @@ class TerrainSteps:
         if foothold is None:
             return None
         (x_lo, x_hi), y = self._box(origin, R, footprint, foothold)
-        down = stance_z - foothold.position[2] > DROP_STEP and x_lo > 0.0
-        if not (down and self._drops(origin[:2], foothold.position[:2] - origin[:2])):
-            return StepRegion(((x_lo, x_hi), y))  # no step down an edge ahead (a slope has none)
-        return StepRegion(((min(x_lo + DROP_MARGIN, x_hi), x_hi), y), (-DROP_COP * self.heel[stance], 0.0))
+        rise, step = foothold.position[2] - stance_z, foothold.position[:2] - origin[:2]
+        if abs(rise) <= DROP_STEP or x_lo <= 0.0 or not self._edge(origin[:2], step, rise > 0.0):
+            return StepRegion(((x_lo, x_hi), y))  # no edge up or down ahead (a slope has none)
+        near = x_lo if rise > 0.0 else min(x_lo + DROP_MARGIN, x_hi)
+        return StepRegion(((near, x_hi), y), (-EDGE_COP * self.heel[stance], 0.0))
 
     def halfplanes(self, origin: np.ndarray, heading: float, foothold: Foothold, yaw: float, swing_side: str,
                    margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:

@@ -23,7 +23,7 @@ buys that time. Whenever the law's step is reachable and its offset viable
 (:meth:`StepAdapter.viable_offset`), the law's own plan is returned, so adaptation changes
 nothing in normal walking; when a push asks for more, the footholds stop at their bounds and
 the step times move so that the DCM reaches the orbit over two steps: earlier when it runs away
-from the bound, later when it comes back. A step down an edge of terrain may also move its stance
+from the bound, later when it comes back. A step up or down an edge of terrain may also move its stance
 CoP along the heading (:class:`CopShift`), which carries the DCM past a far foothold without a
 longer step.
 
@@ -104,7 +104,7 @@ class StepAdaptWeights:
     step: float = 1.0
     timing: float = 0.01
     offset: float = 10.0
-    # A tenth of the foothold's: a step down an edge moves its CoP before it lengthens its time.
+    # A tenth of the foothold's: a step over an edge moves its CoP before it lengthens its time.
     # At the foothold's weight G1 on g1_stairs took its steps down in 0.34 s, each carrying it
     # 7 cm sideways (the lateral DCM grows with the step time), until a foot met the stairs' side
     # and it fell at 22.4 s; 0.05, 0.1 and 0.2 of it all walk down.
