@@ -11,17 +11,20 @@ from romoco_drake.scenario import load_scenario, with_overrides
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("controller", ["tscqp", "posik"])
-def test_g1_walks_up_and_down_the_five_steps(controller):
-    """The whole of g1_stairs (32 s) under the TSC-QP and the position IK: no fall, no QP failure,
-    over the 0.5 m landing at its nominal height above it at 16 s, then on the floor past the flight
-    down (it ends at x = 4.8 m) at its nominal height, every step onto supported ground (none in
-    place) and every landed sole fully on its tread (the issue's "no foot placed on an edge"). Each
-    step keeps the tread it committed to (SURFACE_COMMIT): without that, a plan between two treads
-    flipped the step time and G1 fell at the fourth riser. Each step down an edge plans its stance
-    CoP toward the heel (rom/step_adapt.py CopShift): with the pivot alone the DCM fell behind the
-    first tread's foothold and G1 fell at 20.6 s."""
-    run = walk(with_overrides(load_scenario("g1_stairs"), controller=controller))
+@pytest.mark.parametrize("controller, estimator", [("tscqp", "invariant_ekf"), ("posik", "ground_truth")])
+def test_g1_walks_up_and_down_the_five_steps(controller, estimator):
+    """The whole of g1_stairs (32 s) under the TSC-QP with no motion capture (the invariant EKF) and
+    under the position IK: no fall, no QP failure, over the 0.5 m landing at its nominal height above
+    it at 16 s, then on the floor past the flight down (it ends at x = 4.8 m) at its nominal height,
+    every step onto supported ground (none in place) and every landed sole fully on its tread (the
+    issue's "no foot placed on an edge"); on the EKF, the base height estimate within 3 cm at the end.
+    Each step keeps the tread it committed to (SURFACE_COMMIT): without that, a plan between two
+    treads flipped the step time and G1 fell at the fourth riser. Each step up or down an edge plans
+    its stance CoP toward the heel (rom/step_adapt.py CopShift): with the pivot alone the DCM fell
+    behind the first tread's foothold down and G1 fell at 20.6 s, and on the EKF it stalled on a
+    tread's back edge up and fell at 10.1 s. The TSC-QP's ground-truth run walks the same course (the
+    README's terrain table); the harder case alone keeps the suite's time."""
+    run = walk(with_overrides(load_scenario("g1_stairs"), controller=controller, estimator=estimator))
     s = run.summary
     assert not s["fell"] and s["qp_failures"] == 0
     b = run.robot.base_q_start
@@ -30,6 +33,8 @@ def test_g1_walks_up_and_down_the_five_steps(controller):
     assert run.states[b + 6][k] - 0.5 == pytest.approx(run.robot.nominal.base_height, abs=0.03)
     assert run.states[b + 4][-1] > 5.0
     assert run.states[b + 6][-1] == pytest.approx(run.robot.nominal.base_height, abs=0.03)
+    if estimator != "ground_truth":
+        assert abs(s["height_error_end"]) <= 0.03
     footholds = s["footholds"]
     assert footholds["in_place"] == 0 and footholds["planned"] + footholds["adjusted"] >= s["steps"] - 2
     assert_landed_supported(s)
