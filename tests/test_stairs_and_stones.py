@@ -9,35 +9,61 @@ from walk_support import assert_landed_supported, walk
 
 from romoco_drake.scenario import load_scenario, with_overrides
 
+LANDING = (2.4, 3.4)  # g1_stairs' 0.5 m landing spans x = 2.4 … 3.4 m
+
+
+def _over_the_landing_at_nominal_height(run) -> None:
+    """When the base crosses the landing's middle, it is there at its nominal height above it."""
+    b = run.robot.base_q_start
+    k = int(np.argmax(run.states[b + 4] > sum(LANDING) / 2))
+    assert k > 0
+    assert run.states[b + 6][k] - 0.5 == pytest.approx(run.robot.nominal.base_height, abs=0.03)
+
+
+def _every_step_on_supported_ground(summary: dict) -> None:
+    """Every step planned or adjusted onto supported ground (none in place), and every landed sole
+    fully on its tread (the issue's "no foot placed on an edge")."""
+    footholds = summary["footholds"]
+    assert footholds["in_place"] == 0 and footholds["planned"] + footholds["adjusted"] >= summary["steps"] - 2
+    assert_landed_supported(summary)
+
 
 @pytest.mark.slow
-@pytest.mark.parametrize("controller, estimator", [("tscqp", "invariant_ekf"), ("posik", "ground_truth")])
-def test_g1_walks_up_and_down_the_five_steps(controller, estimator):
-    """The whole of g1_stairs (32 s) under the TSC-QP with no motion capture (the invariant EKF) and
-    under the position IK: no fall, no QP failure, over the 0.5 m landing at its nominal height above
-    it at 16 s, then on the floor past the flight down (it ends at x = 4.8 m) at its nominal height,
-    every step onto supported ground (none in place) and every landed sole fully on its tread (the
-    issue's "no foot placed on an edge"); on the EKF, the base height estimate within 3 cm at the end.
-    Each step keeps the tread it committed to (SURFACE_COMMIT): without that, a plan between two
-    treads flipped the step time and G1 fell at the fourth riser. Each step up or down an edge plans
-    its stance CoP toward the heel (rom/step_adapt.py CopShift): with the pivot alone the DCM fell
-    behind the first tread's foothold down and G1 fell at 20.6 s, and on the EKF it stalled on a
-    tread's back edge up and fell at 10.1 s. The TSC-QP's ground-truth run walks the same course (the
-    README's terrain table); the harder case alone keeps the suite's time."""
-    run = walk(with_overrides(load_scenario("g1_stairs"), controller=controller, estimator=estimator))
+def test_g1_walks_up_and_down_the_five_steps_on_the_invariant_ekf():
+    """The whole of g1_stairs (32 s) under the TSC-QP with no motion capture: no fall, no QP failure,
+    over the 0.5 m landing at its nominal height above it, then on the floor past the flight down
+    (it ends at x = 4.8 m) at its nominal height, every step on supported ground, and the base
+    height estimate within 3 cm at the end. Each step keeps the tread it committed to
+    (SURFACE_COMMIT): without that, a plan between two treads flipped the step time and G1 fell at
+    the fourth riser. Each step up or down an edge plans its stance CoP toward the heel
+    (rom/step_adapt.py CopShift): with the pivot alone the DCM fell behind the first tread's
+    foothold down and G1 fell at 20.6 s, and on the way up it stalled on a tread's back edge and
+    fell at 10.1 s. Ground truth walks the same course (the README's terrain table); this harder
+    case alone keeps the suite's time."""
+    run = walk(with_overrides(load_scenario("g1_stairs"), estimator="invariant_ekf"))
     s = run.summary
     assert not s["fell"] and s["qp_failures"] == 0
+    _over_the_landing_at_nominal_height(run)
     b = run.robot.base_q_start
-    k = int(np.searchsorted(run.times, 16.0))
-    assert 2.6 < run.states[b + 4][k] < 3.4  # the landing spans x = 2.4 … 3.4 m
-    assert run.states[b + 6][k] - 0.5 == pytest.approx(run.robot.nominal.base_height, abs=0.03)
     assert run.states[b + 4][-1] > 5.0
     assert run.states[b + 6][-1] == pytest.approx(run.robot.nominal.base_height, abs=0.03)
-    if estimator != "ground_truth":
-        assert abs(s["height_error_end"]) <= 0.03
-    footholds = s["footholds"]
-    assert footholds["in_place"] == 0 and footholds["planned"] + footholds["adjusted"] >= s["steps"] - 2
-    assert_landed_supported(s)
+    assert abs(s["height_error_end"]) <= 0.03
+    _every_step_on_supported_ground(s)
+
+
+@pytest.mark.slow
+def test_g1_climbs_the_five_steps_under_the_position_ik():
+    """g1_stairs' climb under the position IK (15 s): no fall, up the five steps and on the landing
+    at its nominal height above it at the end, every step on supported ground. The whole course
+    (down too) is in the README's terrain table; its second half alone keeps the suite's time."""
+    run = walk(with_overrides(load_scenario("g1_stairs"), controller="posik"), duration=15.0)
+    s = run.summary
+    assert not s["fell"] and s["qp_failures"] == 0
+    _over_the_landing_at_nominal_height(run)
+    b = run.robot.base_q_start
+    assert LANDING[0] + 0.2 < run.states[b + 4][-1] < LANDING[1]
+    assert run.states[b + 6][-1] - 0.5 == pytest.approx(run.robot.nominal.base_height, abs=0.03)
+    _every_step_on_supported_ground(s)
 
 
 @pytest.mark.slow
@@ -55,6 +81,4 @@ def test_h1_crosses_the_stepping_stones_on_the_invariant_ekf():
     assert not s["fell"] and s["qp_failures"] == 0
     assert 4.3 < run.states[run.robot.base_q_start + 4][-1] < 5.2
     assert abs(s["height_error_end"]) <= 0.03
-    footholds = s["footholds"]
-    assert footholds["in_place"] == 0 and footholds["planned"] + footholds["adjusted"] >= s["steps"] - 2
-    assert_landed_supported(s)
+    _every_step_on_supported_ground(s)
