@@ -385,26 +385,27 @@ _ALIGNED = math.cos(math.radians(30.0))
 def _bound_inside(A: np.ndarray, b: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
     """Tightens (lo, hi) to the aligned half-planes A p ≤ b of a convex region containing ``q``,
     each one's limit on its axis taken on the line through ``q`` along that axis (:func:`_limits`)."""
-    axis, a, limit = _limits(A, b, q)
-    for k, row_a, bound in zip(axis, a, limit, strict=True):
-        if abs(row_a) >= _ALIGNED:
-            if row_a > 0:
-                hi[k] = min(hi[k], bound)
-            else:
-                lo[k] = max(lo[k], bound)
+    axis, side, limit = _limits(A, b, q)
+    for k, sign, bound in zip(axis, side, limit, strict=True):
+        if sign > 0:
+            hi[k] = min(hi[k], bound)
+        elif sign < 0:
+            lo[k] = max(lo[k], bound)
 
 
 def _limits(A: np.ndarray, b: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per half-plane A p ≤ b (rows on the last axis of ``A``): the axis it is nearest normal to,
-    its component a on that axis, and where it crosses the line through ``q`` along that axis,
-    (b − a' q') / a with a' and q' the other axis' (a's sign says which side it bounds). At the
+    which side of that axis it bounds (the sign of its component a there; 0: not within 30° of
+    the axis, no bound), and where it crosses the line through ``q`` along that axis,
+    (b − a' q') / a with a' and q' the other axis'. At the
     line through the stance origin instead, an edge yawed by h sat |q'| tan h off: G1 yawed
     0.015 rad with its foothold 0.22 m aside, 3 mm, past the floor foothold at a riser, so the
     floor's box ran on to the second tread's riser (g1_stairs)."""
     axis = np.argmax(np.abs(A), axis=-1)
     a = np.take_along_axis(A, axis[..., None], axis=-1)[..., 0]
     across = np.take_along_axis(A, 1 - axis[..., None], axis=-1)[..., 0]
-    return axis, a, (b - across * q[1 - axis]) / np.where(np.abs(a) >= _ALIGNED, a, 1.0)
+    aligned = np.abs(a) >= _ALIGNED
+    return axis, np.where(aligned, np.sign(a), 0.0), (b - across * q[1 - axis]) / np.where(aligned, a, 1.0)
 
 
 def _bound_outside(A: np.ndarray, b: np.ndarray, q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
@@ -412,13 +413,12 @@ def _bound_outside(A: np.ndarray, b: np.ndarray, q: np.ndarray, lo: np.ndarray, 
     by the sole; A (regions, rows, 2), b (regions, rows)) so the box stays clear of each region
     along the axis that separates them. Each region's own box is its aligned half-planes'
     (:func:`_bound_inside`), on the lines through ``q``; rows of zeros (padding) bound nothing."""
-    axis, a, limit = _limits(A, b, q)
-    aligned = np.abs(a) >= _ALIGNED
+    axis, side, limit = _limits(A, b, q)
     box_lo, box_hi = np.empty((len(A), 2)), np.empty((len(A), 2))
     for k in (0, 1):
-        on_axis = aligned & (axis == k)
-        box_hi[:, k] = np.min(np.where(on_axis & (a > 0.0), limit, np.inf), axis=1, initial=np.inf)
-        box_lo[:, k] = np.max(np.where(on_axis & (a < 0.0), limit, -np.inf), axis=1, initial=-np.inf)
+        on_axis = axis == k
+        box_hi[:, k] = np.min(np.where(on_axis & (side > 0.0), limit, np.inf), axis=1, initial=np.inf)
+        box_lo[:, k] = np.max(np.where(on_axis & (side < 0.0), limit, -np.inf), axis=1, initial=-np.inf)
     for k in (0, 1):
         other = 1 - k
         beside = (box_lo[:, other] < q[other]) & (q[other] < box_hi[:, other])
