@@ -159,6 +159,27 @@ def test_foothold_offset_is_clamped():
     assert (p_f - p_hip) @ [5.0, 3.0] > 0.0
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_foothold_is_eq_14_term_by_term(seed):
+    """Every term of eq. 14 at once, against the formula written with rotation matrices (the
+    function itself works on floats)."""
+    rng = np.random.default_rng(seed)
+    p_com, v_com = rng.normal(size=3), rng.normal(size=3)
+    v_cmd, v_hip = rng.normal(size=2), rng.normal(size=2)
+    yaw, wz, t_rem, t_stance = rng.uniform(-3, 3), rng.normal(), rng.uniform(0, 0.5), rng.uniform(0.2, 0.6)
+    for side, max_step in (("left", 10.0), ("right", 10.0), ("left", 0.05)):
+        p_f, foot_yaw = raibert_foothold(p_com, v_com, v_cmd, wz, yaw, side, t_rem, t_stance, H, W, 0.1, 0.7,
+                                         max_step, v_body_hip=v_hip)
+        lateral = W / 2 if side == "left" else -W / 2
+        p_hip = p_com[:2] + heading_integral(yaw, wz, t_rem) @ v_hip + _rz(foot_yaw) @ [0.0, lateral]
+        v = v_com[:2]
+        centrifugal = wz * np.array([v[1], -v[0]])  # (v × ω)_xy
+        offset = t_stance / 2 * v + 0.1 * (v - _rz(yaw) @ v_cmd) + 0.7 * H / GRAVITY * centrifugal
+        offset *= min(1.0, max_step / np.linalg.norm(offset))
+        np.testing.assert_allclose(p_f, p_hip + offset, atol=1e-12)
+        assert foot_yaw == pytest.approx(yaw + wz * (t_rem + t_stance / 2), abs=1e-12)
+
+
 def test_foot_yaw_and_turning_footholds():
     yaw, wz = 0.3, 0.6
     t_stance = stance_duration(T_SS, T_DS)

@@ -47,6 +47,8 @@ Fixes to the paper's formulas (each checked in ``tests/test_gait_schedule.py``):
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from romoco_drake.rom.types import SIDES
@@ -69,10 +71,23 @@ def _rot2(yaw: float | np.ndarray) -> np.ndarray:
 
 def heading_integral(yaw: float, yaw_rate: float, duration: float) -> np.ndarray:
     """∫₀^duration Rz(yaw + yaw_rate s) ds (2×2): maps a body-frame velocity to the arc it sweeps."""
+    return np.array(_heading_integral(float(yaw), float(yaw_rate), float(duration)))
+
+
+def _sinc(x: float) -> float:
+    """sin(x)/x, 1 at 0."""
+    return math.sin(x) / x if x != 0.0 else 1.0
+
+
+def _heading_integral(yaw: float, yaw_rate: float, duration: float) -> tuple[tuple[float, float], ...]:
+    """:func:`heading_integral` on floats, as nested tuples (the planners' per-tick path: numpy's
+    per-call cost on 2×2 arrays was most of DRACO's foothold update)."""
     a = yaw_rate * duration
-    sin_term = duration * np.sinc(a / np.pi)  # sin(a)/ω
-    cos_term = duration * np.sin(a / 2) * np.sinc(a / (2 * np.pi))  # (1 − cos a)/ω
-    return _rot2(yaw) @ np.array([[sin_term, -cos_term], [cos_term, sin_term]])
+    sin_term = duration * _sinc(a)  # sin(a)/ω
+    cos_term = duration * math.sin(a / 2) * _sinc(a / 2)  # (1 − cos a)/ω
+    c, s = math.cos(yaw), math.sin(yaw)
+    return ((c * sin_term - s * cos_term, -c * cos_term - s * sin_term),
+            (s * sin_term + c * cos_term, -s * cos_term + c * sin_term))
 
 
 def stance_duration(t_ss: float, t_ds: float) -> float:
@@ -141,19 +156,23 @@ def raibert_foothold(p_com: np.ndarray, v_com: np.ndarray, v_body_cmd: np.ndarra
     (default the command, ``v_body_cmd``).
     """
     _check_side(side)
-    v_body_hip = v_body_cmd if v_body_hip is None else v_body_hip
+    hx, hy = (v_body_cmd if v_body_hip is None else v_body_hip)[:2]
+    cx, cy = v_body_cmd[:2]
+    vx, vy = float(v_com[0]), float(v_com[1])
     foot_yaw = yaw + yaw_rate_cmd * (t_rem + 0.5 * t_stance)
     lateral = 0.5 * step_width if side == "left" else -0.5 * step_width
-    p_hip = (np.asarray(p_com, float)[:2] + heading_integral(yaw, yaw_rate_cmd, t_rem) @ v_body_hip
-             + _rot2(foot_yaw) @ np.array([0.0, lateral]))
-    v = np.asarray(v_com, float)[:2]
-    v_cmd = _rot2(yaw) @ np.asarray(v_body_cmd, float)
-    centrifugal = np.array([v[1] * yaw_rate_cmd, -v[0] * yaw_rate_cmd])  # (ṗ_c × ω_cmd)_xy, outward
-    offset = 0.5 * t_stance * v + k1 * (v - v_cmd) + k2 * height / g * centrifugal
-    norm = np.linalg.norm(offset)
+    (h00, h01), (h10, h11) = _heading_integral(yaw, yaw_rate_cmd, t_rem)
+    hip_x = float(p_com[0]) + h00 * hx + h01 * hy - math.sin(foot_yaw) * lateral
+    hip_y = float(p_com[1]) + h10 * hx + h11 * hy + math.cos(foot_yaw) * lateral
+    c, s = math.cos(yaw), math.sin(yaw)
+    cmd_x, cmd_y = c * cx - s * cy, s * cx + c * cy
+    lean = k2 * height / g * yaw_rate_cmd  # k2 (h/g) ṗ_c × ω_cmd, outward
+    off_x = 0.5 * t_stance * vx + k1 * (vx - cmd_x) + lean * vy
+    off_y = 0.5 * t_stance * vy + k1 * (vy - cmd_y) - lean * vx
+    norm = math.hypot(off_x, off_y)
     if norm > max_step:
-        offset *= max_step / norm
-    return p_hip + offset, float(foot_yaw)
+        off_x, off_y = off_x * (max_step / norm), off_y * (max_step / norm)
+    return np.array([hip_x + off_x, hip_y + off_y]), float(foot_yaw)
 
 
 def reference_trajectory(p_com: np.ndarray, yaw: float, v_body_cmd: np.ndarray, yaw_rate_cmd: float,
