@@ -194,11 +194,14 @@ class OutputEmbedding(LeafSystem):
             return
         phase = self.gait_phase_port.Eval(context)
         memory = self.memory(context)
-        plan = memory.plan if self.latch_plan and isinstance(memory, SwingState) else None
-        if plan is None:
-            plan = self.planner_output_port.Eval(context)
+        mode = self._mode(context)
+        plan = None
+        if mode == Mode.WALKING:  # standing and in-air references read no plan: none is made for them
+            plan = memory.plan if self.latch_plan and isinstance(memory, SwingState) else None
+            if plan is None:
+                plan = self.planner_output_port.Eval(context)
         refs: TaskReferences = self.core.evaluate(
-            self._kinematics(context), self._mode(context), float(phase[1]), plan, memory, context.get_time())
+            self._kinematics(context), mode, float(phase[1]), plan, memory, context.get_time())
         value.set_value(refs)
 
     def _update_tracking_error(self, context, discrete_state) -> None:

@@ -311,9 +311,13 @@ class GaitStateMachine(LeafSystem):
                 and tau < SWING_COMMIT_FRACTION * s.t_ss and plan.t_ss > tau and plan.t_ss != s.t_ss)
 
     def _update(self, context, state) -> None:
-        plan = self.planner_output_port.Eval(context) if self.planner_output_port.HasValue(context) else None
+        schedule = self.schedule(context)
+        # Only a step under way reads the plan (re-timing, the scuff check): a standing robot's
+        # tick makes none (a step started this tick cannot end before ``early_touchdown``).
+        plan = (self.planner_output_port.Eval(context)
+                if schedule.mode == Mode.WALKING and self.planner_output_port.HasValue(context) else None)
         blind = LinkStage.decode(self.link_stage_port.Eval(context)[0]) >= LinkStage.STAND
-        s = self.next_schedule(self.schedule(context), context.get_time(), self.kinematics_port.Eval(context),
+        s = self.next_schedule(schedule, context.get_time(), self.kinematics_port.Eval(context),
                                WalkCommand.from_vector(self.command_port.Eval(context)),
                                self.foot_contact_port.Eval(context),
                                blind, plan)
