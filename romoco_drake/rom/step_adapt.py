@@ -308,8 +308,18 @@ class SwingWindow:
         return s + d * np.where(crossed, least, low), s + d * np.where(crossed, least, high)
 
     def contains(self, u: Sequence[float], t_ss: float) -> bool:
-        lo, hi = self.interval(t_ss)
-        return all(lo[i] <= u[i] <= hi[i] for i in range(2))
+        """Whether ``u`` is in the window at one ``t_ss``: :meth:`interval`'s arithmetic on the two
+        axes' sample rows alone (every walking tick asks this; the broadcasting cost more than it)."""
+        d = max(float(t_ss) - self.tau, 0.0)
+        low0, high0, slope, least0, least1 = self._lines
+        dr = d * slope
+        low, high = (dr + low0).max(axis=1).tolist(), (dr + high0).min(axis=1).tolist()
+        for i in range(2):
+            if low[i] > high[i]:
+                low[i] = high[i] = float(least0[i] + d * least1[i])
+            if not self.s[i] + d * low[i] <= u[i] <= self.s[i] + d * high[i]:
+                return False
+        return True
 
 
 # The σ grid: points over the whole range, then rounds of points around the best one so far;
