@@ -47,7 +47,7 @@ class BezierCurve:
 
     def evaluate(self, t: float | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         n = self.degree
-        if np.ndim(t) == 0:
+        if isinstance(t, float) or np.ndim(t) == 0:  # a float (numpy's too) skips ndim's dispatch
             powers = min(max(t / self.duration, 0.0), 1.0) ** self._exponents
         else:
             powers = np.clip(np.asarray(t, dtype=float) / self.duration, 0.0, 1.0)[:, None] ** self._exponents
