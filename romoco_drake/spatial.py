@@ -57,7 +57,14 @@ def wrench_map(points: np.ndarray) -> np.ndarray:
     ``points`` (3×k, m) are the force application points relative to the moment reference
     point, in the frame the forces and the wrench are expressed in. Rank 6 for three
     non-collinear points; rank 5 for points on a line through the reference point (no
-    moment about the line), the line-foot case.
+    moment about the line), the line-foot case. Written entry by entry (the wrench-tracking
+    term builds one per foot in contact every tick; stacking the blocks cost twice as much).
     """
-    k = points.shape[1]
-    return np.vstack([np.tile(_I3, k), np.hstack(skew(points.T))])
+    x, y, z = points
+    c = np.arange(0, 3 * len(x), 3)  # each point's first column: its block is [I; [p]×]
+    G = np.zeros((6, 3 * len(x)))
+    G[0, c] = G[1, c + 1] = G[2, c + 2] = 1.0
+    G[3, c + 1], G[3, c + 2] = -z, y
+    G[4, c], G[4, c + 2] = z, -x
+    G[5, c], G[5, c + 1] = -y, x
+    return G

@@ -298,28 +298,23 @@ class SwingWindow:
         """(lo, hi) of the touchdown point, with a leading dimension of 2 (x, y) over ``t_ss``'s shape."""
         d = np.maximum(np.asarray(t_ss, dtype=float) - self.tau, 0.0)
         low0, high0, slope, least0, least1 = self._lines
-        lead = (2,) + (1,) * d.ndim
-        dr = d[None, ..., None] * slope.reshape(lead + (-1,))  # both axes at once, each sample r
-        low = (dr + low0.reshape(lead + (-1,))).max(axis=-1)
-        high = (dr + high0.reshape(lead + (-1,))).min(axis=-1)
-        least = least0.reshape(lead) + d * least1.reshape(lead)
+        if d.ndim == 0:  # one time (every walking tick asks): the two axes' sample rows alone
+            dr = d * slope
+            low, high = (dr + low0).max(axis=1), (dr + high0).min(axis=1)
+            least, s = least0 + d * least1, np.asarray(self.s)
+        else:
+            lead = (2,) + (1,) * d.ndim
+            dr = d[None, ..., None] * slope.reshape(lead + (-1,))  # both axes at once, each sample r
+            low = (dr + low0.reshape(lead + (-1,))).max(axis=-1)
+            high = (dr + high0.reshape(lead + (-1,))).min(axis=-1)
+            least = least0.reshape(lead) + d * least1.reshape(lead)
+            s = np.reshape(self.s, lead)
         crossed = low > high
-        s = np.reshape(self.s, lead)
         return s + d * np.where(crossed, least, low), s + d * np.where(crossed, least, high)
 
     def contains(self, u: Sequence[float], t_ss: float) -> bool:
-        """Whether ``u`` is in the window at one ``t_ss``: :meth:`interval`'s arithmetic on the two
-        axes' sample rows alone (every walking tick asks this; the broadcasting cost more than it)."""
-        d = max(float(t_ss) - self.tau, 0.0)
-        low0, high0, slope, least0, least1 = self._lines
-        dr = d * slope
-        low, high = (dr + low0).max(axis=1).tolist(), (dr + high0).min(axis=1).tolist()
-        for i in range(2):
-            if low[i] > high[i]:
-                low[i] = high[i] = float(least0[i] + d * least1[i])
-            if not self.s[i] + d * low[i] <= u[i] <= self.s[i] + d * high[i]:
-                return False
-        return True
+        lo, hi = self.interval(t_ss)
+        return all(lo[i] <= u[i] <= hi[i] for i in range(2))
 
 
 # The σ grid: points over the whole range, then rounds of points around the best one so far;
