@@ -167,6 +167,7 @@ def make_parser() -> argparse.ArgumentParser:
         dropout,
         embedding,
         engines_cli,
+        framework,
         inertia,
         push,
         realtime,
@@ -201,6 +202,7 @@ def make_parser() -> argparse.ArgumentParser:
         module.register(bench)
     walking.register_tick(bench)
     realtime.register(bench)
+    framework.register(bench)
     inertia.register(bench)
     report.register(sub)
     _register_inertia(sub)

@@ -15,6 +15,7 @@ from romoco_drake.modes import Mode
 from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_value
 from romoco_drake.robots.model import RobotModel
 from romoco_drake.rom.types import GAIT_PHASE_SIZE, PlannerOutput, side_from_sign
+from romoco_drake.values import SharedValue
 
 # Output groups of the ``tracking_error`` port: (label, name prefixes), the tasks of the RoMoCo
 # paper's eq. 13: z_com; pelvis pitch and roll; the swing foot's x, y, z; its roll and pitch; the
@@ -219,6 +220,7 @@ def _groups(names: tuple[str, ...]) -> np.ndarray:
                           len(ERROR_GROUPS) - 1) for n in names], dtype=int)
 
 
-class _NoSwing:
-    """Marker for 'no step latched' (abstract state needs one concrete value type)."""
+class _NoSwing(SharedValue):
+    """Marker for 'no step latched' (abstract state needs one concrete value type); shared on
+    copy, as the state update copies it every standing tick."""
 

@@ -69,6 +69,7 @@ from romoco_drake.rom.types import (
     WalkCommand,
     side_from_sign,
 )
+from romoco_drake.values import SharedValue
 
 INERTIA_MODES = ("nominal", "updated", "network")
 
@@ -398,8 +399,8 @@ def age_percentiles(histogram: np.ndarray) -> dict:
     return {q: float(np.searchsorted(cumulative, f) + 1) for q, f in (("median", 0.5), ("p99", 0.99))}
 
 
-class _NoReference:
-    """The reference state before the first solve and outside walking."""
+class _NoReference(SharedValue):
+    """The reference state before the first solve and outside walking (shared on copy)."""
 
     ok = False
 
