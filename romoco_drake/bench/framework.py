@@ -46,7 +46,12 @@ class _Shared(SharedValue):
 
 
 class _Probe(LeafSystem):
-    """One system of a kind (module docstring); ``calls`` counts its callbacks."""
+    """One system of a kind (module docstring); ``calls`` counts its callbacks.
+
+    | port | dir | size | meaning                                      |
+    |------|-----|------|----------------------------------------------|
+    | y    | out | 6    | zeros (the ``output port read`` kind only)   |
+    """
 
     def __init__(self, kind: str):
         super().__init__()
@@ -84,7 +89,12 @@ class _Probe(LeafSystem):
 
 
 class _Reader(LeafSystem):
-    """Reads every probe's output once a period, as a controller's update pulls its inputs."""
+    """Reads every probe's output once a period, as a controller's update pulls its inputs.
+
+    | port      | dir | size | meaning                 |
+    |-----------|-----|------|-------------------------|
+    | u0 … un−1 | in  | 6    | the probes' ``y``       |
+    """
 
     def __init__(self, n: int):
         super().__init__()
