@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from romoco_drake.control.gravity import contact_gravity_compensation
-from romoco_drake.interfaces.monitor import FallMonitor
+from romoco_drake.interfaces.monitor import FallMonitor, reach_bounds
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import load_robot
 from romoco_drake.runner import run_scenario
@@ -61,6 +61,39 @@ def test_fall_monitor_detects_each_kind_of_fall():
     bad = x.copy()
     bad[0] = np.nan
     assert monitor.check(bad)[0] == "invalid_state"
+
+
+@pytest.mark.parametrize("name", ["g1", "cassie", "xo"])
+def test_fall_monitor_skips_only_bodies_that_cannot_be_low(name):
+    """Each body's reach bound holds at random joint angles (within the limits, the base
+    turned at random), and the monitor's verdict over the bodies it looks at is the verdict over
+    all of them, at heights where some body touches and where none does."""
+    robot = load_robot(name)
+    plant, monitor = robot.plant, FallMonitor(robot)
+    bodies = monitor._bodies
+    bound = reach_bounds(plant, bodies, robot.base_body)
+    assert np.all(np.isfinite(bound)) and np.array_equal(bound, monitor._reach)
+    kin, rng = RobotKinematics(robot), np.random.default_rng(3)
+    lo, hi = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
+    joints = robot.joint_q_index
+    verdicts = {"": 0, "body_contact": 0}
+    for _ in range(40):
+        x = np.concatenate([robot.nominal.q, np.zeros(robot.nv)])
+        x[joints] = rng.uniform(np.maximum(lo[joints], -np.pi), np.minimum(hi[joints], np.pi))
+        quat = rng.standard_normal(4)
+        i = robot.base_q_start
+        x[i:i + 4] = quat / np.linalg.norm(quat) * [1.0, 0.15, 0.15, 1.0]
+        x[i:i + 4] /= np.linalg.norm(x[i:i + 4])  # within the tilt limit mostly
+        x[i + 6] = rng.uniform(0.55, 1.0) * robot.nominal.base_height
+        kin.update(x)
+        p_base = plant.EvalBodyPoseInWorld(kin.context, robot.base_body).translation()
+        p = np.array([plant.EvalBodyPoseInWorld(kin.context, b).translation() for b in bodies])
+        assert np.all(np.linalg.norm(p - p_base, axis=1) <= bound + 1e-9)
+        reason = monitor.check(x)[0]
+        if reason in verdicts:
+            assert reason == ("body_contact" if p[:, 2].min() < monitor._clearance else "")
+            verdicts[reason] += 1
+    assert min(verdicts.values()) > 0, verdicts  # both verdicts were compared
 
 
 def test_fall_monitor_counts_joint_speeds_past_the_model_limits():

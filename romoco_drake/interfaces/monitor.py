@@ -4,7 +4,10 @@ A fall is any of: base below ``height_fraction`` of its nominal height; base til
 ``max_tilt`` (angle between the base z axis and world z); a body other than a foot
 touching the ground; a non-finite state (the simulation diverged). Only the soles carry
 collision geometry in simulation, so "touching" is judged by body frame origins: a
-non-foot body origin below ``body_clearance`` (m).
+non-foot body origin below ``body_clearance`` (m). Only the bodies that could be that low are
+looked at: each body's origin lies within a bound of the base origin, the sum of its joints' fixed
+offsets along the tree (:func:`reach_bounds`), so a body whose bound is shorter than the base's
+height above the highest ground is skipped, exactly (G1 standing: 6 of its 37).
 
 Heights are above the terrain's ground under the base or the body, not above z = 0: a robot
 standing on a landing has not fallen. Over a floor the feet may not step on (a stepping-stone
@@ -59,10 +62,13 @@ class FallMonitor(LeafSystem):
         self._clearance = body_clearance
         plant = robot.plant
         feet = robot.foot_body_names  # with the bodies welded to them (a sole frame, a sensor link)
-        self._bodies = [
-            plant.get_body(i) for i in plant.GetBodyIndices(robot.model_instance)
-            if plant.get_body(i).name() not in feet
-        ]
+        bodies = [plant.get_body(i) for i in plant.GetBodyIndices(robot.model_instance)
+                  if plant.get_body(i).name() not in feet]
+        reach = reach_bounds(plant, bodies, robot.base_body)
+        order = np.argsort(-reach, kind="stable")
+        self._bodies = [bodies[k] for k in order]  # farthest reach first
+        self._reach = reach[order]
+        self._highest_ground = max([terrain.floor, *tops])
         self.state_input = self.DeclareVectorInputPort("state", robot.nq + robot.nv)
         self._kinematics = declare_kinematics_cache(self, robot, self.state_input.Eval,
                                                     {self.state_input.ticket()})
@@ -96,11 +102,14 @@ class FallMonitor(LeafSystem):
         height -= ground
         if reason:
             return reason, height
-        poses = (r.plant.EvalBodyPoseInWorld(kin.context, body).translation() for body in self._bodies)
+        # Bodies whose reach below the base origin could take them under the clearance.
+        depth = kin.x[i + 6] - self._highest_ground - self._clearance
+        near = self._bodies[:int(np.count_nonzero(self._reach >= depth))]
+        poses = (r.plant.EvalBodyPoseInWorld(kin.context, body).translation() for body in near)
         if flat:
             low = any(p_WB[2] < ground + self._clearance for p_WB in poses)
         else:
-            p = np.array(list(poses))
+            p = np.array(list(poses)).reshape(-1, 3)
             low = bool(np.any(p[:, 2] < self._grounds(p[:, :2]) + self._clearance))
         return ("body_contact" if low else ""), height
 
@@ -169,3 +178,26 @@ class FallMonitor(LeafSystem):
             "final_base_height_m": float(s[LAST_HEIGHT]),
         } | self.speed_summary(context) | audit
 
+
+
+def reach_bounds(plant, bodies, base) -> np.ndarray:
+    """For each of ``bodies``, a bound (m) on its origin's distance from ``base``'s origin over
+    every configuration: the sum, along the tree path to the base, of each joint's fixed offsets
+    from its parent's and its child's origin (a revolute, universal, ball or weld joint keeps its
+    two frames' origins together; any other joint, or a body off the base's subtree, gives ∞)."""
+    inboard = {plant.get_joint(j).child_body().index(): plant.get_joint(j) for j in plant.GetJointIndices()}
+    bound = np.zeros(len(bodies))
+    for k, body in enumerate(bodies):
+        index = body.index()
+        while index != base.index():
+            joint = inboard.get(index)
+            if joint is None or joint.type_name() not in _FIXED_ORIGIN_JOINTS:
+                bound[k] = np.inf
+                break
+            bound[k] += (np.linalg.norm(joint.frame_on_parent().GetFixedPoseInBodyFrame().translation())
+                         + np.linalg.norm(joint.frame_on_child().GetFixedPoseInBodyFrame().translation()))
+            index = joint.parent_body().index()
+    return bound
+
+
+_FIXED_ORIGIN_JOINTS = ("revolute", "universal", "ball_rpy", "weld")

@@ -116,7 +116,7 @@ def _unit(q: np.ndarray) -> np.ndarray | None:
     return q / norm if np.isfinite(norm) and norm > 1e-9 else None
 
 
-def foot_normal_forces(contacts: ContactResults, foot_bodies: Sequence[BodyIndex],
+def foot_normal_forces(contacts: ContactResults, foot_bodies: Sequence[BodyIndex | int],
                        level_world: bool = False) -> list[float]:
     """Total normal force (N, ≥ 0 when pressing) of the point contacts on each of ``foot_bodies``.
 
@@ -385,8 +385,8 @@ class PlantContactReadout(LeafSystem):
         instance = robot.model_instance
         base = plant.GetBodyByName(robot.config.base_body, instance)
         self._base_v = base.floating_velocities_start_in_v() + 3
-        self._feet = [plant.GetBodyByName(robot.feet[side].body_name, instance).index()
-                      for side in ("left", "right")]
+        self._feet = [int(plant.GetBodyByName(robot.feet[side].body_name, instance).index())
+                      for side in ("left", "right")]  # ints: a BodyIndex's int() is a pybind call
         self.accelerations_input = self.DeclareVectorInputPort("generalized_acceleration",
                                                                plant.num_velocities())
         self.contact_results_input = self.DeclareAbstractInputPort(
