@@ -45,6 +45,15 @@ class _Shared(SharedValue):
     t: float = 0.0
 
 
+# The unrestricted-update kinds: the abstract state values each probe holds beside its discrete state.
+UNRESTRICTED_STATES = {
+    "unrestricted update, discrete state": (),
+    "unrestricted update, 1 plain abstract state": (_Plain(),),
+    "unrestricted update, 3 plain abstract states": (_Plain(),) * 3,
+    "unrestricted update, 3 shared abstract states": (_Shared(),) * 3,
+}
+
+
 class _Probe(LeafSystem):
     """One system of a kind (module docstring); ``calls`` counts its callbacks.
 
@@ -61,12 +70,9 @@ class _Probe(LeafSystem):
         elif kind == "discrete update":
             self.DeclareDiscreteState(3)
             self.DeclarePeriodicDiscreteUpdateEvent(PERIOD, 0.0, self._discrete)
-        elif kind.startswith("unrestricted"):
-            values = {"discrete state": (), "1 plain abstract state": (_Plain(),),
-                      "3 plain abstract states": (_Plain(),) * 3,
-                      "3 shared abstract states": (_Shared(),) * 3}
+        elif kind in UNRESTRICTED_STATES:
             self.DeclareDiscreteState(3)
-            for value in values[kind.removeprefix("unrestricted update, ")]:
+            for value in UNRESTRICTED_STATES[kind]:
                 self.DeclareAbstractState(AbstractValue.Make(value))
             self.DeclarePeriodicUnrestrictedUpdateEvent(PERIOD, 0.0, self._unrestricted)
         elif kind == "output port read":
@@ -107,9 +113,7 @@ class _Reader(LeafSystem):
             port.Eval(context)
 
 
-KINDS = ("publish", "discrete update", "unrestricted update, discrete state",
-         "unrestricted update, 1 plain abstract state", "unrestricted update, 3 plain abstract states",
-         "unrestricted update, 3 shared abstract states", "output port read")
+KINDS = ("publish", "discrete update", *UNRESTRICTED_STATES, "output port read")
 
 
 def _time_kind(kind: str, ticks: int) -> tuple[float, int]:
