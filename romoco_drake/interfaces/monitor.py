@@ -179,6 +179,9 @@ class FallMonitor(LeafSystem):
         } | self.speed_summary(context) | audit
 
 
+# Joints whose two frames' origins stay together (they only turn the child about that point).
+_FIXED_ORIGIN_JOINTS = ("revolute", "universal", "ball_rpy", "weld")
+
 
 def reach_bounds(plant, bodies, base) -> np.ndarray:
     """For each of ``bodies``, a bound (m) on its origin's distance from ``base``'s origin over
@@ -198,6 +201,3 @@ def reach_bounds(plant, bodies, base) -> np.ndarray:
                          + np.linalg.norm(joint.frame_on_child().GetFixedPoseInBodyFrame().translation()))
             index = joint.parent_body().index()
     return bound
-
-
-_FIXED_ORIGIN_JOINTS = ("revolute", "universal", "ball_rpy", "weld")
