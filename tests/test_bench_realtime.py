@@ -78,6 +78,9 @@ def test_realtime_replays_the_logged_run_exactly(tmp_path):
     assert 0.0 <= r["deadline_miss_fraction"] <= 1.0
     assert r["deadline_misses"] == round(r["deadline_miss_fraction"] * r["ticks"])
     assert r["plant_step_ms"] > 0.0
+    # The station's own Python systems, each timed (every one runs in a standing station's steps).
+    assert set(r["station_callbacks_us"]) == {"contact_readout", "sensors", "monitor"}
+    assert all(us > 0.0 for us in r["station_callbacks_us"].values())
     json.dumps(r)
 
 

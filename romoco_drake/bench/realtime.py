@@ -35,7 +35,7 @@ from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.bench.callback_timer import timed_callbacks
-from romoco_drake.bench.walking import station_and_bare_plant_steps
+from romoco_drake.bench.walking import station_and_bare_plant_steps, station_callback_split
 from romoco_drake.config import LINK_TICK_OFFSET
 from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces.lcm_codec import (
@@ -134,7 +134,8 @@ def bench_realtime(scenario: Scenario, duration: float = 10.0, lcm_log: Path | N
     station, plant = station_and_bare_plant_steps(built.robot, scenario, 1000)
     return _report(scenario, period, np.array(tick_ns), parts, plant, replay, recorded, pace) | {
         "station_step_ms": round(float(np.median(station)) / 1e6, 4),
-        "station_to_plant_step": round(float(np.median(station) / np.median(plant)), 3)}
+        "station_to_plant_step": round(float(np.median(station) / np.median(plant)), 3),
+        "station_callbacks_us": station_callback_split(built.robot, scenario, 1000)}
 
 
 def _sleep_until(deadline: float) -> None:
@@ -211,7 +212,8 @@ def _cmd_bench_realtime(args) -> int:
     print(f"  bare plant step   {r['plant_step_ms']:8.3f} ms median; tick p99 / plant step "
           f"{r['tick_p99_to_plant_step']}")
     print(f"  simulated station {r['station_step_ms']:8.3f} ms median; station / bare plant step "
-          f"{r['station_to_plant_step']} (stepped alternately)")
+          f"{r['station_to_plant_step']} (stepped alternately); its Python systems, µs a step: "
+          + ", ".join(f"{name} {us:g}" for name, us in r["station_callbacks_us"].items()))
     print("  per system (exclusive):")
     for name, v in r["systems_ms"].items():
         print(f"    {name:24s} {v['median']:8.3f} ms median {v['p99']:8.3f} p99")

@@ -9,6 +9,7 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
+from romoco_drake.bench.callback_timer import timed_callbacks
 from romoco_drake.bench.rom import percentiles
 from romoco_drake.bench.sweep import SweepOptions, Variant, add_sweep_args, run_sweep, sweep_options
 from romoco_drake.commands import names, print_rows
@@ -194,6 +195,18 @@ def station_and_bare_plant_steps(robot, scenario: Scenario, steps: int) -> tuple
     times = _stepped([(station, station.GetSubsystemByName("plant")), _bare_plant(robot, scenario)],
                      robot, scenario.time_step, steps)
     return times[0], times[1]
+
+
+def station_callback_split(robot, scenario: Scenario, steps: int) -> dict[str, float]:
+    """Each Python system of the simulated station (Drake engine): µs of callbacks per step, over
+    ``steps`` steps of the robot standing (:func:`_stepped`), on a station of its own so that the
+    timing wrappers stay out of :func:`station_and_bare_plant_steps`. What the station costs over
+    the bare plant beyond these is Drake's (the contact results, the events)."""
+    with timed_callbacks() as timer:
+        station = make_engine_station("drake", robot, scenario.time_step, sensors=scenario.sensors)
+    _stepped([(station, station.GetSubsystemByName("plant"))], robot, scenario.time_step, steps)
+    spent = timer.lap()
+    return {name: round(ns / steps / 1e3, 1) for name, ns in sorted(spent.items(), key=lambda kv: -kv[1])}
 
 
 def _bare_plant(robot, scenario: Scenario):
