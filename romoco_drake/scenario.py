@@ -268,12 +268,17 @@ def validate_scenario(scenario: Scenario, source: str | Path | None = None) -> N
 def _check_controller(scenario: Scenario, where: str | Path) -> None:
     """A controller term that cannot act is an error, not a silent no-op: a point foot carries a
     force only, so there is no centre of pressure for the ankle strategy to move; the hip strategy
-    ``when: recovering`` acts only while a step adapter bounds the step."""
+    ``when: recovering`` acts only while a step adapter bounds the step, and ``target: mpc`` only
+    beside a wrench MPC."""
     momentum = getattr(scenario.controller, "angular_momentum", None)
     adapts = isinstance(scenario.planner, FootPlacementConfig) and scenario.planner.step_adaptation.enabled
     if momentum is not None and momentum.weight > 0.0 and momentum.when == "recovering" and not adapts:
         raise ConfigError(where, "controller.angular_momentum.when", "'recovering' needs the planner's step "
                           "adaptation (planner.step_adaptation.enabled), which this scenario does not have")
+    if (momentum is not None and momentum.weight > 0.0 and momentum.target == "mpc"
+            and not isinstance(scenario.planner, VimpcConfig)):
+        raise ConfigError(where, "controller.angular_momentum.target", "'mpc' needs a wrench MPC's plan "
+                          "(planner: {name: vimpc}), which this scenario does not have")
     ankle = getattr(scenario.controller, "ankle", None)
     if ankle is not None and ankle.gain > 0.0 and load_robot_config(scenario.robot).feet.type == "point":
         raise ConfigError(where, "controller.ankle.gain", f"robot '{scenario.robot}' has point feet: they "

@@ -20,7 +20,7 @@ from romoco_drake.control.terms.mpc_tracking import MpcComTracking, MpcTrackingC
 from romoco_drake.control.terms.pivot_moment import PivotMoment, PivotMomentConfig
 from romoco_drake.control.terms.regularization import Regularization, RegularizationConfig
 from romoco_drake.control.terms.tasks import TaskTracking
-from romoco_drake.control.tscqp import TscQp, TscqpConfig
+from romoco_drake.control.tscqp import LockedHold, TscQp, TscqpConfig
 from romoco_drake.embedding.outputs import sole_frame
 from romoco_drake.embedding.references import EmbeddingCore
 from romoco_drake.errors import RomocoError
@@ -195,6 +195,38 @@ def test_angular_momentum_rows_are_the_damped_momentum_rate_in_the_heading_frame
     R = R_yaw if len(set(axes)) > 1 else np.eye(3)
     expected = np.sqrt(w * np.array(axes)) * (R.T @ (k_dot + d * k))
     np.testing.assert_allclose(_residual(term.rows(ctx), x), expected, atol=1e-5 * np.abs(expected).max())
+
+
+def test_angular_momentum_toward_the_mpc_plan_damps_the_difference_from_its_momentum():
+    """``target: mpc``: S x − s = √w (k̇_G + d (k_G − I ω_ref)) with the MPC's first-knot inertia I and
+    reference angular velocity; without a solved MPC reference the target is zero momentum."""
+    robot, _, kin, refs, ctx = _tick("walking")
+    w, d = 3.0, 10.0
+    term = AngularMomentumDamping(AngularMomentumConfig(weight=w, damping=d, target="mpc"))
+    inertia = np.array([[[4.0, 0.1, 0.0], [0.1, 3.5, 0.2], [0.0, 0.2, 1.5]]] * 2)
+    plan = dataclasses.replace(_mpc(kin), angular_velocity=np.array([0.1, -0.2, 0.8]), inertia=inertia)
+    x = _random_x(ctx)
+    toward = _residual(term.rows(dataclasses.replace(ctx, refs=dataclasses.replace(refs, mpc=plan))), x)
+    to_zero = _residual(AngularMomentumDamping(AngularMomentumConfig(weight=w, damping=d)).rows(ctx), x)
+    np.testing.assert_allclose(toward - to_zero, -np.sqrt(w) * d * (inertia[0] @ plan.angular_velocity),
+                               rtol=1e-12)
+    failed = dataclasses.replace(plan, ok=False)
+    unsolved = dataclasses.replace(ctx, refs=dataclasses.replace(refs, mpc=failed))
+    np.testing.assert_array_equal(_residual(term.rows(unsolved), x), to_zero)
+
+
+def test_locked_hold_sets_the_locked_joints_task_gains_and_weight():
+    robot, contact, kin, refs, ctx = _tick("walking")
+    k_out = int(np.count_nonzero(refs.active))
+    default = ctx.tasks
+    assert np.all(default.kp[k_out:] == 200.0) and np.all(default.weight[k_out:] == 1.0)
+    loose = TscQp(robot, contact, TscqpConfig(locked_hold=LockedHold(kp=20.0, kd=9.0, weight=0.03)))
+    tasks = loose.context(kin, refs).tasks
+    assert len(tasks.kp) - k_out == int(robot.locked_actuator_mask.sum()) > 0
+    np.testing.assert_array_equal(tasks.kp[k_out:], 20.0)
+    np.testing.assert_array_equal(tasks.kd[k_out:], 9.0)
+    np.testing.assert_array_equal(tasks.weight[k_out:], 0.03)
+    np.testing.assert_array_equal(tasks.weight[:k_out], default.weight[:k_out])  # the outputs' as they were
 
 
 def test_joint_limit_bounds_stop_each_leg_joint_at_its_limits_within_the_horizon():

@@ -26,7 +26,7 @@ CHECKERS = {"validate_scenario", "_check_planner", "_check_controller", "_check_
 # Keys read by people, not by code.
 DOCUMENTATION = {("Scenario", "description"), ("RobotConfig", "description")}
 # Which scenario each overlay is exercised on.
-OVERLAY_SCENARIO = {"estimator_wrong_start": "g1_walk", "mpc_beside": "draco_walk",
+OVERLAY_SCENARIO = {"arm_swing": "draco_walk", "estimator_wrong_start": "g1_walk", "mpc_beside": "draco_walk",
                     "push_recovery": "g1_walk", "terrain": "g1_walk"}
 TICKS_S = 0.03  # a few controller ticks: every system is built and updated
 

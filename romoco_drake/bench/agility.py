@@ -28,7 +28,7 @@ Every commanded component must be within 20 % of its command.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -38,7 +38,7 @@ from romoco_drake.errors import RomocoError
 from romoco_drake.metrics import AVERAGE_WINDOW_S, moving_average
 from romoco_drake.planners.heading import heading_velocity
 from romoco_drake.planners.vimpc import INERTIA_MODES
-from romoco_drake.runner import log_samples, run_scenario
+from romoco_drake.runner import add_overlay_arg, log_samples, run_scenario
 from romoco_drake.scenario import CommandPoint, Scenario, load_scenario
 from romoco_drake.simulation import stderr_progress
 
@@ -100,9 +100,11 @@ def reached_speed(times: np.ndarray, measured: np.ndarray, direction, until: flo
     return float(along[:end].max()) if end else 0.0
 
 
-def agility_scenario(robot: str, inertia: str, motion: str, rate: float, top: float) -> Scenario:
-    """``diagrams/<robot>_walk.yaml`` with the ramp of ``motion`` and the VI-MPC in ``inertia`` mode."""
-    base = load_scenario(f"{robot}_walk")
+def agility_scenario(robot: str, inertia: str, motion: str, rate: float, top: float,
+                     overlays: Sequence[str] = ()) -> Scenario:
+    """``diagrams/<robot>_walk.yaml`` (with ``overlays`` merged on) with the ramp of ``motion`` and the
+    VI-MPC in ``inertia`` mode."""
+    base = load_scenario(f"{robot}_walk", overlays)
     direction = MOTIONS[motion]
     return dataclasses.replace(base, name=f"{robot}_agility_{motion}_{inertia}",
                                command=ramp(direction, rate, top),
@@ -140,22 +142,23 @@ def agility_job(scenario: Scenario, motion: str, also: Callable | None = None) -
             "realtime_factor": s["realtime_factor"]} | logs.get("also", {})
 
 
-def agility_variants(robot: str, modes, motions, rate: float, top: float | None, also: Callable | None = None
-                     ) -> list[Variant]:
+def agility_variants(robot: str, modes, motions, rate: float, top: float | None, also: Callable | None = None,
+                     overlays: Sequence[str] = ()) -> list[Variant]:
     """The ramps of :func:`bench_agility`, as sweep variants (``also`` as in :func:`agility_job`)."""
     return [Variant(agility_scenario(robot, inertia, motion, rate,
-                                     top if top is not None else 1.5 * PAPER[motion][0]),
-                    {"robot": robot, "motion": motion, "inertia": inertia,
+                                     top if top is not None else 1.5 * PAPER[motion][0], overlays),
+                    {"robot": robot, "motion": motion, "inertia": inertia, "overlays": list(overlays),
                      "paper": PAPER[motion][0] if inertia == "network" else PAPER[motion][1]},
                     agility_job, {"motion": motion, "also": also})
             for motion in motions for inertia in modes]
 
 
 def bench_agility(robot: str = "draco", modes=INERTIA_MODES, motions=tuple(MOTIONS), rate: float = 0.1,
-                  top: float | None = None, sweep: SweepOptions | None = None, progress=None
-                  ) -> list[dict]:
-    """One ramp per inertia mode × motion (module docstring); ``top`` defaults to 1.5× the paper's best."""
-    return run_sweep(agility_variants(robot, modes, motions, rate, top), sweep, progress)
+                  top: float | None = None, sweep: SweepOptions | None = None, progress=None,
+                  overlays: Sequence[str] = ()) -> list[dict]:
+    """One ramp per inertia mode × motion (module docstring); ``top`` defaults to 1.5× the paper's best;
+    ``overlays`` are merged onto the robot's walking scenario (the rows name them)."""
+    return run_sweep(agility_variants(robot, modes, motions, rate, top, overlays=overlays), sweep, progress)
 
 
 def register(bench) -> None:
@@ -168,6 +171,7 @@ def register(bench) -> None:
     p.add_argument("--rate", type=float, default=0.1, help="command ramp, (m/s or rad/s) per s")
     p.add_argument("--top", type=float, default=None, help="ramp ceiling (default: 1.5x the paper's best)")
     p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
+    add_overlay_arg(p)
     add_sweep_args(p)
     p.set_defaults(func=_cmd_bench_agility)
 
@@ -178,7 +182,7 @@ def _cmd_bench_agility(args) -> int:
     if not args.rate > 0.0:
         raise RomocoError(f"--rate must be positive, got {args.rate}")
     rows = bench_agility(args.robot, modes, motions, args.rate, args.top, sweep_options(args),
-                         progress=stderr_progress)
+                         progress=stderr_progress, overlays=args.overlay or ())
     return print_rows(args.json, rows,
                       "motion     inertia   settled   tracked   reached   paper (case 3 / cases 1-2)   ended",
                       lambda r: f"{r['motion']:10s} {r['inertia']:9s} {r['settled']:7.2f}   "

@@ -91,7 +91,9 @@ class Tasks:
 class TaskStack:
     """Builds :class:`Tasks` from references: active outputs, then the locked joints."""
 
-    def __init__(self, robot: RobotModel, gains: tuple[TaskGain, ...] = DEFAULT_TASK_GAINS):
+    def __init__(self, robot: RobotModel, gains: tuple[TaskGain, ...] = DEFAULT_TASK_GAINS,
+                 locked: TaskGain = LOCKED_GAIN):
+        """``locked``: the gains and weight of the locked joints' tasks."""
         self.gains = gains
         mask = robot.locked_actuator_mask
         self._locked_q = robot.actuated_q_index[mask]
@@ -99,8 +101,7 @@ class TaskStack:
         n = len(self._locked_q)
         self._J_locked = np.zeros((n, robot.nv))
         self._J_locked[np.arange(n), robot.actuated_v_index[mask]] = 1.0
-        g = LOCKED_GAIN
-        self._locked_gains = (np.full(n, g.kp), np.full(n, g.kd), np.full(n, g.weight))
+        self._locked_gains = (np.full(n, locked.kp), np.full(n, locked.kd), np.full(n, locked.weight))
         self._cache: dict[tuple[tuple[str, ...], bytes], tuple[np.ndarray, ...]] = {}
 
     def _rows(self, names: tuple[str, ...], active: np.ndarray):

@@ -33,7 +33,7 @@ from pydrake.solvers import ClarabelSolver, MathematicalProgram, SolverOptions
 from romoco_drake.config import Range, declare_ranges
 from romoco_drake.control.controller import SolverResult, torque_command
 from romoco_drake.control.settings import ControllerSettings
-from romoco_drake.control.tasks import DEFAULT_TASK_GAINS, TaskGain, TaskStack, with_weight
+from romoco_drake.control.tasks import DEFAULT_TASK_GAINS, LOCKED_GAIN, TaskGain, TaskStack, with_weight
 from romoco_drake.control.terms.angular_momentum import AngularMomentumConfig, AngularMomentumDamping
 from romoco_drake.control.terms.ankle import AnkleConfig, AnkleStrategy
 from romoco_drake.control.terms.joint_limits import JointLimitConfig, JointLimits
@@ -58,6 +58,25 @@ _DAQP_EQUALITY, _DAQP_ACTIVE_UPPER, _DAQP_ACTIVE_LOWER = 5, 1, 3  # its constrai
 
 
 @dataclass
+class LockedHold:
+    """The locked joints' task (``controller.locked_hold``): ``kp`` (1/s²), ``kd`` (1/s) and
+    ``weight`` of the joint PD that holds each at its nominal angle (the shared
+    :data:`~romoco_drake.control.tasks.LOCKED_GAIN` by default). Held loosely, the arms give way
+    to the other terms: the angular-momentum rows then swing them."""
+
+    kp: float = LOCKED_GAIN.kp
+    kd: float = LOCKED_GAIN.kd
+    weight: float = LOCKED_GAIN.weight
+
+    def gain(self) -> TaskGain:
+        return TaskGain("locked", self.kp, self.kd, self.weight)
+
+
+# As the output tasks' gains (100-400 /s², 20-40 /s) and weights (1-100).
+declare_ranges(LockedHold, kp=Range(0.0, 1e4, "1/s²"), kd=Range(0.0, 1e3, "1/s"), weight=Range(0.0, 1e4))
+
+
+@dataclass
 class TscqpConfig(ControllerSettings):
     """The TSC-QP's settings (scenario ``controller:`` with ``name: tscqp``).
 
@@ -66,13 +85,15 @@ class TscqpConfig(ControllerSettings):
     (``MathematicalProgram`` solved by Drake's Clarabel), which alone would not fit a 1 kHz tick
     in Python. ``task_weights``: an output's task weight in place of the shared table's
     (:data:`~romoco_drake.control.tasks.DEFAULT_TASK_GAINS`), by output name, measured per robot
-    and scenario (``diagrams/g1_walk.yaml`` says why it lowers ``stance_hip_yaw``). Each other
-    section configures one term (:mod:`romoco_drake.control.terms`).
+    and scenario (``diagrams/g1_walk.yaml`` says why it lowers ``stance_hip_yaw``).
+    ``locked_hold``: the task holding each locked joint (arms, waist) at its nominal angle. Each
+    other section configures one term (:mod:`romoco_drake.control.terms`).
     """
 
     name: str = "tscqp"
     solver: Literal["daqp", "clarabel"] = "daqp"
     task_weights: dict[str, float] = dataclasses.field(default_factory=dict)
+    locked_hold: LockedHold = dataclasses.field(default_factory=LockedHold)
     regularization: RegularizationConfig = dataclasses.field(default_factory=RegularizationConfig)
     pivot_moment: PivotMomentConfig = dataclasses.field(default_factory=PivotMomentConfig)
     load_split: LoadSplitConfig = dataclasses.field(default_factory=LoadSplitConfig)
@@ -233,7 +254,8 @@ class TscQp:
         self._rows_a = np.argmax(B, axis=0)  # the velocity row each actuator drives, actuator order
         self._rows_u = np.flatnonzero(B.sum(axis=1) == 0.0)
         self._effort = robot.effort_limits
-        self._tasks = TaskStack(robot, weighted_gains(robot, gains, config.task_weights))
+        self._tasks = TaskStack(robot, weighted_gains(robot, gains, config.task_weights),
+                                config.locked_hold.gain())
         self.terms = self.make_terms(config)
         self._costs = [t for t in self.terms if isinstance(t, CostTerm)]
         self._limits = [t for t in self.terms if isinstance(t, ConstraintTerm) and t.size]
