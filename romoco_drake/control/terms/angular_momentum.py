@@ -26,6 +26,7 @@ from typing import Literal
 import numpy as np
 
 from romoco_drake.config import Range, declare_ranges
+from romoco_drake.control.terms.mpc_tracking import tracking
 from romoco_drake.control.terms.term import CostTerm, Rows, TermContext
 from romoco_drake.errors import RomocoError
 from romoco_drake.robots.kinematics import heading_rotation
@@ -91,8 +92,8 @@ class AngularMomentumDamping(CostTerm):
 
 def planned_momentum(refs) -> np.ndarray:
     """The centroidal angular momentum (world, N·m·s) of the references' MPC solution: its first
-    knot's inertia times its reference angular velocity; zero without a solved one."""
-    mpc = refs.mpc
-    if mpc is None or not mpc.ok or mpc.inertia is None:
+    knot's inertia times its reference angular velocity; zero without one to track
+    (:func:`~romoco_drake.control.terms.mpc_tracking.tracking`)."""
+    if not tracking(refs) or refs.mpc.inertia is None:
         return np.zeros(3)
-    return mpc.inertia[0] @ mpc.angular_velocity
+    return refs.mpc.inertia[0] @ refs.mpc.angular_velocity
