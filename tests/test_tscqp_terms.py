@@ -253,6 +253,26 @@ def test_joint_limit_bounds_stop_each_leg_joint_at_its_limits_within_the_horizon
     np.testing.assert_allclose(-1.0 + term.bounds(past)[1][0] * h, 0.0, atol=1e-12)
 
 
+def test_joint_limits_cover_only_the_joints_their_patterns_name():
+    """``joints`` picks the limited joints by name (G1's knees alone: two rows, on the knees' own
+    velocities, with the same bounds as when every leg joint is limited); a pattern naming no
+    actuated joint is a load error."""
+    robot, _, _, _, ctx = _tick("standing")
+    every = JointLimits(robot, JointLimitConfig(horizon=0.05))
+    knees = JointLimits(robot, JointLimitConfig(horizon=0.05, joints=["*knee*"]))
+    names = [n for n, locked in zip(robot.actuator_names, robot.locked_actuator_mask, strict=True)
+             if not locked]
+    assert knees.size == 2 and every.size == len(names)
+    A, lower, upper = knees.bounds(ctx)
+    A_all, lower_all, upper_all = every.bounds(ctx)
+    rows = [names.index(n) for n in names if "knee" in n]
+    np.testing.assert_array_equal(A, A_all[rows])
+    np.testing.assert_array_equal(lower, lower_all[rows])
+    np.testing.assert_array_equal(upper, upper_all[rows])
+    with pytest.raises(RomocoError, match="matches no actuated joint"):
+        JointLimits(robot, JointLimitConfig(horizon=0.05, joints=["*elbow_knee*"]))
+
+
 def _mpc(kin, ok=True):
     wrenches = np.array([[1.0, -2.0, 0.5, 10.0, -5.0, 200.0], [-1.0, 2.0, 0.0, -10.0, 5.0, 150.0]])
     com = kin.p_com + [0.02, -0.01, 0.0]

@@ -11,6 +11,8 @@ if the rows still cannot all hold, the relaxed solve drops them with the torque 
 
 from __future__ import annotations
 
+import dataclasses
+import fnmatch
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,12 +27,14 @@ from romoco_drake.robots.model import RobotModel
 class JointLimitConfig:
     """Each leg joint stops within ``horizon`` s of its position limits less ``margin`` (rad, at most
     a quarter of the joint's range), so the plan keeps off the hard stops a real joint meets
-    with an impact; horizon 0, the default, leaves the rows out. Off by default: with them H1 on
-    the invariant EKF tracked 0.3 m/s with a lateral rms error of 0.051-0.053 m/s against the
-    walking test's 0.05."""
+    with an impact; horizon 0, the default, leaves the rows out. ``joints``: fnmatch patterns
+    naming the actuated joints limited (default all; a list naming none is a load error). Off by
+    default: with them H1 on the invariant EKF tracked 0.3 m/s with a lateral rms error of
+    0.051-0.053 m/s against the walking test's 0.05."""
 
     horizon: float = 0.0
     margin: float = 0.0
+    joints: list[str] = dataclasses.field(default_factory=lambda: ["*"])
 
 
 # A margin past 0.5 rad leaves most leg joints little range.
@@ -46,7 +50,12 @@ class JointLimits(ConstraintTerm):
         self.horizon = config.horizon
         plant = robot.plant
         q_lo, q_hi = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
-        free = ~robot.locked_actuator_mask & (config.horizon > 0.0)
+        chosen = np.array([any(fnmatch.fnmatchcase(name, p) for p in config.joints)
+                           for name in robot.actuator_names], dtype=bool)
+        if config.horizon > 0.0 and not chosen.any():
+            raise RomocoError(f"controller.joint_limits.joints {config.joints} matches no actuated joint "
+                              f"of {robot.name}")
+        free = ~robot.locked_actuator_mask & chosen & (config.horizon > 0.0)
         q_idx, v_idx = robot.actuated_q_index[free], robot.actuated_v_index[free]
         finite = np.isfinite(q_lo[q_idx]) & np.isfinite(q_hi[q_idx])
         self._q, self._v = q_idx[finite], v_idx[finite]
