@@ -216,6 +216,10 @@ BOUNDS: dict[str, Bound] = {
     "turning.xo.wz_rms": ceiling(0.032, 0.02171),
     "via_lcm.g1.steps": floor(7, 8),
     "via_lcm.g1.vx_rms": ceiling(0.018, 0.0125),
+    # 1 m/s under the joint limits (test_draco_walks_at_one_metre_a_second_...): the robot trails the
+    # 0.5 and 1.0 m/s steps of the staircase by 12 % and 11 %.
+    "vimpc.draco.fast.segment1.mean_error": ceiling(0.18, 0.12),
+    "vimpc.draco.fast.segment3.mean_error": ceiling(0.17, 0.1142),
     "vimpc.draco.steps": floor(9, 11),
     "vimpc.draco.vx_rms": ceiling(0.0052, 0.0035),
     "vimpc.draco.vy_rms": ceiling(0.03, 0.0202),
