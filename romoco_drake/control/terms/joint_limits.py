@@ -1,5 +1,5 @@
-"""Leg joint limits: q_lo + m ≤ q + v h + ½ v̇ h² ≤ q_hi − m for each actuated, unlocked joint
-(horizon h, margin m).
+"""Leg joint limits: q_lo + m ≤ q + v h + ½ v̇ h² ≤ q_hi − m for each actuated, unlocked joint the
+config's ``joints`` patterns name (horizon h, margin m).
 
 Each joint's acceleration is bounded so that, at its present velocity, it would stop at its
 position limits within h. Without them the QP plans through a limit the robot then meets: a
