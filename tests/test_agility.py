@@ -8,6 +8,7 @@ from romoco_drake.bench.agility import (
     START_S,
     TOLERANCE,
     ramp,
+    rate_summary,
     reached_speed,
     tracked_speed,
 )
@@ -79,3 +80,22 @@ def test_reached_is_the_slowest_commanded_component_before_the_last_window():
     assert settled == 0.0 and reason == "lost tracking"
     assert abs(reached_speed(times, measured, direction, 9.0 - AVERAGE_WINDOW_S) - 0.5 * 0.7) < 0.011
     assert reached_speed(times, measured, direction, None) == 2.0
+
+
+def test_rate_summary_averages_each_mode_over_the_rates_and_judges_the_ordering():
+    def row(motion, inertia, rate, settled):
+        return {"motion": motion, "inertia": inertia, "rate": rate, "settled": settled}
+
+    rows = [row("forward", "nominal", 0.1, 1.2), row("forward", "nominal", 0.08, 1.4),
+            row("forward", "updated", 0.1, 1.3), row("forward", "updated", 0.08, 1.3),
+            row("forward", "network", 0.1, 1.25), row("forward", "network", 0.08, 1.45),
+            row("circle", "nominal", 0.1, 1.0), row("circle", "updated", 0.1, 1.1),
+            row("circle", "network", 0.1, 0.9), row("turning", "network", 0.1, 3.0)]
+    summary = {(r["motion"], r["inertia"]): r for r in rate_summary(rows)}
+    network = summary["forward", "network"]
+    assert network["rates"] == [0.08, 0.1]
+    assert (network["settled_mean"], network["settled_min"], network["settled_max"]) == (1.35, 1.25, 1.45)
+    # 1.35 ≥ 1.3 ≥ 1.3: holds on the means though network trails updated at 0.1 (1.25 < 1.3).
+    assert network["ordering_holds"] and summary["forward", "nominal"]["ordering_holds"]
+    assert summary["circle", "network"]["ordering_holds"] is False
+    assert summary["turning", "network"]["ordering_holds"] is None  # one mode: nothing to order

@@ -90,6 +90,8 @@ def test_run_text_summary():
         (["bench", "push", "--impulses", "-5"], "--impulses must be in"),
         (["bench", "push", "--phases", "1.5"], "--phases must be in [0, 1)"),
         (["bench", "push", "--directions", "up"], "unknown direction 'up'"),
+        (["bench", "agility", "--rate", "0.1,x"], "not a comma-separated list"),
+        (["bench", "agility", "--rate", "0.1,0"], "--rate must be positive"),
         (["bench", "matrix", "--robots", "g1", "--planners", "hlip", "--estimator", "ekf"],
          "unknown estimator 'ekf'"),
     ],

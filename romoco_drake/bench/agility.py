@@ -20,6 +20,12 @@ before a fall, tracked or not (to the run's end without a fall). It tells laggin
 DRACO's forward ramp (network inertia) settles at 1.03 m/s and falls having reached 0.83; with
 the foothold gain k1 at 0 (0.1 by default) it lags further, reaches 0.71 and walks to 20.9 s.
 
+One ramp's score moves by up to ±0.05 m/s with small changes anywhere in the loop, so an ordering
+of the inertia modes read off one ramp each can be noise. With several ramp rates (``--rate
+0.08,0.1,0.125``) the bench also prints, per motion and mode, the mean, lowest and highest
+``settled`` over the rates, and whether the mean keeps the paper's ordering (network ≥ updated
+≥ nominal) in that motion.
+
 A motion's command is ``speed`` times its direction (vx, vy, wz): the diagonal walks
 vx = vy = speed, the circle v = speed with ω = speed (the paper's 0.9 m/s with 0.9 rad/s).
 Every commanded component must be within 20 % of its command.
@@ -33,7 +39,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from romoco_drake.bench.sweep import SweepOptions, Variant, add_sweep_args, run_sweep, sweep_options
-from romoco_drake.commands import names, print_rows
+from romoco_drake.commands import names, numbers, print_rows
 from romoco_drake.errors import RomocoError
 from romoco_drake.metrics import AVERAGE_WINDOW_S, moving_average
 from romoco_drake.planners.heading import heading_velocity
@@ -144,21 +150,51 @@ def agility_job(scenario: Scenario, motion: str, also: Callable | None = None) -
 
 def agility_variants(robot: str, modes, motions, rate: float, top: float | None, also: Callable | None = None,
                      overlays: Sequence[str] = ()) -> list[Variant]:
-    """The ramps of :func:`bench_agility`, as sweep variants (``also`` as in :func:`agility_job`)."""
+    """The ramps of :func:`bench_agility` at one ``rate``, as sweep variants (``also`` as in
+    :func:`agility_job`)."""
     return [Variant(agility_scenario(robot, inertia, motion, rate,
                                      top if top is not None else 1.5 * PAPER[motion][0], overlays),
-                    {"robot": robot, "motion": motion, "inertia": inertia, "overlays": list(overlays),
+                    {"robot": robot, "motion": motion, "inertia": inertia, "rate": rate,
+                     "overlays": list(overlays),
                      "paper": PAPER[motion][0] if inertia == "network" else PAPER[motion][1]},
                     agility_job, {"motion": motion, "also": also})
             for motion in motions for inertia in modes]
 
 
-def bench_agility(robot: str = "draco", modes=INERTIA_MODES, motions=tuple(MOTIONS), rate: float = 0.1,
+def bench_agility(robot: str = "draco", modes=INERTIA_MODES, motions=tuple(MOTIONS), rates=(0.1,),
                   top: float | None = None, sweep: SweepOptions | None = None, progress=None,
                   overlays: Sequence[str] = ()) -> list[dict]:
-    """One ramp per inertia mode × motion (module docstring); ``top`` defaults to 1.5× the paper's best;
-    ``overlays`` are merged onto the robot's walking scenario (the rows name them)."""
-    return run_sweep(agility_variants(robot, modes, motions, rate, top, overlays=overlays), sweep, progress)
+    """One ramp per ramp rate × inertia mode × motion (module docstring); ``top`` defaults to 1.5×
+    the paper's best; ``overlays`` are merged onto the robot's walking scenario (the rows name them)."""
+    return run_sweep([v for rate in rates for v in agility_variants(robot, modes, motions, rate, top,
+                                                                   overlays=overlays)], sweep, progress)
+
+
+ORDERING_TEXT = {True: "yes", False: "no", None: "-"}  # None: not every inertia mode ran
+RAMP_HEADER = "motion     inertia   rate    settled   tracked   reached   paper (case 3 / cases 1-2)   ended"
+SUMMARY_HEADER = ("motion     inertia   settled over the rates: mean   lowest   highest   "
+                  "network >= updated >= nominal")
+
+
+def rate_summary(rows: list[dict]) -> list[dict]:
+    """Per motion and inertia mode, ``settled`` over the ramp rates of ``rows``: its mean, lowest and
+    highest, and whether the motion's means keep network ≥ updated ≥ nominal (None unless all three
+    modes ran)."""
+    out = []
+    for motion in dict.fromkeys(r["motion"] for r in rows):
+        means = {}
+        for inertia in dict.fromkeys(r["inertia"] for r in rows if r["motion"] == motion):
+            scores = [r["settled"] for r in rows if r["motion"] == motion and r["inertia"] == inertia]
+            means[inertia] = round(float(np.mean(scores)), 3)
+            rates = sorted(r["rate"] for r in rows if r["motion"] == motion and r["inertia"] == inertia)
+            out.append({"motion": motion, "inertia": inertia, "rates": rates, "settled_mean": means[inertia],
+                        "settled_min": min(scores), "settled_max": max(scores)})
+        ordered = (means["network"] >= means["updated"] >= means["nominal"]
+                   if set(INERTIA_MODES) <= set(means) else None)
+        for row in out:
+            if row["motion"] == motion:
+                row["ordering_holds"] = ordered
+    return out
 
 
 def register(bench) -> None:
@@ -168,7 +204,8 @@ def register(bench) -> None:
     p.add_argument("--robot", default="draco")
     p.add_argument("--modes", help="comma-separated inertia modes (default: nominal,updated,network)")
     p.add_argument("--motions", help="comma-separated (default: forward,diagonal,turning,circle)")
-    p.add_argument("--rate", type=float, default=0.1, help="command ramp, (m/s or rad/s) per s")
+    p.add_argument("--rate", default="0.1", help="command ramp, (m/s or rad/s) per s; several, "
+                   "comma-separated, add each motion and mode's mean over them")
     p.add_argument("--top", type=float, default=None, help="ramp ceiling (default: 1.5x the paper's best)")
     p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
     add_overlay_arg(p)
@@ -179,12 +216,22 @@ def register(bench) -> None:
 def _cmd_bench_agility(args) -> int:
     modes = names(args.modes, INERTIA_MODES, "inertia mode", INERTIA_MODES)
     motions = names(args.motions, tuple(MOTIONS), "motion", tuple(MOTIONS))
-    if not args.rate > 0.0:
+    rates = numbers(args.rate, "--rate")
+    if not all(r > 0.0 for r in rates):
         raise RomocoError(f"--rate must be positive, got {args.rate}")
-    rows = bench_agility(args.robot, modes, motions, args.rate, args.top, sweep_options(args),
+    rows = bench_agility(args.robot, modes, motions, rates, args.top, sweep_options(args),
                          progress=stderr_progress, overlays=args.overlay or ())
-    return print_rows(args.json, rows,
-                      "motion     inertia   settled   tracked   reached   paper (case 3 / cases 1-2)   ended",
-                      lambda r: f"{r['motion']:10s} {r['inertia']:9s} {r['settled']:7.2f}   "
-                                f"{r['tracked']:7.2f}   {r['reached']:7.2f}   {PAPER[r['motion']][0]:.1f} / "
-                                f"{PAPER[r['motion']][1]:.1f}{'':18s} {r['ended']}")
+    summary = rate_summary(rows) if len(set(rates)) > 1 else []
+    if args.json:
+        return print_rows(True, rows + summary, "", str)
+    print_rows(False, rows, RAMP_HEADER,
+               lambda r: f"{r['motion']:10s} {r['inertia']:9s} {r['rate']:<6g}  {r['settled']:7.2f}   "
+                         f"{r['tracked']:7.2f}   {r['reached']:7.2f}   {PAPER[r['motion']][0]:.1f} / "
+                         f"{PAPER[r['motion']][1]:.1f}{'':18s} {r['ended']}")
+    if summary:
+        print()
+        print_rows(False, summary, SUMMARY_HEADER,
+                   lambda r: f"{r['motion']:10s} {r['inertia']:9s} {r['settled_mean']:35.3f}   "
+                             f"{r['settled_min']:6.2f}   {r['settled_max']:7.2f}   "
+                             f"{ORDERING_TEXT[r['ordering_holds']]}")
+    return 0
