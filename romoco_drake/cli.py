@@ -171,6 +171,7 @@ def make_parser() -> argparse.ArgumentParser:
         inertia,
         push,
         realtime,
+        rehearsal,
         report,
         rom,
         walking,
@@ -198,7 +199,7 @@ def make_parser() -> argparse.ArgumentParser:
     register_plot(sub)
     bench = sub.add_parser("bench", help="benchmarks that print numbers").add_subparsers(
         dest="bench", required=True)
-    for module in (rom, embedding, walking, engines_cli, agility, dropout, push):
+    for module in (rom, embedding, walking, engines_cli, agility, dropout, push, rehearsal):
         module.register(bench)
     walking.register_tick(bench)
     realtime.register(bench)

@@ -92,6 +92,8 @@ def test_run_text_summary():
         (["bench", "push", "--directions", "up"], "unknown direction 'up'"),
         (["bench", "agility", "--rate", "0.1,x"], "not a comma-separated list"),
         (["bench", "agility", "--rate", "0.1,0"], "--rate must be positive"),
+        (["bench", "rehearsal", "--runs", "0"], "--runs must be at least 1"),
+        (["bench", "rehearsal", "--scenario", "nope"], "unknown scenario 'nope'"),
         (["bench", "matrix", "--robots", "g1", "--planners", "hlip", "--estimator", "ekf"],
          "unknown estimator 'ekf'"),
     ],

@@ -1,41 +1,54 @@
 """The hardware path as two processes over UDP: ``romoco robot-sim`` and ``romoco run --hardware``.
 
-A short version of the README's rehearsal. Whether both ends keep real time depends on the
+A short version of ``romoco bench rehearsal``. Whether both ends keep real time depends on the
 machine (``romoco bench realtime`` measures it); what must hold anywhere is that the two
 processes find each other, exchange well-formed messages both ways and end with summaries.
 """
 
-import json
 import os
-import subprocess
-import sys
 
 import pytest
 
-
-def _romoco(*args: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "romoco_drake.cli", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
-
-
-def _summary(process: subprocess.Popen) -> dict:
-    out, err = process.communicate(timeout=300)
-    assert process.returncode == 0, err[-2000:]
-    return json.loads(out.strip().splitlines()[-1])
+from romoco_drake.bench.rehearsal import judge, rehearse, udp_url
 
 
 @pytest.mark.slow
 def test_robot_sim_and_hardware_controller_talk_over_udp():
-    url = f"udpm://239.255.76.67:{7000 + os.getpid() % 997}?ttl=0"  # a port of this test's own
-    robot = _romoco("robot-sim", "g1_walk", "--lcm-url", url, "--duration", "2.5", "--wait", "120", "--json")
-    controller = _romoco("run", "g1_walk", "--hardware", "--lcm-url", url, "--duration", "2.0", "--json")
-    ours, theirs = _summary(controller), _summary(robot)
+    run = rehearse("g1_walk", 2.0, udp_url(7000 + os.getpid() % 997))  # a port of this test's own
+    theirs, ours = run["robot"], run["controller"]
     # The robot started (it waits for a first motor command) and took every command it got.
-    assert theirs["robot"] == "g1" and theirs["duration_s"] == 2.5
+    assert theirs["robot"] == "g1" and theirs["duration_s"] == 4.0
     assert theirs["wall_s"] > 0.0 and 0.0 < theirs["realtime_factor"] <= 1.1  # paced at real time at most
     assert theirs["rejected_messages"] == 0 and theirs["estop"] == 0
+    # When its command stream first went stale (the controller stopping, or on a busy machine sooner).
+    assert theirs["first_stale_time_s"] is None or theirs["first_stale_time_s"] > 0.0
     # The controller took the robot's messages and computed from them.
     assert ours["link"] == "hardware" and ours["rejected_messages"] == 0
     assert ours["nonfinite_state_events"] == 0 and ours["qp_failures"] == 0
     assert all(isinstance(v, float) for v in ours["mean_velocity"])  # of the estimate
     assert ours["realtime_factor"] > 0.0 and ours["deadline_misses"] >= 0
+
+
+def _run(robot_fall=None, robot_stale=None, ours_stale=0, robot_rt=1.0, ours_rt=1.0, misses=20):
+    robot = {"fell": robot_fall is not None, "fall_time_s": robot_fall, "realtime_factor": robot_rt,
+             "first_stale_time_s": robot_stale}
+    ours = {"realtime_factor": ours_rt, "stale_events": ours_stale, "deadline_misses": misses,
+            "longest_miss_streak": 3, "ride_through_events": 0, "velocity_rms_error": [0.02, 0.02, 0.04],
+            "controller_tick_ms": {"median": 0.3, "p99": 0.5}}
+    return {"robot": robot, "controller": ours}
+
+
+@pytest.mark.parametrize("run, passed", [
+    (_run(), True),
+    (_run(robot_fall=20.9), True),  # the robot falls after the controller stopped: its hold, then damping
+    (_run(robot_fall=4.5), False),
+    (_run(robot_stale=20.02), True),  # the controller stopped at 20 s
+    (_run(robot_stale=7.3), False),
+    (_run(ours_stale=1), False),
+    (_run(robot_rt=0.98), False),
+    (_run(ours_rt=0.7), False),
+])
+def test_a_rehearsal_passes_only_up_with_fresh_streams_and_both_ends_at_real_time(run, passed):
+    row = judge(run, 20.0, 500.0)
+    assert row["passed"] is passed
+    assert row["miss_fraction"] == 20 / 10000

@@ -92,6 +92,9 @@ class CommandReceiver(LeafSystem):
         self._link = self.DeclareDiscreteState([float(LinkStage.DAMPING)])
         self._held = self.DeclareDiscreteState(5 * nu)  # the hold command, set when the stream is lost
         self._stats = self.DeclareDiscreteState(RobotLinkCounters.size())
+        # When the command stream first went stale (inf: never): a rehearsal's robot outlives its
+        # controller, so only a loss before the controller's end is a fault.
+        self.first_stale_state = self.DeclareDiscreteState([np.inf])
         self.motor_command_port = self.DeclareVectorOutputPort("motor_command", 5 * nu, self._motor_command)
         self.torque_port = self.DeclareVectorOutputPort("torque", nu, self._torque)
         self.stats_port = counters_port(self, "stats", RobotLinkCounters, self._stats)
@@ -150,6 +153,9 @@ class CommandReceiver(LeafSystem):
             counts += RobotLinkCounters(stale_events=was == LinkStage.FRESH,
                                         hold_events=stage == LinkStage.HOLD,
                                         damping_events=stage == LinkStage.DAMPING)
+            first = context.get_discrete_state(self.first_stale_state).GetAtIndex(0)
+            if was == LinkStage.FRESH and not np.isfinite(first):
+                discrete.get_mutable_vector(int(self.first_stale_state)).SetFromVector([context.get_time()])
             if stage == LinkStage.HOLD:
                 discrete.get_mutable_vector(int(self._held)).SetFromVector(self._hold(context))
         discrete.get_mutable_vector(int(self._link)).SetFromVector([float(stage)])
@@ -258,3 +264,12 @@ def robot_summary(robot_sim: Diagram, context) -> dict:
     """The robot side's safety counters (``context``: the root context)."""
     receiver = robot_sim.GetSubsystemByName("receiver")
     return receiver.stats_port.Eval(receiver.GetMyContextFromRoot(context)).summary()
+
+
+def first_stale_time(robot_sim: Diagram, context) -> float | None:
+    """When the robot's command stream first went stale (s; None: never; ``context``: the root
+    context)."""
+    receiver = robot_sim.GetSubsystemByName("receiver")
+    own = receiver.GetMyContextFromRoot(context)
+    first = float(own.get_discrete_state(receiver.first_stale_state).GetAtIndex(0))
+    return first if np.isfinite(first) else None
