@@ -9,7 +9,7 @@ from pydrake.systems.analysis import Simulator
 
 from romoco_drake.interfaces import lcm_codec as codec
 from romoco_drake.interfaces.link import LinkConfig
-from romoco_drake.interfaces.robot_sim import make_robot_sim, robot_summary
+from romoco_drake.interfaces.robot_sim import first_stale_time, make_robot_sim, robot_summary
 from romoco_drake.robots.model import load_robot
 
 
@@ -58,6 +58,9 @@ class RobotSide:
     def summary(self) -> dict:
         return robot_summary(self.diagram, self.context)
 
+    def first_stale(self) -> float | None:
+        return first_stale_time(self.diagram, self.context)
+
 
 def test_robot_side_holds_then_damps_a_stalled_or_rejected_command_stream(g1):
     """The robot's own watchdog: commands stop (or every command is rejected) for timeout_s → its
@@ -74,9 +77,12 @@ def test_robot_side_holds_then_damps_a_stalled_or_rejected_command_stream(g1):
     side.advance(0.03, command)
     for key, value in zip(("q_d", "v_d", "tau_ff", "kp", "kd"), posture, strict=True):
         np.testing.assert_allclose(side.applied()[key], value, err_msg=key)
-    assert side.summary() == ROBOT_NO_FAULTS
+    assert side.summary() == ROBOT_NO_FAULTS and side.first_stale() is None
 
     side.advance(config.timeout_s + 0.005)  # hold: the last posture and gains, no feed-forward
+    # The loss is dated at the receiver's first update past timeout_s after the last command.
+    lost = side.first_stale()
+    assert 0.03 + config.timeout_s <= lost <= 0.03 + config.timeout_s + 1.0 / config.receive_rate_hz + 1e-9
     held = side.applied()
     expected = (("q_d", posture[0]), ("v_d", 0.0), ("tau_ff", 0.0), ("kp", posture[3]), ("kd", posture[4]))
     for key, value in expected:
@@ -101,6 +107,7 @@ def test_robot_side_holds_then_damps_a_stalled_or_rejected_command_stream(g1):
     assert_damping(g1, side.applied(), side.measured_q(), atol=0.02)
     assert side.summary() == {"stale_events": 2, "hold_events": 2, "damping_events": 2,
                               "rejected_messages": ticks, "estop": 0}
+    assert side.first_stale() == lost  # the first loss keeps its date
 
 
 def test_robot_side_holds_a_torque_stream_at_the_measured_posture_with_yaml_gains(g1):

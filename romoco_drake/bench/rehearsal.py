@@ -123,6 +123,19 @@ def bench_rehearsal(scenario: str, duration: float, runs: int, port: int | None 
     return rows
 
 
+HEADER = ("run  bare loop  robot rt  controller rt  fell  stale (robot/ctl)  misses (share)   longest  "
+          "rms [vx, vy, wz]            passed")
+
+
+def _line(r: dict) -> str:
+    yes = {True: "yes", False: "no"}
+    return (f"{r['run']:3d}  {r['bare_loop_s']:7.3f} s  {r['robot_realtime_factor']:8.3f}  "
+            f"{r['controller_realtime_factor']:13.3f}  {yes[r['fell']]:4s}  "
+            f"{yes[r['robot_stale']]:>7s} / {r['controller_stale_events']:<7d}  "
+            f"{r['deadline_misses']:6d} ({100 * r['miss_fraction']:5.2f} %)  {r['longest_miss_streak']:7d}  "
+            f"{str(r['velocity_rms_error']):27s}  {yes[r['passed']]}")
+
+
 def register(bench) -> None:
     """``romoco bench rehearsal``."""
     p = bench.add_parser("rehearsal", help="the hardware path as two processes over UDP: robot-sim and "
@@ -147,15 +160,3 @@ def _cmd_bench_rehearsal(args) -> int:
     rows = bench_rehearsal(args.scenario, args.duration, args.runs, args.port, tuple(args.overlay or ()))
     return print_rows(args.json, rows, HEADER, _line)
 
-
-HEADER = ("run  bare loop  robot rt  controller rt  fell  stale (robot/ctl)  misses (share)   longest  "
-          "rms [vx, vy, wz]            passed")
-
-
-def _line(r: dict) -> str:
-    yes = {True: "yes", False: "no"}
-    return (f"{r['run']:3d}  {r['bare_loop_s']:7.3f} s  {r['robot_realtime_factor']:8.3f}  "
-            f"{r['controller_realtime_factor']:13.3f}  {yes[r['fell']]:4s}  "
-            f"{yes[r['robot_stale']]:>7s} / {r['controller_stale_events']:<7d}  "
-            f"{r['deadline_misses']:6d} ({100 * r['miss_fraction']:5.2f} %)  {r['longest_miss_streak']:7d}  "
-            f"{str(r['velocity_rms_error']):27s}  {yes[r['passed']]}")

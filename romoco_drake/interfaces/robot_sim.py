@@ -66,7 +66,8 @@ class CommandReceiver(LeafSystem):
     | torque        | out | nu       | that command as torque at the measured joints (torque drives) |
     | stats         | out | abstract | :class:`~romoco_drake.modes.RobotLinkCounters`          |
 
-    Its stage (FRESH, HOLD or DAMPING, :class:`~romoco_drake.modes.LinkStage`) is discrete state.
+    Its stage (FRESH, HOLD or DAMPING, :class:`~romoco_drake.modes.LinkStage`) is discrete state,
+    and so is the time its stream first went stale (:func:`first_stale_time`).
     """
 
     def __init__(self, robot: RobotModel, config: LinkConfig, time_step: float = 0.001):
