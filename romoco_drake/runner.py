@@ -25,7 +25,7 @@ from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces.engines import with_engine
 from romoco_drake.interfaces.hardware import link_summary
 from romoco_drake.interfaces.lcm_log import LcmLogRecorder
-from romoco_drake.interfaces.robot_sim import first_stale_time, make_robot_sim, robot_summary
+from romoco_drake.interfaces.robot_sim import make_robot_sim, robot_summary, stale_summary
 from romoco_drake.logs import RunLogs
 from romoco_drake.metrics import estimator_summary, log_samples, tracking_summary, velocity_tracking
 from romoco_drake.modes import LinkCounters
@@ -212,8 +212,7 @@ def run_robot_sim(scenario: Scenario, duration: float | None = None, lcm_url: st
     return ({"robot": robot.name, "lcm_url": lcm.get_lcm_url(), "duration_s": duration,
              "wall_s": round(end.wall_s, 3), "realtime_factor": end.realtime_factor}
             | end.outcome(monitor.summary(monitor.GetMyContextFromRoot(context)))
-            | robot_summary(robot_sim, context)
-            | {"first_stale_time_s": first_stale_time(robot_sim, context)})
+            | robot_summary(robot_sim, context) | stale_summary(robot_sim, context))
 
 
 def _plant_state(built, context) -> np.ndarray | None:

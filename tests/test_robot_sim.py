@@ -9,7 +9,7 @@ from pydrake.systems.analysis import Simulator
 
 from romoco_drake.interfaces import lcm_codec as codec
 from romoco_drake.interfaces.link import LinkConfig
-from romoco_drake.interfaces.robot_sim import first_stale_time, make_robot_sim, robot_summary
+from romoco_drake.interfaces.robot_sim import make_robot_sim, robot_summary, stale_summary
 from romoco_drake.robots.model import load_robot
 
 
@@ -59,7 +59,7 @@ class RobotSide:
         return robot_summary(self.diagram, self.context)
 
     def first_stale(self) -> float | None:
-        return first_stale_time(self.diagram, self.context)
+        return stale_summary(self.diagram, self.context)["first_stale_time_s"]
 
 
 def test_robot_side_holds_then_damps_a_stalled_or_rejected_command_stream(g1):

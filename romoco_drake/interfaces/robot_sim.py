@@ -67,7 +67,7 @@ class CommandReceiver(LeafSystem):
     | stats         | out | abstract | :class:`~romoco_drake.modes.RobotLinkCounters`          |
 
     Its stage (FRESH, HOLD or DAMPING, :class:`~romoco_drake.modes.LinkStage`) is discrete state,
-    and so is the time its stream first went stale (:func:`first_stale_time`).
+    and so is the time its stream first went stale (:func:`stale_summary`).
     """
 
     def __init__(self, robot: RobotModel, config: LinkConfig, time_step: float = 0.001):
@@ -267,10 +267,10 @@ def robot_summary(robot_sim: Diagram, context) -> dict:
     return receiver.stats_port.Eval(receiver.GetMyContextFromRoot(context)).summary()
 
 
-def first_stale_time(robot_sim: Diagram, context) -> float | None:
-    """When the robot's command stream first went stale (s; None: never; ``context``: the root
-    context)."""
+def stale_summary(robot_sim: Diagram, context) -> dict:
+    """``first_stale_time_s``: when the robot's command stream first went stale (s; None: never;
+    ``context``: the root context)."""
     receiver = robot_sim.GetSubsystemByName("receiver")
     own = receiver.GetMyContextFromRoot(context)
     first = float(own.get_discrete_state(receiver.first_stale_state).GetAtIndex(0))
-    return first if np.isfinite(first) else None
+    return {"first_stale_time_s": first if np.isfinite(first) else None}
