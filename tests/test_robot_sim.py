@@ -58,8 +58,11 @@ class RobotSide:
     def summary(self) -> dict:
         return robot_summary(self.diagram, self.context)
 
+    def stale(self) -> dict:
+        return stale_summary(self.diagram, self.context)
+
     def first_stale(self) -> float | None:
-        return stale_summary(self.diagram, self.context)["first_stale_time_s"]
+        return self.stale()["first_stale_time_s"]
 
 
 def test_robot_side_holds_then_damps_a_stalled_or_rejected_command_stream(g1):
@@ -78,10 +81,17 @@ def test_robot_side_holds_then_damps_a_stalled_or_rejected_command_stream(g1):
     for key, value in zip(("q_d", "v_d", "tau_ff", "kp", "kd"), posture, strict=True):
         np.testing.assert_allclose(side.applied()[key], value, err_msg=key)
     assert side.summary() == ROBOT_NO_FAULTS and side.first_stale() is None
+    # The newest command taken: one of the last two ticks' (a message published at a tick reaches
+    # the receiver's port at the next step, after that tick's update), taken by its next update.
+    last = side.stale()
+    sent, arrived = last["last_command_utime_s"], last["last_command_time_s"]
+    assert 0.03 - 2 * TICK - 1e-9 <= sent < 0.03
+    assert sent <= arrived <= sent + 1.0 / config.receive_rate_hz + 1e-9
 
     side.advance(config.timeout_s + 0.005)  # hold: the last posture and gains, no feed-forward
     # The loss is dated at the receiver's first update past timeout_s after the last command.
     lost = side.first_stale()
+    assert lost > arrived  # after the last command: a rehearsal tells a loss from the sender's end so
     assert 0.03 + config.timeout_s <= lost <= 0.03 + config.timeout_s + 1.0 / config.receive_rate_hz + 1e-9
     held = side.applied()
     expected = (("q_d", posture[0]), ("v_d", 0.0), ("tau_ff", 0.0), ("kp", posture[3]), ("kd", posture[4]))
@@ -97,6 +107,7 @@ def test_robot_side_holds_then_damps_a_stalled_or_rejected_command_stream(g1):
 
     side.advance(0.01, command)
     np.testing.assert_allclose(side.applied()["kp"], posture[3])
+    resumed = side.stale()
 
     nan_posture = [x.copy() for x in posture]
     nan_posture[0][0] = np.nan
@@ -108,6 +119,8 @@ def test_robot_side_holds_then_damps_a_stalled_or_rejected_command_stream(g1):
     assert side.summary() == {"stale_events": 2, "hold_events": 2, "damping_events": 2,
                               "rejected_messages": ticks, "estop": 0}
     assert side.first_stale() == lost  # the first loss keeps its date
+    # Rejected messages are not commands: the newest good one is still the last before them.
+    assert side.stale() == resumed | {"first_stale_time_s": lost}
 
 
 def test_robot_side_holds_a_torque_stream_at_the_measured_posture_with_yaml_gains(g1):

@@ -22,6 +22,9 @@ def test_robot_sim_and_hardware_controller_talk_over_udp():
     assert theirs["rejected_messages"] == 0 and theirs["estop"] == 0
     # When its command stream first went stale (the controller stopping, or on a busy machine sooner).
     assert theirs["first_stale_time_s"] is None or theirs["first_stale_time_s"] > 0.0
+    # The controller's last command (its own clock) came at its end, and arrived on the robot's.
+    assert 2.0 - 0.05 <= theirs["last_command_utime_s"] <= 2.0
+    assert 0.0 < theirs["last_command_time_s"] <= theirs["duration_s"]
     # The controller took the robot's messages and computed from them.
     assert ours["link"] == "hardware" and ours["rejected_messages"] == 0
     assert ours["nonfinite_state_events"] == 0 and ours["qp_failures"] == 0
@@ -29,9 +32,11 @@ def test_robot_sim_and_hardware_controller_talk_over_udp():
     assert ours["realtime_factor"] > 0.0 and ours["deadline_misses"] >= 0
 
 
-def _run(robot_fall=None, robot_stale=None, ours_stale=0, robot_rt=1.0, ours_rt=1.0, misses=20):
+def _run(robot_fall=None, robot_stale=None, ours_stale=0, robot_rt=1.0, ours_rt=1.0, misses=20,
+         last_command=20.0, last_stamp=20.0):
     robot = {"fell": robot_fall is not None, "fall_time_s": robot_fall, "realtime_factor": robot_rt,
-             "first_stale_time_s": robot_stale}
+             "first_stale_time_s": robot_stale, "last_command_time_s": last_command,
+             "last_command_utime_s": last_stamp}
     ours = {"realtime_factor": ours_rt, "stale_events": ours_stale, "deadline_misses": misses,
             "longest_miss_streak": 3, "ride_through_events": 0, "velocity_rms_error": [0.02, 0.02, 0.04],
             "controller_tick_ms": {"median": 0.3, "p99": 0.5}}
@@ -44,6 +49,13 @@ def _run(robot_fall=None, robot_stale=None, ours_stale=0, robot_rt=1.0, ours_rt=
     (_run(robot_fall=4.5), False),
     (_run(robot_stale=20.02), True),  # the controller stopped at 20 s
     (_run(robot_stale=7.3), False),
+    # The robot's clock 60 ms behind the controller's: its end arrives at 19.94 on the robot's clock.
+    (_run(robot_stale=19.96, last_command=19.94), True),
+    (_run(robot_fall=19.98, last_command=19.94), True),  # after the controller's end
+    (_run(robot_stale=19.93, last_command=19.94), False),  # lost before the end, then resumed
+    (_run(robot_fall=19.9, last_command=19.94), False),
+    (_run(robot_stale=12.0, last_command=12.0, last_stamp=12.0), False),  # commands stopped at 12 s
+    (_run(robot_stale=None, last_command=None, last_stamp=None), False),  # no command ever arrived
     (_run(ours_stale=1), False),
     (_run(robot_rt=0.98), False),
     (_run(ours_rt=0.7), False),

@@ -268,9 +268,16 @@ def robot_summary(robot_sim: Diagram, context) -> dict:
 
 
 def stale_summary(robot_sim: Diagram, context) -> dict:
-    """``first_stale_time_s``: when the robot's command stream first went stale (s; None: never;
-    ``context``: the root context)."""
+    """When the robot's command stream first went stale, ``first_stale_time_s``, and when its newest
+    good command arrived, ``last_command_time_s`` (both s of the robot's clock; None: never), with
+    that command's own time stamp, ``last_command_utime_s`` (s of the sender's clock). A stream that
+    first went stale after its last command ended with its sender rather than losing messages; the
+    two processes' clocks differ by their start-up, so only the robot's own times compare (``context``:
+    the root context)."""
     receiver = robot_sim.GetSubsystemByName("receiver")
     own = receiver.GetMyContextFromRoot(context)
     first = float(own.get_discrete_state(receiver.first_stale_state).GetAtIndex(0))
-    return {"first_stale_time_s": first if np.isfinite(first) else None}
+    utime, arrival, received = own.get_discrete_state(receiver.inbox.meta).value()
+    return {"first_stale_time_s": first if np.isfinite(first) else None,
+            "last_command_time_s": float(arrival) if received else None,
+            "last_command_utime_s": utime * 1e-6 if received else None}
