@@ -151,7 +151,7 @@ def test_teleop_page_drives_the_robot(browser, tmp_path):
     from selenium.webdriver.common.by import By
     from selenium.webdriver.common.keys import Keys
 
-    proc, url, _ = _start_teleop(tmp_path)
+    proc, url, lines = _start_teleop(tmp_path)
     script = browser.execute_cdp_cmd("Page.addScriptToEvaluateOnNewDocument", {"source": NO_RENDER})
     try:
         browser.get(url)
@@ -182,12 +182,12 @@ def test_teleop_page_drives_the_robot(browser, tmp_path):
                                 {"identifier": script["identifier"]})
         proc.send_signal(signal.SIGINT)
         try:
-            out, _ = proc.communicate(timeout=WAIT_S)
+            out, err = proc.communicate(timeout=WAIT_S)
         except subprocess.TimeoutExpired:
             proc.kill()  # never leave a real-time run behind
             proc.communicate()
             pytest.fail("romoco run --teleop did not end on Ctrl-C")
-    assert proc.returncode == 0, out
+    assert proc.returncode == 0, (out, err, list(lines.queue)[-20:])
     summary = json.loads(out.strip().splitlines()[-1])
     assert summary["teleop_estop"] is True
     assert summary["mean_velocity"][0] > 0.02
