@@ -13,10 +13,10 @@ summaries. A run passes when, while the controller ran:
 The two processes' clocks start apart (each from its own first tick), so the controller's end is
 taken on the robot's clock: when its last command arrived (``last_command_time_s`` of the robot's
 summary). A stream that first went stale after that (``first_stale_time_s``) ended with the
-controller; a loss before it, or a last command stamped earlier than ``STREAM_END_S`` before the
-controller's duration, is a stale stream. Judged on the controller's duration instead, five of ten
-runs on Dec 6 failed at the controller's end: the robot's clock ran behind the controller's, and
-the stream's end read as a loss at 19.94-19.99 s.
+controller; a loss before it, or a last command stamped more than the link's ``timeout_s`` before
+the controller's duration (the stream lost in its last moments), is a stale stream. Judged on the
+controller's duration instead, five of ten runs on Dec 6 failed at the controller's end: the
+robot's clock ran behind the controller's, and the stream's end read as a loss at 19.94-19.99 s.
 
 It also reports the controller's deadline misses (ticks over the period), their longest run and
 its velocity tracking. Whether both ends keep real time depends on the machine and on what else
@@ -34,6 +34,7 @@ import time
 
 from romoco_drake.commands import print_rows
 from romoco_drake.errors import RomocoError
+from romoco_drake.interfaces.link import LinkConfig
 from romoco_drake.runner import add_overlay_arg
 from romoco_drake.scenario import load_scenario
 
@@ -42,7 +43,6 @@ REALTIME_MIN = 0.99  # both ends' realtime_factor for a pass
 WAIT_S = 120.0  # how long the robot waits for the controller's first command
 GROUP = "239.255.76.67"  # Drake's default LCM multicast group
 TIMEOUT_MARGIN_S = 300.0  # wall time allowed beyond the simulated time before a process is killed
-STREAM_END_S = 0.05  # the last command is stamped no earlier than this before the controller's duration
 
 
 def udp_url(port: int) -> str:
@@ -99,9 +99,10 @@ def rehearse(scenario: str, duration: float, url: str, overlays: tuple[str, ...]
     return {"robot": _summary(robot, timeout, "robot (romoco robot-sim)"), "controller": ours}
 
 
-def judge(run: dict, duration: float, rate_hz: float) -> dict:
+def judge(run: dict, duration: float, rate_hz: float, timeout_s: float = LinkConfig().timeout_s) -> dict:
     """A rehearsal's row: the pass criteria (module docstring) and what explains them; ``rate_hz``: the
-    controller's rate, for the fraction of its ticks that missed their deadline."""
+    controller's rate, for the fraction of its ticks that missed their deadline; ``timeout_s``: how
+    long the robot's link waits for a command before its stream is stale."""
     robot, ours = run["robot"], run["controller"]
     end, last_stamp = robot["last_command_time_s"], robot["last_command_utime_s"]
     end = duration if end is None else end  # the controller's end on the robot's clock
@@ -109,7 +110,7 @@ def judge(run: dict, duration: float, rate_hz: float) -> dict:
     fell = fall is not None and fall <= end
     stale = robot["first_stale_time_s"]
     robot_stale = ((stale is not None and stale < end)
-                   or last_stamp is None or last_stamp < duration - STREAM_END_S)
+                   or last_stamp is None or last_stamp < duration - timeout_s)
     row = {"fell": fell, "robot_fall_time_s": fall, "robot_realtime_factor": robot["realtime_factor"],
            "controller_realtime_factor": ours["realtime_factor"],
            "robot_stale": robot_stale, "robot_first_stale_time_s": None if stale is None else round(stale, 3),
@@ -128,12 +129,13 @@ def judge(run: dict, duration: float, rate_hz: float) -> dict:
 def bench_rehearsal(scenario: str, duration: float, runs: int, port: int | None = None,
                     overlays: tuple[str, ...] = ()) -> list[dict]:
     """``runs`` rehearsals one after the other, each on its own port, with the bare loop timed before it."""
-    rate_hz = load_scenario(scenario, overlays).controller.rate_hz  # and a bad name is a one-line error
+    loaded = load_scenario(scenario, overlays)  # and a bad name is a one-line error
+    rate_hz, timeout_s = loaded.controller.rate_hz, loaded.link.timeout_s
     base = port if port is not None else 7000 + os.getpid() % 900
     rows = []
     for i in range(runs):
         bare = bare_loop_s()
-        row = judge(rehearse(scenario, duration, udp_url(base + i), overlays), duration, rate_hz)
+        row = judge(rehearse(scenario, duration, udp_url(base + i), overlays), duration, rate_hz, timeout_s)
         rows.append({"run": i + 1, "scenario": scenario, "duration_s": duration,
                      "bare_loop_s": round(bare, 3)} | row)
     return rows
