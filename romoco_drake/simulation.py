@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -37,6 +39,25 @@ def frozen_heap():
         yield
     finally:
         gc.unfreeze()
+
+
+@contextlib.contextmanager
+def ctrl_c_between_chunks():
+    """Within (on the main thread, unless Ctrl-C is ignored): Ctrl-C only marks the yielded list,
+    for the loop to act on between chunks. Raised as KeyboardInterrupt where it lands, it can land
+    while pybind11 converts the arguments of a call inside a Drake callback, which then fails as
+    a TypeError ("incompatible function arguments"): a teleop run ended by Ctrl-C exited 1 with
+    a traceback and no summary (deadline.py's ``SetFromVector([...])``)."""
+    pressed: list[bool] = []
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is signal.SIG_IGN):
+        yield pressed
+        return
+    previous = signal.signal(signal.SIGINT, lambda *_: pressed.append(True))
+    try:
+        yield pressed
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 @dataclass(frozen=True)
@@ -75,7 +96,8 @@ def simulate(simulator: Simulator, duration: float, plant_state: Callable[[], np
 
     A diverged simulation (:func:`divergence` of the error and ``plant_state()``) ends the loop
     as a fall, without a traceback; any other error goes up as it is. ``stop(t)`` true ends it
-    after a chunk; with ``ctrl_c_ends`` so does Ctrl-C. ``report(t, rate)`` is called at most
+    after a chunk; with ``ctrl_c_ends`` so does Ctrl-C, else it is a KeyboardInterrupt from the
+    chunk's end (:func:`ctrl_c_between_chunks`). ``report(t, rate)`` is called at most
     every ``PROGRESS_WALL_S`` of wall time with the real-time rate since the last report.
     ``logs`` are spilled to disk every ``SPILL_PERIOD_S`` of simulated time (memory stays flat).
     """
@@ -84,19 +106,19 @@ def simulate(simulator: Simulator, duration: float, plant_state: Callable[[], np
     last_print, last_t = wall0, context.get_time()
     t = context.get_time()
     next_spill = t + SPILL_PERIOD_S
-    with frozen_heap():
+    with frozen_heap(), ctrl_c_between_chunks() as pressed:
         while t < duration - 1e-9:
             t = min(duration, t + CHUNK_S)
             try:
                 simulator.AdvanceTo(t)
-            except KeyboardInterrupt:
-                if not ctrl_c_ends:
-                    raise
-                return RunEnd(context.get_time(), time.perf_counter() - wall0, interrupted=True)
             except Exception as e:
                 if (reason := divergence(e, plant_state())) is None:
                     raise
                 return RunEnd(context.get_time(), time.perf_counter() - wall0, (context.get_time(), reason))
+            if pressed:
+                if not ctrl_c_ends:
+                    raise KeyboardInterrupt
+                return RunEnd(context.get_time(), time.perf_counter() - wall0, interrupted=True)
             if stop is not None and stop(t):
                 return RunEnd(t, time.perf_counter() - wall0, stopped=t)
             if logs is not None and t >= next_spill:
