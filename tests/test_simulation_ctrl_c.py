@@ -61,7 +61,7 @@ def test_ctrl_c_ends_a_run_at_the_chunk_end_with_every_tick_done(sigint_default)
 
 
 def test_ctrl_c_aborts_a_run_without_ctrl_c_ends_at_the_chunk_end(sigint_default):
-    simulator, system = _simulator()
+    simulator, _ = _simulator()
     with pytest.raises(KeyboardInterrupt):
         simulate(simulator, 1.0, lambda: None)
     assert simulator.get_context().get_time() == pytest.approx(2 * CHUNK_S)

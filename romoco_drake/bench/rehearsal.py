@@ -104,17 +104,16 @@ def judge(run: dict, duration: float, rate_hz: float, timeout_s: float = LinkCon
     controller's rate, for the fraction of its ticks that missed their deadline; ``timeout_s``: how
     long the robot's link waits for a command before its stream is stale."""
     robot, ours = run["robot"], run["controller"]
-    end, last_stamp = robot["last_command_time_s"], robot["last_command_utime_s"]
-    end = duration if end is None else end  # the controller's end on the robot's clock
+    end = robot["last_command_time_s"]  # the controller's end on the robot's clock (None: no command)
     fall = robot["fall_time_s"] if robot["fell"] else None
-    fell = fall is not None and fall <= end
+    fell = fall is not None and (end is None or fall <= end)
     stale = robot["first_stale_time_s"]
-    robot_stale = ((stale is not None and stale < end)
-                   or last_stamp is None or last_stamp < duration - timeout_s)
+    robot_stale = (end is None or (stale is not None and stale < end)
+                   or robot["last_command_utime_s"] < duration - timeout_s)
     row = {"fell": fell, "robot_fall_time_s": fall, "robot_realtime_factor": robot["realtime_factor"],
            "controller_realtime_factor": ours["realtime_factor"],
            "robot_stale": robot_stale, "robot_first_stale_time_s": None if stale is None else round(stale, 3),
-           "robot_last_command_time_s": round(end, 3),
+           "robot_last_command_time_s": None if end is None else round(end, 3),
            "controller_stale_events": ours["stale_events"],
            "deadline_misses": ours["deadline_misses"],
            "miss_fraction": round(ours["deadline_misses"] / max(round(duration * rate_hz), 1), 5),

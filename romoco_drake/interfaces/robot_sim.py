@@ -280,4 +280,4 @@ def stale_summary(robot_sim: Diagram, context) -> dict:
     utime, arrival, received = own.get_discrete_state(receiver.inbox.meta).value()
     return {"first_stale_time_s": first if np.isfinite(first) else None,
             "last_command_time_s": float(arrival) if received else None,
-            "last_command_utime_s": utime * 1e-6 if received else None}
+            "last_command_utime_s": float(utime) * 1e-6 if received else None}
