@@ -5,7 +5,7 @@ periodic, initialization and forced events) is wrapped so that its wall time is 
 system's account. Times are exclusive: a callback that evaluates another system's port (the
 usual way a tick pulls its inputs) is charged its own time only, the other system the rest.
 What is in no Python callback (Drake's framework, its C++ systems) is the tick's time minus the
-accounts' sum. The wrapping costs about a microsecond a call (30-40 µs a G1 hardware tick of
+accounts' sum. The wrapping costs about a microsecond a call (30-50 µs a G1 hardware tick of
 some 30 callbacks).
 """
 

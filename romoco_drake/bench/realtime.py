@@ -15,7 +15,7 @@ released at the control rate on the wall clock (a robot's loop sleeps between ti
 caches and clocks it meets are an idle loop's, not a back-to-back benchmark's). A tick misses
 its deadline when it takes longer than the period. The deadline numbers come from a replay
 as the robot would run it; a second replay, its systems' callbacks timed
-(:mod:`~romoco_drake.bench.callback_timer`, about a microsecond a callback, 30-40 µs a G1 tick),
+(:mod:`~romoco_drake.bench.callback_timer`, about a microsecond a callback, 30-50 µs a G1 tick),
 splits each tick's time over the systems whose Python callbacks spent it and the rest
 (``framework``: Drake's event dispatch and C++ systems), and names its worst ticks. The bare
 ``MultibodyPlant`` step of the scenario's robot, timed in the same process, is the reference
