@@ -5,6 +5,7 @@ import json
 import pytest
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
+from romoco_drake.bench import realtime
 from romoco_drake.bench.callback_timer import timed_callbacks
 from romoco_drake.bench.realtime import bench_realtime, logged_messages
 from romoco_drake.errors import RomocoError
@@ -58,14 +59,23 @@ def test_callback_times_are_exclusive_and_charged_to_their_system():
     assert timer.lap() == {}
 
 
-def test_realtime_replays_the_logged_run_exactly(tmp_path):
+def test_realtime_replays_the_logged_run_exactly(tmp_path, monkeypatch):
     """The hardware controller fed a simulated run's robot messages sends that run's commands
     again; every tick is timed and split over systems; misses are ticks over the period. The
-    replay runs past the first step (at 1 s): a standing robot's ticks make no plan."""
+    replay runs past the first step (at 1 s): a standing robot's ticks make no plan. Only the
+    second replay's callbacks are timed."""
     scenario = load_scenario("g1_walk")
     log = tmp_path / "run.lcmlog"
     run_scenario(scenario, duration=1.7, link="via_lcm", lcm_log=log)
+    timers = []
+
+    def counted(*args):
+        timers.append(args)
+        return timed_callbacks(*args)
+
+    monkeypatch.setattr(realtime, "timed_callbacks", counted)
     r = bench_realtime(scenario, duration=1.5, lcm_log=log, pace=False)
+    assert len(timers) == 1  # the second replay; the first, whose ticks are reported, is not timed
     assert r["ticks"] == 750 and r["rate_hz"] == 500
     assert r["replay"]["commands_matched"] >= 749
     assert r["replay"]["max_torque_difference_nm"] == 0.0
@@ -77,7 +87,7 @@ def test_realtime_replays_the_logged_run_exactly(tmp_path):
     assert r["tick_ms"]["median"] <= r["tick_ms"]["p99"] <= r["tick_ms"]["max"]
     # The split comes from a second replay, its callbacks timed; the deadline numbers from the first.
     assert r["timed_tick_ms"]["median"] <= r["timed_tick_ms"]["max"]
-    assert all(w["ms"] <= r["timed_tick_ms"]["max"] for w in r["worst_ticks"])
+    assert all(w["ms"] <= r["timed_tick_ms"]["max"] + 5e-4 for w in r["worst_ticks"])  # 3 vs 4 decimals
     assert 0.0 <= r["deadline_miss_fraction"] <= 1.0
     assert r["deadline_misses"] == round(r["deadline_miss_fraction"] * r["ticks"])
     assert r["plant_step_ms"] > 0.0
