@@ -50,7 +50,7 @@ from romoco_drake.interfaces.lcm_codec import (
 from romoco_drake.runner import add_overlay_arg, run_scenario, run_summary, scenario_from_args
 from romoco_drake.scenario import Scenario
 from romoco_drake.simulation import RunEnd, frozen_heap
-from romoco_drake.wiring import build_diagram
+from romoco_drake.wiring import BuiltDiagram, build_diagram
 
 ROBOT_CHANNELS = (PROPRIOCEPTION_CHANNEL, BASE_STATE_CHANNEL)
 WORST = 10  # ticks listed with their costliest system
@@ -123,7 +123,7 @@ class _Replay:
 
     tick_ns: np.ndarray
     parts: list[dict[str, int]]
-    built: object
+    built: BuiltDiagram
     summary: dict
     commands: list[bytes]
 
