@@ -91,12 +91,18 @@ class LinkStage(IntEnum):
     @classmethod
     def decode(cls, value: float) -> LinkStage:
         """The stage numbered ``value``; ValueError names a value that is no stage."""
+        try:  # a stage's own number (int or float) needs no checks
+            return _STAGES[value]
+        except (KeyError, TypeError):  # another value, or an unhashable one (an array)
+            pass
         v = float(value)
         if not math.isfinite(v) or v != round(v) or int(v) not in cls._value2member_map_:
             known = ", ".join(f"{s.value} {s.name}" for s in cls)
             raise ValueError(f"{value!r} is not a link stage ({known})")
         return cls(int(v))
 
+
+_STAGES = {float(stage): stage for stage in LinkStage}
 
 @dataclass(frozen=True)
 class Counters(SharedValue):
@@ -109,7 +115,7 @@ class Counters(SharedValue):
 
     @classmethod
     def from_vector(cls, values) -> Counters:
-        return cls(*(int(v) for v in values))
+        return cls(*map(int, np.asarray(values).tolist()))  # Python floats: int() of each is cheap
 
     def values(self) -> tuple[int, ...]:
         """The counts in field order (``dataclasses.astuple`` deep-copies: ten times slower)."""

@@ -2,6 +2,7 @@
 
 import json
 
+import numpy as np
 import pytest
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
@@ -90,7 +91,12 @@ def test_realtime_replays_the_logged_run_exactly(tmp_path, monkeypatch):
     assert all(w["ms"] <= r["timed_tick_ms"]["max"] + 5e-4 for w in r["worst_ticks"])  # 3 vs 4 decimals
     assert 0.0 <= r["deadline_miss_fraction"] <= 1.0
     assert r["deadline_misses"] == round(r["deadline_miss_fraction"] * r["ticks"])
+    assert (r["miss_bursts"]["count"] == 0) == (r["deadline_misses"] == 0)
+    assert r["miss_bursts"]["count"] <= r["deadline_misses"]
     assert r["plant_step_ms"] > 0.0
+    # The empty loop is timed beside the untimed replay, and the ratio is its p99 over the loop.
+    assert r["bare_loop_ms"] > 0.0 and all(ms > 0.0 for ms in r["bare_loop_ms_before_after"])
+    assert r["tick_p99_to_bare_loop"] == pytest.approx(r["tick_ms"]["p99"] / r["bare_loop_ms"], rel=2e-3)
     # The station's own Python systems, each timed (every one runs in a standing station's steps).
     assert set(r["station_callbacks_us"]) == {"contact_readout", "sensors", "monitor"}
     assert all(us > 0.0 for us in r["station_callbacks_us"].values())
@@ -108,3 +114,12 @@ def test_a_log_without_robot_messages_is_a_one_line_error(tmp_path):
         logged_messages(path)
     with pytest.raises(RomocoError, match="cannot read LCM log"):
         logged_messages(tmp_path / "missing.lcmlog")
+
+
+def test_misses_group_into_bursts():
+    """Misses within BURST_GAP ticks of each other are one burst; its span counts every tick in it."""
+    missed = np.zeros(200, dtype=bool)
+    missed[[3, 50, 52, 60, 61, 150]] = True
+    assert realtime.miss_bursts(missed) == {"count": 3, "longest_ticks": 12}
+    assert realtime.miss_bursts(np.zeros(5, dtype=bool)) == {"count": 0, "longest_ticks": 0}
+    assert realtime.miss_bursts(missed, gap=100) == {"count": 1, "longest_ticks": 148}

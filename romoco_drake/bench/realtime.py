@@ -20,7 +20,10 @@ splits each tick's time over the systems whose Python callbacks spent it and the
 (``framework``: Drake's event dispatch and C++ systems), and names its worst ticks. The bare
 ``MultibodyPlant`` step of the scenario's robot, timed in the same process, is the reference
 that makes the numbers comparable across machines; the simulated station's step (sensors, fall
-monitor, logs), stepped alternately with it, gives what the station costs over the physics.
+monitor, logs), stepped alternately with it, gives what the station costs over the physics. A
+tick is mostly Python, and the host's Python speed drifts within minutes (G1's median tick was
+1.75 ms and, a quarter of an hour later on the same idle machine, 1.46 ms on Dec 6), so an empty
+Python loop timed just before and just after the untimed replay is the tick's second reference.
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.bench.callback_timer import timed_callbacks
+from romoco_drake.bench.rehearsal import bare_loop_s
 from romoco_drake.bench.walking import station_and_bare_plant_steps, station_callback_split
 from romoco_drake.config import LINK_TICK_OFFSET
 from romoco_drake.errors import RomocoError
@@ -54,6 +58,10 @@ from romoco_drake.wiring import BuiltDiagram, build_diagram
 
 ROBOT_CHANNELS = (PROPRIOCEPTION_CHANNEL, BASE_STATE_CHANNEL)
 WORST = 10  # ticks listed with their costliest system
+# The host's Python speed, beside the untimed replay: an empty loop of LOOP_STEPS steps (about a
+# millisecond, a G1 tick's order), LOOP_SAMPLES times before it and as many after.
+LOOP_STEPS, LOOP_SAMPLES = 10**5, 10
+BURST_GAP = 10  # ticks: misses closer than this belong to one burst (miss_bursts)
 
 
 def logged_messages(path: Path) -> tuple[list[tuple[float, str, bytes]], list[bytes]]:
@@ -106,11 +114,18 @@ def bench_realtime(scenario: Scenario, duration: float = 10.0, lcm_log: Path | N
     scenario = dataclasses.replace(scenario, link=link)
     period = 1.0 / scenario.controller.rate_hz
     ticks = int(min(duration, events[-1][0]) / period)
+    loops = [bare_loop_s(LOOP_STEPS) for _ in range(LOOP_SAMPLES)]
     bare = _replay(scenario, events, ticks, pace, timed=False)
+    loops += [bare_loop_s(LOOP_STEPS) for _ in range(LOOP_SAMPLES)]
     split = _replay(scenario, events, ticks, pace, timed=True)
     replay = bare.summary | command_agreement(bare.built.robot, logged_commands, bare.commands)
     station, plant = station_and_bare_plant_steps(bare.built.robot, scenario, 1000)
+    loop_ms = 1e3 * float(np.median(loops))
     return _report(scenario, period, bare.tick_ns, split, plant, replay, recorded, pace) | {
+        "bare_loop_ms": round(loop_ms, 4),
+        "bare_loop_ms_before_after": [round(1e3 * float(np.median(part)), 4)
+                                      for part in (loops[:LOOP_SAMPLES], loops[LOOP_SAMPLES:])],
+        "tick_p99_to_bare_loop": round(float(np.percentile(bare.tick_ns, 99)) / 1e6 / loop_ms, 3),
         "station_step_ms": round(float(np.median(station)) / 1e6, 4),
         "station_to_plant_step": round(float(np.median(station) / np.median(plant)), 3),
         "station_callbacks_us": station_callback_split(bare.built.robot, scenario, 1000)}
@@ -198,11 +213,25 @@ def _report(scenario: Scenario, period: float, tick_ns: np.ndarray, split: _Repl
         "rate_hz": scenario.controller.rate_hz, "ticks": len(tick_ns), "paced": pace,
         "deadline_misses": int(np.sum(tick_ns > period * 1e9)),
         "deadline_miss_fraction": round(float(np.mean(tick_ns > period * 1e9)), 5),
+        "miss_bursts": miss_bursts(tick_ns > period * 1e9),
         "tick_ms": tick, "timed_tick_ms": _ms(timed_ns), "systems_ms": ms, "worst_ticks": worst,
         "plant_step_ms": round(plant, 4), "tick_p99_to_plant_step": round(tick["p99"] / plant, 3),
         "replay": {k: replay.get(k) for k in (*keys, "commands_matched", "max_torque_difference_nm")},
         "recorded": None if recorded is None else {k: recorded.get(k) for k in keys},
     }
+
+
+def miss_bursts(missed: np.ndarray, gap: int = BURST_GAP) -> dict:
+    """The missed ticks grouped into bursts (a miss within ``gap`` ticks of the previous one joins
+    its burst): how many, and the most ticks one spans. A controller spike misses alone; the host
+    slowing every tick for tens of milliseconds (seen on this 2-core VM: 20-45 ticks in a row,
+    at other times in each replay) misses in bursts."""
+    ticks = np.flatnonzero(missed)
+    if not len(ticks):
+        return {"count": 0, "longest_ticks": 0}
+    starts = np.flatnonzero(np.diff(ticks) > gap) + 1
+    bounds = np.split(ticks, starts)
+    return {"count": len(bounds), "longest_ticks": int(max(b[-1] - b[0] + 1 for b in bounds))}
 
 
 def _ms(ns: np.ndarray) -> dict:
@@ -238,9 +267,14 @@ def _cmd_bench_realtime(args) -> int:
           f"({period_ms:g} ms){'' if r['paced'] else ', back to back'}")
     t = r["tick_ms"]
     print(f"  tick              {t['median']:8.3f} ms median {t['p99']:8.3f} p99 {t['max']:8.3f} max")
-    print(f"  deadline misses   {r['deadline_misses']} ({100 * r['deadline_miss_fraction']:.2f} %)")
+    bursts = r["miss_bursts"]
+    print(f"  deadline misses   {r['deadline_misses']} ({100 * r['deadline_miss_fraction']:.2f} %) in "
+          f"{bursts['count']} bursts, the longest {bursts['longest_ticks']} ticks")
     print(f"  bare plant step   {r['plant_step_ms']:8.3f} ms median; tick p99 / plant step "
           f"{r['tick_p99_to_plant_step']}")
+    before, after = r["bare_loop_ms_before_after"]
+    print(f"  bare Python loop  {r['bare_loop_ms']:8.3f} ms median per 10^5 empty steps (before the replay "
+          f"{before:.3f}, after {after:.3f}); tick p99 / loop {r['tick_p99_to_bare_loop']}")
     print(f"  simulated station {r['station_step_ms']:8.3f} ms median; station / bare plant step "
           f"{r['station_to_plant_step']} (stepped alternately); its Python systems, µs a step: "
           + ", ".join(f"{name} {us:g}" for name, us in r["station_callbacks_us"].items()))

@@ -112,12 +112,21 @@ class SwingTrajectory(SharedValue):
     lateral_end: float = 1.0
 
     def evaluate(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Desired position, velocity and acceleration (3,) each at swing time t (clipped)."""
-        t = min(max(t, self.t_start), self.duration)
-        pieces = [curve.evaluate(t - self.t_start) for curve in self.horizontal]
-        t0, curve = next(piece for piece in reversed(self.vertical) if t >= piece[0])
-        pieces.append(curve.evaluate(t - t0))
-        return tuple(np.concatenate(parts) for parts in zip(*pieces, strict=True))
+        """Desired position, velocity and acceleration (3,) each at swing time t (clipped);
+        read-only, and kept for the last t: a tick asks for the same t up to three times (the
+        replan, the planner's swing reference, the task references)."""
+        memo = self.__dict__.get("_memo")
+        if memo is not None and memo[0] == t:
+            return memo[1]
+        clipped = min(max(t, self.t_start), self.duration)
+        pieces = [curve.evaluate(clipped - self.t_start) for curve in self.horizontal]
+        t0, curve = next(piece for piece in reversed(self.vertical) if clipped >= piece[0])
+        pieces.append(curve.evaluate(clipped - t0))
+        result = tuple(np.concatenate(parts) for parts in zip(*pieces, strict=True))
+        for array in result:
+            array.flags.writeable = False
+        object.__setattr__(self, "_memo", (t, result))  # not a field: no part of equality
+        return result
 
     def replan(self, t: float, target: np.ndarray, duration: float | None = None,
                apex_height: float | None = None, lateral_end: float | None = None) -> SwingTrajectory:

@@ -30,7 +30,8 @@ def base_fault(robot: RobotModel, x: np.ndarray, min_height: float, cos_max_tilt
     if not np.all(np.abs(x) < DIVERGED):  # NaN included
         return "invalid_state", float("nan")
     i = robot.base_q_start
-    w, qx, qy, qz = x[i:i + 4] / np.linalg.norm(x[i:i + 4])
+    quaternion = x[i:i + 4]
+    _, qx, qy, _ = (quaternion / np.linalg.norm(quaternion)).tolist()
     height = float(x[i + 6])
     if height < min_height:
         return "base_low", height
