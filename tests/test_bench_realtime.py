@@ -80,6 +80,7 @@ def test_realtime_replays_the_logged_run_exactly(tmp_path, monkeypatch):
     assert r["ticks"] == 750 and r["rate_hz"] == 500
     assert r["replay"]["commands_matched"] >= 749
     assert r["replay"]["max_torque_difference_nm"] == 0.0
+    assert r["step_qp"] == "compiled"
     assert r["replay"]["stale_events"] == 0 and r["replay"]["safe_mode_entries"] == 0
     systems = r["systems_ms"]
     expected = {"receiver", "sender", "estimator", "controller", "embedding", "planner", "framework"}

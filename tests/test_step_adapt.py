@@ -11,8 +11,10 @@ import pytest
 
 from romoco_drake.embedding.bezier import quintic_bezier
 from romoco_drake.errors import RomocoError
+from romoco_drake.rom import step_qp_kernel
 from romoco_drake.rom.planners import PlannerParams, foot_placement_laws, make_planner
 from romoco_drake.rom.step_adapt import (
+    CopShift,
     NextStep,
     StepAdapter,
     StepAdaptWeights,
@@ -216,3 +218,40 @@ def test_bad_bounds_and_weights_are_one_line_errors():
         dataclasses.replace(BOUNDS, lateral_min=0.5)
     with pytest.raises(RomocoError, match="weights must be positive"):
         StepAdapter(BOUNDS, MASS, StepAdaptWeights(timing=0.0))
+
+
+def _random_qp(rng, window: bool, cop: bool):
+    """One two-step QP as the adapter poses it: random footholds, DCM and timing, a swing window
+    (the foot moving) and CoP shifts (a terrain edge) when asked."""
+    sigma_n = rng.uniform(2.5, 4.0)
+    nxt = NextStep(((-0.25, 0.3), (0.12, 0.45)), (0.12, 0.2), tuple(rng.uniform(-0.08, 0.08, 2)),
+                   np.linspace(2.17, 5.7, 9), sigma_n)
+    state = [tuple(rng.uniform(-x, x, 2)) for x in (0.3, 1.5, 20.0)]  # the swing's p, v, a
+    swing = SwingWindow(*state, rng.uniform(0.5, 2.0), rng.uniform(0.0, 0.15), 3.9) if window else None
+    shifts = CopShift(-0.03, 0.02, 0.1, rng.uniform(0.5, 1.0)) if cop else None
+    box, sigma_box = ((-0.25, 0.3), (-0.45, -0.12)), (rng.uniform(2.0, 2.5), rng.uniform(4.5, 6.0))
+    return ((tuple(rng.uniform(-0.6, 0.6, 2)), sigma_n, tuple(rng.uniform(-0.2, 0.2, 2)), box, sigma_box,
+             StepAdaptWeights(), nxt), {"window": swing, "cop": shifts})
+
+
+def test_the_compiled_kernel_is_built():
+    """`pip install -e .` compiles romoco_drake/rom/_step_qp.c (a C compiler is on every machine
+    the project installs on); without it the numpy reference runs, 5-6 times slower."""
+    assert step_qp_kernel.AVAILABLE, "the step QP kernel was not built: is a C compiler installed?"
+
+
+@pytest.mark.parametrize("window, cop", [(False, False), (True, False), (False, True), (True, True)])
+def test_the_kernel_solves_the_qp_as_numpy_does_to_the_last_bit(window, cop):
+    """The C kernel repeats the numpy search operation for operation (no contracted multiply-adds),
+    so a replayed run's motor commands do not move at all."""
+    rng = np.random.default_rng(11 + 2 * window + cop)
+    for _ in range(60):
+        args, kwargs = _random_qp(rng, window, cop)
+        assert solve_step_qp(*args, **kwargs, compiled=True) == solve_step_qp(*args, **kwargs, compiled=False)
+
+
+def test_a_malformed_kernel_buffer_is_a_value_error():
+    from romoco_drake.rom import _step_qp
+
+    with pytest.raises(ValueError, match="malformed"):
+        _step_qp.solve(np.zeros(7))

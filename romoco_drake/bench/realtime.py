@@ -51,6 +51,7 @@ from romoco_drake.interfaces.lcm_codec import (
     PROPRIOCEPTION_CHANNEL,
     decode_motor_command,
 )
+from romoco_drake.rom import step_qp_kernel
 from romoco_drake.runner import add_overlay_arg, run_scenario, run_summary, scenario_from_args
 from romoco_drake.scenario import Scenario
 from romoco_drake.simulation import RunEnd, frozen_heap
@@ -217,6 +218,7 @@ def _report(scenario: Scenario, period: float, tick_ns: np.ndarray, split: _Repl
         "tick_ms": tick, "timed_tick_ms": _ms(timed_ns), "systems_ms": ms, "worst_ticks": worst,
         "plant_step_ms": round(plant, 4), "tick_p99_to_plant_step": round(tick["p99"] / plant, 3),
         "replay": {k: replay.get(k) for k in (*keys, "commands_matched", "max_torque_difference_nm")},
+        "step_qp": "compiled" if step_qp_kernel.AVAILABLE else "numpy",  # rom/step_qp_kernel.py
         "recorded": None if recorded is None else {k: recorded.get(k) for k in keys},
     }
 
@@ -286,7 +288,7 @@ def _cmd_bench_realtime(args) -> int:
     print("  the timed replay's worst ticks:")
     for w in r["worst_ticks"]:
         print(f"    t {w['t_s']:8.3f} s  {w['ms']:7.3f} ms  {w['system']} {w['system_ms']:.3f} ms")
-    print(f"  replay: {r['replay']}")
+    print(f"  replay: {r['replay']}; the step QP ran {r['step_qp']}")
     if r["recorded"] is not None:
         print(f"  recorded run: {r['recorded']}")
     return 0

@@ -38,10 +38,9 @@ late in the swing is then not asked to land far away (the swing would land fast 
 late), and a foot already moving keeps the target it is moving toward: a window of
 ``swing_speed``·(T − t) about s alone shrank under a swing that starts slowly (G1 pushed forward at
 phase 0.75: the third step's target retreated from 0.37 to 0.17 m while the foot accelerated
-toward it, and the robot fell).
-That window depends on σ through T = ln σ / λ, so the QP is solved over σ₁ on a grid refined
-around its best point and over σ₂ on a grid, with (u₁, u₂) minimised exactly for each pair
-(:func:`solve_step_qp`).
+toward it, and the robot fell). That window depends on σ through T = ln σ / λ, so the QP is solved
+over σ₁ on a grid refined around its best point and over σ₂ on a grid, with (u₁, u₂) minimised
+exactly for each pair (:func:`solve_step_qp`; in C where it is built, :mod:`.step_qp_kernel`).
 """
 
 from __future__ import annotations
@@ -54,6 +53,7 @@ from functools import cached_property
 import numpy as np
 
 from romoco_drake.errors import RomocoError
+from romoco_drake.rom import step_qp_kernel
 from romoco_drake.rom.types import SWING_COMMIT_FRACTION, PlannerOutput, other_side
 from romoco_drake.spatial import GRAVITY
 
@@ -285,7 +285,7 @@ class SwingWindow:
     lam: float
 
     @cached_property
-    def _lines(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def lines(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Per axis and sample r, the bounds on d / D as lines in D: (low and high intercepts, the
         common slope −a k / g), and the least-velocity d / D as one line (intercept, slope)."""
         v, a = (np.array(x, dtype=float)[:, None] for x in (self.v, self.a))
@@ -297,7 +297,7 @@ class SwingWindow:
     def interval(self, t_ss):
         """(lo, hi) of the touchdown point, with a leading dimension of 2 (x, y) over ``t_ss``'s shape."""
         d = np.maximum(np.asarray(t_ss, dtype=float) - self.tau, 0.0)
-        low0, high0, slope, least0, least1 = self._lines
+        low0, high0, slope, least0, least1 = self.lines
         if d.ndim == 0:  # one time (every walking tick asks): the two axes' sample rows alone
             dr = d * slope
             low, high = (dr + low0).max(axis=1), (dr + high0).min(axis=1)
@@ -381,10 +381,10 @@ def _least_over_shifts(axis: tuple[np.ndarray, np.ndarray], shift_cost: np.ndarr
 
 def solve_step_qp(u_n: tuple[float, float], sigma_n: float, dcm0: tuple[float, float], box,
                   sigma_box: tuple[float, float], w: StepAdaptWeights, nxt: NextStep,
-                  window: SwingWindow | None = None, cop: CopShift | None = None
+                  window: SwingWindow | None = None, cop: CopShift | None = None, compiled: bool = True
                   ) -> tuple[float, tuple[float, float], float]:
     """(σ₁, (u_x, u_y), d) of the current step minimising the module docstring's two-step QP; d is
-    the sagittal CoP shift (0 without ``cop``; :class:`CopShift`).
+    the sagittal CoP shift (0 without ``cop``; :class:`CopShift`); ``compiled``: by the C kernel if built.
 
     For fixed (σ₁, σ₂) each axis is a box-constrained convex QP in (u₁, u₂), solved exactly
     (:func:`_two_step_axis`); u₁'s box is the reach intersected with the swing ``window``; where
@@ -393,6 +393,14 @@ def solve_step_qp(u_n: tuple[float, float], sigma_n: float, dcm0: tuple[float, f
     but not convex once the window binds, so σ₁ is searched on a grid and refined around the best
     point (to about 1e-6 of its range).
     """
+    if compiled and step_qp_kernel.AVAILABLE:
+        grid = (_GRID, _REFINE, _ROUNDS)
+        return step_qp_kernel.solve(u_n, sigma_n, dcm0, box, sigma_box, w, nxt, window, cop, grid)
+    return _solve_step_qp_numpy(u_n, sigma_n, dcm0, box, sigma_box, w, nxt, window, cop)
+
+
+def _solve_step_qp_numpy(u_n, sigma_n, dcm0, box, sigma_box, w, nxt, window, cop):
+    """:func:`solve_step_qp` in numpy: the reference the C kernel repeats."""
     w_u, w_t, w_b = w.step, w.timing, w.offset
     s2 = np.asarray(nxt.sigmas, dtype=float)[None, :]
 
