@@ -14,6 +14,7 @@ from romoco_drake.errors import RomocoError
 from romoco_drake.rom import step_qp_kernel
 from romoco_drake.rom.planners import PlannerParams, foot_placement_laws, make_planner
 from romoco_drake.rom.step_adapt import (
+    _WINDOW_SAMPLES,
     CopShift,
     NextStep,
     StepAdapter,
@@ -255,3 +256,17 @@ def test_a_malformed_kernel_buffer_is_a_value_error():
 
     with pytest.raises(ValueError, match="malformed"):
         _step_qp.solve(np.zeros(7))
+
+
+def test_the_kernel_bounds_the_swing_window_as_numpy_does():
+    """The window every walking tick asks about (SwingWindow.contains), from the kernel and from
+    numpy, equal to the last bit: its bounds and so its verdicts."""
+    rng = np.random.default_rng(5)
+    for _ in range(500):
+        state = [tuple(rng.uniform(-x, x, 2)) for x in (0.3, 2.0, 30.0)]
+        window = SwingWindow(*state, rng.uniform(0.3, 2.5), rng.uniform(0.0, 0.3), 3.9)
+        t = rng.uniform(0.0, 0.5)
+        lo, hi = window.interval(t)
+        assert step_qp_kernel.window_interval(_WINDOW_SAMPLES, window, t) == (lo[0], lo[1], hi[0], hi[1])
+        u = tuple(rng.uniform(-0.5, 0.5, 2))
+        assert window.contains(u, t) == window.contains(u, t, compiled=False)

@@ -212,8 +212,47 @@ static PyObject *solve(PyObject *Py_UNUSED(self), PyObject *args) {
     return out;
 }
 
+/* SwingWindow.interval at one time t, and SwingWindow.lines with it: samples is [n, peak, HG, KG, G2,
+ * H (n), G (n), K/G (n)] (step_adapt's constants), the rest the window's fields. */
+static PyObject *window_interval(PyObject *Py_UNUSED(self), PyObject *args) {
+    Py_buffer view;
+    double s[2], v[2], a[2], speed, tau, t, lo[2], hi[2];
+    if (!PyArg_ParseTuple(args, "y*ddddddddd", &view, &s[0], &s[1], &v[0], &v[1], &a[0], &a[1], &speed, &tau, &t))
+        return NULL;
+    const double *c = (const double *)view.buf;
+    Py_ssize_t size = view.len / (Py_ssize_t)sizeof(double);
+    int n = size >= 5 ? (int)c[0] : -1;
+    if (n < 1 || size != 5 + 3 * (Py_ssize_t)n || view.len % sizeof(double) != 0) {
+        PyBuffer_Release(&view);
+        PyErr_SetString(PyExc_ValueError, "swing window samples: malformed buffer");
+        return NULL;
+    }
+    const double peak = c[1], hg = c[2], kg = c[3], g2 = c[4], *H = c + 5, *G = H + n, *KG = G + n;
+    double vmax = peak * speed, d = np_max(t - tau, 0.0);
+    for (int ax = 0; ax < 2; ax++) {
+        double low = -INFINITY, high = INFINITY;
+        int low_nan = 0, high_nan = 0;
+        for (int r = 0; r < n; r++) {
+            double dr = d * (-a[ax] * KG[r]);
+            double l = dr + (-vmax - v[ax] * H[r]) / G[r], h = dr + (vmax - v[ax] * H[r]) / G[r];
+            if (l != l) low_nan = 1; else if (l > low) low = l;
+            if (h != h) high_nan = 1; else if (h < high) high = h;
+        }
+        if (low_nan) low = NAN;
+        if (high_nan) high = NAN;
+        double least = -v[ax] * hg / g2 + d * (-a[ax] * kg / g2);
+        int crossed = low > high;
+        lo[ax] = s[ax] + d * (crossed ? least : low);
+        hi[ax] = s[ax] + d * (crossed ? least : high);
+    }
+    PyBuffer_Release(&view);
+    return Py_BuildValue("dddd", lo[0], lo[1], hi[0], hi[1]);
+}
+
 static PyMethodDef methods[] = {
     {"solve", solve, METH_VARARGS, "solve(params) -> (sigma_1, u_x, u_y, shift): the two-step QP's solution"},
+    {"window_interval", window_interval, METH_VARARGS,
+     "window_interval(samples, s_x, s_y, v_x, v_y, a_x, a_y, speed, tau, t) -> (lo_x, lo_y, hi_x, hi_y)"},
     {NULL, NULL, 0, NULL},
 };
 

@@ -1,4 +1,4 @@
-"""Step location and timing adaptation over any foot-placement law's plan (numpy only).
+"""Step location and timing adaptation over any foot-placement law's plan (numpy; hot parts also in C).
 
 Method: the DCM step adjustment of Khadiv, Herzog, Moosavian and Righetti, "Walking Control
 Based on Step Timing Adaptation", IEEE T-RO 36(3), 2020 (first as "Step timing adjustment: a step
@@ -23,9 +23,8 @@ buys that time. Whenever the law's step is reachable and its offset viable
 (:meth:`StepAdapter.viable_offset`), the law's own plan is returned, so adaptation changes
 nothing in normal walking; when a push asks for more, the footholds stop at their bounds and
 the step times move so that the DCM reaches the orbit over two steps: earlier when it runs away
-from the bound, later when it comes back. A step up or down an edge of terrain may also move its stance
-CoP along the heading (:class:`CopShift`), which carries the DCM past a far foothold without a
-longer step.
+from the bound, later when it comes back. A step up or down an edge of terrain may also move its
+stance CoP along the heading (:class:`CopShift`): the DCM passes a far foothold without a longer step.
 
 The reachable box is in the stance yaw frame: forward/backward, and a lateral band on the swing
 foot's own side of the stance foot (at least ``lateral_min`` away), so a crossing step is never
@@ -104,10 +103,9 @@ class StepAdaptWeights:
     step: float = 1.0
     timing: float = 0.01
     offset: float = 10.0
-    # A tenth of the foothold's: a step over an edge moves its CoP before it lengthens its time.
-    # At the foothold's weight G1 on g1_stairs took its steps down in 0.34 s, each carrying it
-    # 7 cm sideways (the lateral DCM grows with the step time), until a foot met the stairs' side
-    # and it fell at 22.4 s; 0.05, 0.1 and 0.2 of it all walk down.
+    # A tenth of the foothold's: a step over an edge moves its CoP before it lengthens its time. At the
+    # foothold's weight G1 on g1_stairs stepped down in 0.34 s, each step carrying it 7 cm sideways (the
+    # lateral DCM grows with the step time) until a foot met the stairs' side (fell at 22.4 s); 0.05-0.2 walk.
     cop: float = 0.1
 
 
@@ -267,6 +265,7 @@ _K = _R - 4.5 * _R ** 2 + 6.0 * _R ** 3 - 2.5 * _R ** 4
 _G_SQUARED = np.sum(_G * _G)
 _HG, _KG = np.sum(_H * _G), np.sum(_K * _G)
 _PEAK = 1.875
+_WINDOW_SAMPLES = np.concatenate([[len(_R), _PEAK, _HG, _KG, _G_SQUARED], _H, _G, _K / _G])  # the C kernel's
 
 
 @dataclass(frozen=True)
@@ -312,13 +311,15 @@ class SwingWindow:
         crossed = low > high
         return s + d * np.where(crossed, least, low), s + d * np.where(crossed, least, high)
 
-    def contains(self, u: Sequence[float], t_ss: float) -> bool:
+    def contains(self, u: Sequence[float], t_ss: float, compiled: bool = True) -> bool:
+        if compiled and step_qp_kernel.AVAILABLE:
+            lo_x, lo_y, hi_x, hi_y = step_qp_kernel.window_interval(_WINDOW_SAMPLES, self, t_ss)
+            return lo_x <= u[0] <= hi_x and lo_y <= u[1] <= hi_y
         lo, hi = self.interval(t_ss)
         return all(lo[i] <= u[i] <= hi[i] for i in range(2))
 
 
-# The σ grid: points over the whole range, then rounds of points around the best one so far;
-# the second step's σ₂ takes _NEXT values over its range.
+# The σ grid: points over the whole range, then rounds around the best so far; σ₂ takes _NEXT values.
 _GRID, _REFINE, _ROUNDS, _NEXT = 121, 41, 3, 9
 # The CoP shifts searched (CopShift): 1 cm apart over G1's 5 cm.
 _COP_GRID = 6
