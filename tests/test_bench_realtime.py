@@ -1,5 +1,6 @@
 """``romoco bench realtime`` and the per-system callback timer it reports with."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -9,7 +10,9 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from romoco_drake.bench import realtime
 from romoco_drake.bench.callback_timer import timed_callbacks
 from romoco_drake.bench.realtime import bench_realtime, logged_messages
+from romoco_drake.cli import main
 from romoco_drake.errors import RomocoError
+from romoco_drake.interfaces.disturbance import Disturbance
 from romoco_drake.runner import run_scenario
 from romoco_drake.scenario import load_scenario
 
@@ -65,7 +68,9 @@ def test_realtime_replays_the_logged_run_exactly(tmp_path, monkeypatch):
     again; every tick is timed and split over systems; misses are ticks over the period. The
     replay runs past the first step (at 1 s): a standing robot's ticks make no plan. Only the
     second replay's callbacks are timed."""
-    scenario = load_scenario("g1_walk")
+    # A push at 1.2 s (15 N·s to the left) puts the step adapter's QP, in its C kernel, in the replay.
+    push = Disturbance(t=1.2, force=[0.0, 150.0, 0.0], frame="heading")
+    scenario = dataclasses.replace(load_scenario("g1_walk"), disturbances=[push])
     log = tmp_path / "run.lcmlog"
     run_scenario(scenario, duration=1.7, link="via_lcm", lcm_log=log)
     timers = []
@@ -78,6 +83,7 @@ def test_realtime_replays_the_logged_run_exactly(tmp_path, monkeypatch):
     r = bench_realtime(scenario, duration=1.5, lcm_log=log, pace=False)
     assert len(timers) == 1  # the second replay; the first, whose ticks are reported, is not timed
     assert r["ticks"] == 750 and r["rate_hz"] == 500
+    assert [push["t"] for push in r["pushes"]] == [1.2]  # named, and left out of the controller's diagram
     assert r["replay"]["commands_matched"] >= 749
     assert r["replay"]["max_torque_difference_nm"] == 0.0
     assert r["step_qp"] == "compiled"
@@ -124,3 +130,9 @@ def test_misses_group_into_bursts():
     assert realtime.miss_bursts(missed) == {"count": 3, "longest_ticks": 12}
     assert realtime.miss_bursts(np.zeros(5, dtype=bool)) == {"count": 0, "longest_ticks": 0}
     assert realtime.miss_bursts(missed, gap=100) == {"count": 1, "longest_ticks": 148}
+
+
+def test_a_push_with_a_replayed_log_is_a_one_line_error(tmp_path, capsys):
+    """--push pushes the run the bench records; a log given with --lcm-log was pushed or not already."""
+    assert main(["bench", "realtime", "--lcm-log", str(tmp_path / "any.lcmlog"), "--push", "4:0,200,0"]) == 2
+    assert "--push pushes the run the bench records" in capsys.readouterr().err

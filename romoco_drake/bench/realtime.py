@@ -111,8 +111,10 @@ def bench_realtime(scenario: Scenario, duration: float = 10.0, lcm_log: Path | N
             recorded = run_scenario(scenario, duration=duration, link="via_lcm", lcm_log=lcm_log)
         events, logged_commands = logged_messages(lcm_log)
     # Missed deadlines are what is measured here: they must not move the loop to its safe stages.
+    # The recorded run's pushes are in its messages; the controller alone has no plant to push.
     link = dataclasses.replace(scenario.link, max_consecutive_misses=0)
-    scenario = dataclasses.replace(scenario, link=link)
+    pushes = [dataclasses.asdict(push) for push in scenario.disturbances]
+    scenario = dataclasses.replace(scenario, link=link, disturbances=[])
     period = 1.0 / scenario.controller.rate_hz
     ticks = int(min(duration, events[-1][0]) / period)
     loops = [bare_loop_s(LOOP_STEPS) for _ in range(LOOP_SAMPLES)]
@@ -123,6 +125,7 @@ def bench_realtime(scenario: Scenario, duration: float = 10.0, lcm_log: Path | N
     station, plant = station_and_bare_plant_steps(bare.built.robot, scenario, 1000)
     loop_ms = 1e3 * float(np.median(loops))
     return _report(scenario, period, bare.tick_ns, split, plant, replay, recorded, pace) | {
+        "pushes": pushes,
         "bare_loop_ms": round(loop_ms, 4),
         "bare_loop_ms_before_after": [round(1e3 * float(np.median(part)), 4)
                                       for part in (loops[:LOOP_SAMPLES], loops[LOOP_SAMPLES:])],
@@ -253,20 +256,25 @@ def register(bench) -> None:
     p.add_argument("--duration", type=float, default=10.0, help="seconds of the run replayed (default 10)")
     p.add_argument("--lcm-log", type=Path, help="replay this LCM log's robot messages instead of recording "
                    "a simulated run")
+    p.add_argument("--push", action="append", metavar="T:FX,FY,FZ[:DURATION]",
+                   help="push the recorded run as romoco run --push does (a recovery's ticks); repeatable")
     p.add_argument("--no-pace", action="store_true", help="ticks back to back instead of at the control rate")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_bench_realtime)
 
 
 def _cmd_bench_realtime(args) -> int:
-    r = bench_realtime(scenario_from_args(args, ("planner", "controller")), args.duration, args.lcm_log,
-                       pace=not args.no_pace)
+    if args.push and args.lcm_log is not None:
+        raise RomocoError("--push pushes the run the bench records; a replayed --lcm-log has its own pushes")
+    scenario = scenario_from_args(args, ("planner", "controller", "push"))
+    r = bench_realtime(scenario, args.duration, args.lcm_log, pace=not args.no_pace)
     if args.json:
         print(json.dumps(r))
         return 0
     period_ms = 1e3 / r["rate_hz"]
+    pushes = "".join(f", pushed at {p['t']:g} s" for p in r["pushes"])
     print(f"{r['scenario']}: {r['planner']} + {r['controller']}, {r['ticks']} ticks at {r['rate_hz']:g} Hz "
-          f"({period_ms:g} ms){'' if r['paced'] else ', back to back'}")
+          f"({period_ms:g} ms){'' if r['paced'] else ', back to back'}{pushes}")
     t = r["tick_ms"]
     print(f"  tick              {t['median']:8.3f} ms median {t['p99']:8.3f} p99 {t['max']:8.3f} max")
     bursts = r["miss_bursts"]
