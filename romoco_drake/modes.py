@@ -104,6 +104,7 @@ class LinkStage(IntEnum):
 
 _STAGES = {float(stage): stage for stage in LinkStage}
 
+
 @dataclass(frozen=True)
 class Counters(SharedValue):
     """Event counts a system keeps in discrete state (:meth:`vector`) and shows on an abstract

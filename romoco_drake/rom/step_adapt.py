@@ -105,7 +105,7 @@ class StepAdaptWeights:
     offset: float = 10.0
     # A tenth of the foothold's: a step over an edge moves its CoP before it lengthens its time. At the
     # foothold's weight G1 on g1_stairs stepped down in 0.34 s, each step carrying it 7 cm sideways (the
-    # lateral DCM grows with the step time) until a foot met the stairs' side (fell at 22.4 s); 0.05-0.2 walk.
+    # lateral DCM grows with the step time) until a foot hit the stairs' side (fell, 22.4 s); 0.05-0.2 held.
     cop: float = 0.1
 
 
