@@ -21,14 +21,22 @@
 #define MAX_SHIFTS 64
 #define MAX_GRID 1024
 
+/* A swing window's bounds as lines in the remaining swing time d (SwingWindow.lines): per axis
+ * and sample r, low0 + d slope and high0 + d slope bound the touchdown offset over d, and
+ * least0 + d least1 is the offset of least velocity. */
+typedef struct {
+    int n;
+    double low0[2][MAX_SAMPLES], high0[2][MAX_SAMPLES], slope[2][MAX_SAMPLES], least0[2], least1[2];
+} Lines;
+
 typedef struct {
     double u_n[2], sigma_n, xi0[2], box_lo[2], box_hi[2], sigma_lo, sigma_hi, w_u, w_t, w_b;
     double lo2[2], hi2[2], g[2], e[2], sigma_n2;
     int n_next;
     double s2[MAX_NEXT];
-    int window, n_samples;
+    int window;
     double s[2], tau, lam, centre[2];
-    double low0[2][MAX_SAMPLES], high0[2][MAX_SAMPLES], slope[2][MAX_SAMPLES], least0[2], least1[2];
+    Lines lines;
     int cop, n_shifts;
     double shifts[MAX_SHIFTS], cop_weight, decay;
 } Problem;
@@ -59,28 +67,37 @@ static double axis(double a, double g, double e, double c, double s2, double lo1
     return w_u * (r1 * r1 + r2 * r2) + w_b * (r3 * r3);
 }
 
-/* The first step's box at sigma_1: the reach cut to the swing window (SwingWindow.interval), or the
- * window's point nearest the reach where the two do not meet. */
-static void first_box(const Problem *p, double s1, double lo[2], double hi[2]) {
-    double d = np_max(log(s1) / p->lam - p->tau, 0.0);
+/* SwingWindow.interval at remaining time d from the window's start s: (lo, hi) per axis, or the
+ * least-velocity point on an axis whose bounds cross. */
+static void window_at(const Lines *w, const double s[2], double d, double lo[2], double hi[2]) {
     for (int ax = 0; ax < 2; ax++) {
         double low = -INFINITY, high = INFINITY;
         int low_nan = 0, high_nan = 0;
-        for (int r = 0; r < p->n_samples; r++) {
-            double dr = d * p->slope[ax][r];
-            double l = dr + p->low0[ax][r], h = dr + p->high0[ax][r];
+        for (int r = 0; r < w->n; r++) {
+            double dr = d * w->slope[ax][r];
+            double l = dr + w->low0[ax][r], h = dr + w->high0[ax][r];
             if (l != l) low_nan = 1; else if (l > low) low = l;
             if (h != h) high_nan = 1; else if (h < high) high = h;
         }
         if (low_nan) low = NAN;
         if (high_nan) high = NAN;
-        double least = p->least0[ax] + d * p->least1[ax];
+        double least = w->least0[ax] + d * w->least1[ax];
         int crossed = low > high;
-        double w_lo = p->s[ax] + d * (crossed ? least : low), w_hi = p->s[ax] + d * (crossed ? least : high);
-        int apart = (w_lo > p->box_hi[ax]) || (w_hi < p->box_lo[ax]);
-        double nearest = np_min(np_max(p->centre[ax], w_lo), w_hi);
-        lo[ax] = apart ? nearest : np_max(p->box_lo[ax], w_lo);
-        hi[ax] = apart ? nearest : np_min(p->box_hi[ax], w_hi);
+        lo[ax] = s[ax] + d * (crossed ? least : low);
+        hi[ax] = s[ax] + d * (crossed ? least : high);
+    }
+}
+
+/* The first step's box at sigma_1: the reach cut to the swing window, or the window's point
+ * nearest the reach where the two do not meet. */
+static void first_box(const Problem *p, double s1, double lo[2], double hi[2]) {
+    double w_lo[2], w_hi[2];
+    window_at(&p->lines, p->s, np_max(log(s1) / p->lam - p->tau, 0.0), w_lo, w_hi);
+    for (int ax = 0; ax < 2; ax++) {
+        int apart = (w_lo[ax] > p->box_hi[ax]) || (w_hi[ax] < p->box_lo[ax]);
+        double nearest = np_min(np_max(p->centre[ax], w_lo[ax]), w_hi[ax]);
+        lo[ax] = apart ? nearest : np_max(p->box_lo[ax], w_lo[ax]);
+        hi[ax] = apart ? nearest : np_min(p->box_hi[ax], w_hi[ax]);
     }
 }
 
@@ -160,17 +177,18 @@ static int parse(const double *buf, Py_ssize_t n, Problem *p, int grid[3]) {
     if (p->n_next < 1 || p->n_next > MAX_NEXT || !take(buf, n, &at, p->s2, p->n_next) || !take(buf, n, &at, v, 2))
         return 0;
     p->window = (int)v[0];
-    p->n_samples = (int)v[1];
+    p->lines.n = (int)v[1];
     if (p->window) {
-        if (p->n_samples < 1 || p->n_samples > MAX_SAMPLES) return 0;
+        if (p->lines.n < 1 || p->lines.n > MAX_SAMPLES) return 0;
         if (!take(buf, n, &at, p->s, 2) || !take(buf, n, &at, &p->tau, 1) || !take(buf, n, &at, &p->lam, 1)
             || !take(buf, n, &at, p->centre, 2))
             return 0;
+        Lines *w = &p->lines;
         for (int ax = 0; ax < 2; ax++)
-            if (!take(buf, n, &at, p->low0[ax], p->n_samples) || !take(buf, n, &at, p->high0[ax], p->n_samples)
-                || !take(buf, n, &at, p->slope[ax], p->n_samples))
+            if (!take(buf, n, &at, w->low0[ax], w->n) || !take(buf, n, &at, w->high0[ax], w->n)
+                || !take(buf, n, &at, w->slope[ax], w->n))
                 return 0;
-        if (!take(buf, n, &at, p->least0, 2) || !take(buf, n, &at, p->least1, 2)) return 0;
+        if (!take(buf, n, &at, w->least0, 2) || !take(buf, n, &at, w->least1, 2)) return 0;
     }
     if (!take(buf, n, &at, v, 2)) return 0;
     p->cop = (int)v[0];
@@ -213,7 +231,7 @@ static PyObject *solve(PyObject *Py_UNUSED(self), PyObject *args) {
     return out;
 }
 
-/* SwingWindow.interval at one time t, and SwingWindow.lines with it: samples is [n, peak, HG, KG, G2,
+/* SwingWindow.interval at one time t, its lines built here: samples is [n, peak, HG, KG, G2,
  * H (n), G (n), K/G (n)] (step_adapt's constants), the rest the window's fields. */
 static PyObject *window_interval(PyObject *Py_UNUSED(self), PyObject *args) {
     Py_buffer view;
@@ -223,29 +241,27 @@ static PyObject *window_interval(PyObject *Py_UNUSED(self), PyObject *args) {
     const double *c = (const double *)view.buf;
     Py_ssize_t size = view.len / (Py_ssize_t)sizeof(double);
     int n = size >= 5 ? (int)c[0] : -1;
-    if (n < 1 || size != 5 + 3 * (Py_ssize_t)n || view.len % sizeof(double) != 0) {
+    if (n < 1 || n > MAX_SAMPLES || size != 5 + 3 * (Py_ssize_t)n || view.len % sizeof(double) != 0) {
         PyBuffer_Release(&view);
         PyErr_SetString(PyExc_ValueError, "swing window samples: malformed buffer");
         return NULL;
     }
     const double peak = c[1], hg = c[2], kg = c[3], g2 = c[4], *H = c + 5, *G = H + n, *KG = G + n;
-    double vmax = peak * speed, d = np_max(t - tau, 0.0);
-    for (int ax = 0; ax < 2; ax++) {
-        double low = -INFINITY, high = INFINITY;
-        int low_nan = 0, high_nan = 0;
+    double vmax = peak * speed;
+    Lines *w = malloc(sizeof(Lines));
+    if (w == NULL) { PyBuffer_Release(&view); return PyErr_NoMemory(); }
+    w->n = n;
+    for (int ax = 0; ax < 2; ax++) {  /* SwingWindow.lines, in its order of operations */
         for (int r = 0; r < n; r++) {
-            double dr = d * (-a[ax] * KG[r]);
-            double l = dr + (-vmax - v[ax] * H[r]) / G[r], h = dr + (vmax - v[ax] * H[r]) / G[r];
-            if (l != l) low_nan = 1; else if (l > low) low = l;
-            if (h != h) high_nan = 1; else if (h < high) high = h;
+            w->low0[ax][r] = (-vmax - v[ax] * H[r]) / G[r];
+            w->high0[ax][r] = (vmax - v[ax] * H[r]) / G[r];
+            w->slope[ax][r] = -a[ax] * KG[r];
         }
-        if (low_nan) low = NAN;
-        if (high_nan) high = NAN;
-        double least = -v[ax] * hg / g2 + d * (-a[ax] * kg / g2);
-        int crossed = low > high;
-        lo[ax] = s[ax] + d * (crossed ? least : low);
-        hi[ax] = s[ax] + d * (crossed ? least : high);
+        w->least0[ax] = -v[ax] * hg / g2;
+        w->least1[ax] = -a[ax] * kg / g2;
     }
+    window_at(w, s, np_max(t - tau, 0.0), lo, hi);
+    free(w);
     PyBuffer_Release(&view);
     return Py_BuildValue("dddd", lo[0], lo[1], hi[0], hi[1]);
 }
