@@ -93,6 +93,7 @@ def solve_hierarchy(E: np.ndarray, e: np.ndarray, G: np.ndarray, lower: np.ndarr
     freedom = []
     lower_d, upper_d = np.maximum(lower, -_INF), np.minimum(upper, _INF)
     sense = np.zeros(len(lower), dtype=np.int32)
+    abs_G = np.abs(G)
     for k, level in enumerate(levels):
         freedom.append(N.shape[1])
         if N.shape[1] == 0:
@@ -101,12 +102,12 @@ def solve_hierarchy(E: np.ndarray, e: np.ndarray, G: np.ndarray, lower: np.ndarr
         AN = root[:, None] * (level.A @ N)
         r = root * (level.b - level.A @ x)
         H = AN.T @ AN
-        diagonal = H.flat[::H.shape[0] + 1]
-        H.flat[::H.shape[0] + 1] = diagonal + damping * (1.0 + diagonal.mean())
+        diagonal = H.ravel()[::H.shape[0] + 1]  # a view: the product is C-contiguous
+        diagonal += damping * (1.0 + diagonal.mean())
         GN, Gx = G @ N, G @ x
         up, lo = upper_d - Gx, lower_d - Gx
         if k:  # x already solves a level: w = 0 is feasible up to round-off, which is relaxed
-            slack = relax * (1.0 + np.abs(G) @ np.abs(x))  # the round-off scale of G x
+            slack = relax * (1.0 + abs_G @ np.abs(x))  # the round-off scale of G x
             up, lo = np.maximum(up, 0.0) + slack, np.minimum(lo, 0.0) - slack
         g = -(AN.T @ r)
         w, _, flag, _ = daqp.solve(H, g, GN, up, lo, sense)

@@ -133,6 +133,7 @@ class MomentumHqp:
         # A point contact holds the point's position only and carries a force: rows v and f.
         self._sole_rows = (np.arange(3, 6) if contact.point_contact
                            else np.arange(1, 6) if contact.line_contact else np.arange(6))
+        self._all_rows = len(self._sole_rows) == 6
         self._soles, self._cones = {}, {}
         for side in ("left", "right"):
             R_FS, p_FS = sole_frame(robot, side)
@@ -147,6 +148,15 @@ class MomentumHqp:
         self._z0 = robot.config.walking.z0
         self._domain_cones: dict[tuple[str, ...], tuple[np.ndarray, ...]] = {}
         self._ankles = {side: _ankle_joints(robot, side, self._soles[side]) for side in ("left", "right")}
+        self._outputs: dict[tuple, tuple[list[str], list[int], list[int]]] = {}
+        g, m = self.gains, robot.total_mass
+        # Per momentum row [k_G; m v_G]: level 1's weights, which rows join the task level
+        # (``weighted_axes``) and their weights there.
+        self._rate_weights = np.concatenate([np.full(3, g.angular_weight / (m * self._z0) ** 2),
+                                             np.full(3, 1.0 / m**2)])
+        self._soft_rows = np.array(["xyz"[i] in g.weighted_axes for i in range(3)] + [False] * 3)
+        self._soft_weights = np.concatenate([np.full(3, g.angular_task_weight / (m * self._z0) ** 2),
+                                             np.full(3, g.lateral_task_weight / m**2)])
         self._gravity_wrench = np.array([0.0, 0.0, 0.0, 0.0, 0.0, -GRAVITY * robot.total_mass])
         # Joint range: every locked joint with finite limits, kept ``limit_margin`` inside them.
         self.limit_horizon, margin = limit_horizon, limit_margin
@@ -243,20 +253,18 @@ class MomentumHqp:
     def _levels(self, kin: RobotKinematics, refs: TaskReferences, space: ContactSpace, tasks, a_cmd,
                 A_G, Adot_v) -> tuple[np.ndarray, list[Level]]:
         """(the desired momentum rate, NaN in the air; levels 1-3 of the hierarchy)."""
-        g, m, feet = self.gains, self.robot.total_mass, refs.domain.feet
+        feet = refs.domain.feet
         P, vdot0 = space.P, space.vdot0
-        k_out = int(np.count_nonzero(refs.active))
-        names = [name for name, on in zip(refs.names, refs.active, strict=True) if on]
-        com = [i for i, name in enumerate(names) if name.startswith("com_")]
-        other = [i for i in range(k_out) if i not in com]
+        names, com, other = self._active_outputs(refs)
+        k_out = len(names)
         hdot_des = np.full(6, np.nan)
         levels = []
         if feet:
             hdot_des, rows = self._momentum_rate(kin, refs, names, com, a_cmd, A_G)
-            w = np.concatenate([np.full(3, g.angular_weight / (m * self._z0) ** 2), np.full(3, 1.0 / m**2)])
+            w = self._rate_weights
             hdot_des = self._constrained_rate(kin, feet, hdot_des, rows, w)
             target = hdot_des - Adot_v - A_G @ vdot0
-            soft = np.array(["xyz"[i] in g.weighted_axes for i in range(3)] + [False] * 3)
+            soft = self._soft_rows.copy()
             A_GP = A_G @ P
             if self.contact.line_contact and len(feet) == 1:
                 # Linear rows along and across the stance line (module docstring).
@@ -274,12 +282,21 @@ class MomentumHqp:
         if feet and soft.any():
             task_A = np.vstack([task_A, A_GP[soft]])
             task_b = np.concatenate([task_b, target[soft]])
-            w_soft = np.concatenate([np.full(3, g.angular_task_weight / (m * self._z0) ** 2),
-                                     np.full(3, g.lateral_task_weight / m**2)])
-            task_w = np.concatenate([task_w, w_soft[soft]])
+            task_w = np.concatenate([task_w, self._soft_weights[soft]])
         levels.append(Level("tasks", task_A, task_b, task_w))
         levels.append(self._regularization(kin, tasks, a_cmd, k_out, P, vdot0, space.nz, space.nl))
         return hdot_des, levels
+
+    def _active_outputs(self, refs: TaskReferences) -> tuple[list[str], list[int], list[int]]:
+        """The active outputs' names, and which of them are ``com_*`` rows and which the others
+        (indices among the active), per set of names and active flags (a domain's; made once)."""
+        key = (refs.names, refs.active.tobytes())
+        found = self._outputs.get(key)
+        if found is None:
+            names = [name for name, on in zip(refs.names, refs.active, strict=True) if on]
+            com = [i for i, name in enumerate(names) if name.startswith("com_")]
+            found = self._outputs[key] = names, com, [i for i in range(len(names)) if i not in com]
+        return found
 
     def _line_frame(self, kin: RobotKinematics, side: str) -> np.ndarray:
         """(2×2) world xy → the stance sole's heading frame: rows along and across its toe-heel line."""
@@ -301,7 +318,6 @@ class MomentumHqp:
         rows H1's 40 N·m ankles could not give the centre of pressure the sole allows, and level
         1 made up the difference with the hips, pitching the torso forward until it fell.
         """
-        cols = self._sole_rows
         blocks = []
         for side in feet:
             frame, _, p_FS = self._soles[side]
@@ -311,30 +327,24 @@ class MomentumHqp:
             X = np.zeros((6, 6))
             X[:3, :3] = X[3:, 3:] = R
             X[:3, 3:] = skew([rx, ry, rz]) @ R
-            blocks.append(X[:, cols])
+            blocks.append(X[:, self._sole_rows])  # (F-ordered, as the gradient's round-off has it)
         X = blocks[0] if len(blocks) == 1 else np.hstack(blocks)
-        C, upper, lower, sense = self._domain_cone(feet)
-        ankle_rows, ankle_limits, c0 = [], [], 0
+        cone, upper, lower, sense = self._domain_cone(feet)
+        C, row, c0 = cone.copy(), len(cone) - sum(len(self._ankles[side]) for side in feet), 0
         for side, block in zip(feet, blocks, strict=True):
-            for frame, axis_F, limit in self._ankles[side]:
+            for frame, axis_F, _ in self._ankles[side]:
                 R_WJ, p_WJ = kin.frame_pose(frame)
                 a = R_WJ @ axis_F  # the joint axis in world; the wrench's moment about the joint
                 rx, ry, rz = (p_WJ - kin.p_com).tolist()  # X gives moments about G: shift to J
-                row = np.zeros(X.shape[1])
-                row[c0:c0 + block.shape[1]] = a @ (block[:3] - skew([rx, ry, rz]) @ block[3:])
-                ankle_rows.append(row)
-                ankle_limits.append(0.9 * limit)  # a margin for the foot's own inertia
+                C[row, c0:c0 + block.shape[1]] = a @ (block[:3] - skew([rx, ry, rz]) @ block[3:])
+                row += 1
             c0 += block.shape[1]
-        if ankle_rows:
-            limits = np.array(ankle_limits)
-            C = np.vstack([C, np.array(ankle_rows)])
-            upper, lower = np.concatenate([upper, limits]), np.concatenate([lower, -limits])
-            sense = np.zeros(len(C), dtype=np.int32)
         root = np.sqrt(w * rows)
         A = root[:, None] * X
         b = root * (hdot_des - self._gravity_wrench)
         H = A.T @ A
-        H.flat[::H.shape[0] + 1] += 1e-9 * (1.0 + H.flat[::H.shape[0] + 1].sum())
+        diagonal = H.ravel()[::H.shape[0] + 1]  # a view: the product is C-contiguous
+        diagonal += 1e-9 * (1.0 + diagonal.sum())
         lam, _, flag, _ = daqp.solve(H, -(A.T @ b), C, upper, lower, sense)
         if flag < 0:
             return hdot_des
@@ -343,15 +353,20 @@ class MomentumHqp:
         return out
 
     def _domain_cone(self, feet: tuple[str, ...]):
-        """The block-diagonal wrench cone of the feet in contact and its DAQP bounds (made once)."""
+        """The constrained rate's constraint rows for the feet in contact, made once: the block-
+        diagonal wrench cone, then a zero row per ankle joint (filled each tick), with the DAQP
+        bounds (the ankle rows at ±0.9 of the joint's effort limit, a margin for the foot's own
+        inertia)."""
         if feet not in self._domain_cones:
             cones = [self._cones[side] for side in feet]
-            C = np.zeros((sum(len(c) for c in cones), sum(c.shape[1] for c in cones)))
+            limits = np.array([0.9 * limit for side in feet for _, _, limit in self._ankles[side]])
+            C = np.zeros((sum(len(c) for c in cones) + len(limits), sum(c.shape[1] for c in cones)))
             r0 = c0 = 0
             for cone in cones:
                 C[r0:r0 + len(cone), c0:c0 + cone.shape[1]] = cone
                 r0, c0 = r0 + len(cone), c0 + cone.shape[1]
-            self._domain_cones[feet] = (C, np.zeros(len(C)), np.full(len(C), -1e30),
+            self._domain_cones[feet] = (C, np.concatenate([np.zeros(r0), limits]),
+                                        np.concatenate([np.full(r0, -1e30), -limits]),
                                         np.zeros(len(C), dtype=np.int32))
         return self._domain_cones[feet]
 
@@ -363,6 +378,8 @@ class MomentumHqp:
         R_SW = self._sole_rotation(kin, side).T
         J_S = np.vstack([R_SW @ J[:3], R_SW @ J[3:]])
         bias_S = np.concatenate([R_SW @ bias[:3], R_SW @ bias[3:]])
+        if self._all_rows:
+            return J_S, bias_S
         return J_S[self._sole_rows], bias_S[self._sole_rows]
 
     def _sole_rotation(self, kin: RobotKinematics, side: str) -> np.ndarray:
