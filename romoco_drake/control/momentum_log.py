@@ -53,10 +53,12 @@ class MomentumRecord:
     l_contact_predicted: np.ndarray = _nan(2)  # the planner's (L̂_cx, L̂_cy) at the step's end, in {c}
 
     def pack(self) -> np.ndarray:
-        """The MOMENTUM_LOG_SIZE vector, fields in declaration order (read directly: ``astuple``
-        deep-copies every array, which was 60 µs of XO's 2 ms tick)."""
-        return np.concatenate([np.atleast_1d(np.asarray(getattr(self, name), dtype=float))
-                               for name in _FIELD_NAMES])
+        """The MOMENTUM_LOG_SIZE vector, fields in declaration order (each read into its slice:
+        ``astuple`` deep-copies every array, which was 60 µs of XO's 2 ms tick)."""
+        out = np.empty(MOMENTUM_LOG_SIZE)
+        for name, rows in _FIELD_SLICES:
+            out[rows] = getattr(self, name)
+        return out
 
     @classmethod
     def unpack(cls, data: np.ndarray) -> MomentumRecord:
@@ -71,6 +73,8 @@ class MomentumRecord:
 _FIELD_NAMES = tuple(f.name for f in fields(MomentumRecord))
 _SIZES = tuple(np.atleast_1d(np.asarray(getattr(MomentumRecord(), name))).size for name in _FIELD_NAMES)
 MOMENTUM_LOG_SIZE = sum(_SIZES)
+_FIELD_SLICES = tuple((name, slice(start, start + n)) for name, n, start
+                      in zip(_FIELD_NAMES, _SIZES, np.cumsum((0,) + _SIZES[:-1]).tolist(), strict=True))
 
 
 class MomentumLog(LeafSystem):
