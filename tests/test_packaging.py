@@ -41,7 +41,7 @@ def _build_wheel(tmp_path: Path) -> Path:
         ".git", ".venv", "build", "*.egg-info", "__pycache__", ".*_cache", ".hypothesis"))
     out = _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-w", str(tmp_path / "dist"), str(src)])
     if out.returncode != 0 and "satisfies the requirement setuptools" in out.stdout + out.stderr:
-        pytest.skip("cannot build a wheel: pip finds no setuptools>=68 for the build backend")
+        pytest.skip("cannot build a wheel: pip finds no setuptools>=77 for the build backend")
     assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
     (wheel,) = (tmp_path / "dist").glob("romoco_drake-*.whl")
     return wheel
