@@ -138,19 +138,20 @@ class OutputEmbedding(LeafSystem):
             state.get_mutable_discrete_state(self._footholds).SetFromVector(counts)
 
     def _update_swing(self, context, state) -> None:
-        swing = self.swing_state(context)
+        memory = self.memory(context)
+        swing = memory if isinstance(memory, SwingState) else None
         mode = self._mode(context)
-        if not self._kinematics(context).finite:  # nothing to latch from; the controllers damp
+        kin = self._kinematics(context)
+        if not kin.finite:  # nothing to latch from; the controllers damp
             return
         if mode == Mode.STANDING:
-            new = self.memory(context)
+            new = memory
             if not isinstance(new, StandState):
                 self._count_step(context, state, swing)
-                new = self.core.start_standing(self._kinematics(context), context.get_time())
+                new = self.core.start_standing(kin, context.get_time())
             sign, tau = self.gait_phase_port.Eval(context)
             if tau < 0.0 and new.shift is None:  # a weight shift before the first step began
-                new = self.core.start_shift(new, self._kinematics(context), side_from_sign(sign),
-                                            context.get_time())
+                new = self.core.start_shift(new, kin, side_from_sign(sign), context.get_time())
         elif mode != Mode.WALKING:
             new = _NoSwing()
         else:
@@ -164,7 +165,7 @@ class OutputEmbedding(LeafSystem):
                 new = self.core.update_swing(swing, tau, plan)
             else:
                 self._count_step(context, state, swing)
-                new = self.core.start_step(self._kinematics(context), side, step_start, plan, tau)
+                new = self.core.start_step(kin, side, step_start, plan, tau)
         state.get_mutable_abstract_state(int(self._swing)).set_value(new)
 
     def _current_swing(self, context) -> tuple[SwingState | None, float]:
@@ -190,7 +191,8 @@ class OutputEmbedding(LeafSystem):
         out.SetAtIndex(0, np.nan if surface is None else float(surface))
 
     def _calc_references(self, context, value) -> None:
-        if not self._kinematics(context).finite:  # the controllers damp; these are never tracked
+        kin = self._kinematics(context)
+        if not kin.finite:  # the controllers damp; these are never tracked
             value.set_value(self._nan_references)
             return
         phase = self.gait_phase_port.Eval(context)
@@ -201,9 +203,7 @@ class OutputEmbedding(LeafSystem):
             plan = memory.plan if self.latch_plan and isinstance(memory, SwingState) else None
             if plan is None:
                 plan = self.planner_output_port.Eval(context)
-        refs: TaskReferences = self.core.evaluate(
-            self._kinematics(context), mode, float(phase[1]), plan, memory, context.get_time())
-        value.set_value(refs)
+        value.set_value(self.core.evaluate(kin, mode, float(phase[1]), plan, memory, context.get_time()))
 
     def _update_tracking_error(self, context, discrete_state) -> None:
         refs: TaskReferences = self.task_references_port.Eval(context)
