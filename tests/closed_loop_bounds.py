@@ -111,6 +111,12 @@ BOUNDS: dict[str, Bound] = {
     "headline.h1.vx_rms": ceiling(0.059, 0.0399),
     "headline.h1.vy_rms": ceiling(0.047, 0.0314),
     "headline.h1.wz_rms": ceiling(0.1, 0.0724),
+    # XO's momentum-controlled runs move with round-off (Dec 6): the hierarchy's null-space bases
+    # turned by a random rotation within the same subspaces (the same QPs in exact arithmetic) took
+    # the Table I walk's vx rms 0.0274 -> 0.0354 and step_end_L_error 0.031 -> 0.046, and the arc
+    # of test_turning to radii 0.77 and 1.11 (1.0 commanded); the same subspaces from a pivoted QR
+    # instead of the SVD, segment 4's rms 0.027 -> 0.042 and step_end_L_error 0.047. These bounds
+    # hold for the shipped arithmetic; a change of its round-off can cross them.
     "headline.xo.centroidal_am_ratio": ceiling(0.04, 0.0268),
     "headline.xo.segment0.rms": ceiling(0.072, 0.04814),
     "headline.xo.segment1.rms": ceiling(0.066, 0.04445),
