@@ -123,8 +123,8 @@ class WholeBodyController(LeafSystem):
         start = time.perf_counter()
         kin: RobotKinematics = self.kinematics_port.Eval(context)
         stats = ControllerStats.from_vector(context.get_discrete_state(self._stats).value())
-        failures, safe, streak, relaxed = (stats.failures, stats.safe_ticks, stats.failure_streak,
-                                           stats.relaxed_ticks)
+        failures, safe, streak, relaxed = counts = (stats.failures, stats.safe_ticks, stats.failure_streak,
+                                                    stats.relaxed_ticks)
         previous = context.get_discrete_state(self._command).value()
         warm = context.get_discrete_state(self._warm).value()
         mode = Mode(self.mode_port.Eval(context))
@@ -145,8 +145,9 @@ class WholeBodyController(LeafSystem):
                            else damping_command(self.robot, kin.x))
         discrete_state.get_mutable_vector(self._command).SetFromVector(command)
         discrete_state.get_mutable_vector(self._tau).SetFromVector(command_torque(self.robot, command, kin.x))
-        discrete_state.get_mutable_vector(self._stats).SetFromVector(
-            ControllerStats(failures, safe, streak, relaxed).vector())
+        if (failures, safe, streak, relaxed) != counts:  # else the counts stand (most ticks)
+            discrete_state.get_mutable_vector(self._stats).SetFromVector(
+                ControllerStats(failures, safe, streak, relaxed).vector())
         discrete_state.get_mutable_vector(self._tick).SetFromVector([1e3 * (time.perf_counter() - start)])
 
     def summary(self, context, ticks_ms: np.ndarray) -> dict:
