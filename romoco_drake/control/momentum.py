@@ -327,7 +327,7 @@ class MomentumHqp:
             X = np.zeros((6, 6))
             X[:3, :3] = X[3:, 3:] = R
             X[:3, 3:] = skew([rx, ry, rz]) @ R
-            blocks.append(X[:, self._sole_rows])  # (F-ordered, as the gradient's round-off has it)
+            blocks.append(X[:, self._sole_rows])  # a copy, F-ordered: the gradient's last bit follows it
         X = blocks[0] if len(blocks) == 1 else np.hstack(blocks)
         cone, upper, lower, sense = self._domain_cone(feet)
         C, row, c0 = cone.copy(), len(cone) - sum(len(self._ankles[side]) for side in feet), 0
