@@ -8,6 +8,12 @@ The tests take their bounds from ``BOUNDS`` through :func:`check`, so this table
 assert. A ceiling (an error) sits at most 1.5× above its measured value, a floor (a step count,
 a number of solves) at least measured / 1.5 — never at a third of the command. Measured on
 this machine's Drake, one run each (the runs are deterministic: noise comes from seeded sensors).
+
+Runs whose numbers move with round-off alone (XO's and H1's momentum controller: its hierarchy
+amplifies a last-bit change into a different walk) also carry ``worst``: the worst value over
+the round-off variants of tests/roundoff.py (``ROMOCO_ROUNDOFF=svd``, ``rot1``, ``rot2`` and the
+shipped arithmetic). Their bound must hold every variant and sits at most 1.5× from that worst
+value, so a numpy, BLAS or CPU change that moves only the round-off does not fail CI.
 """
 
 from __future__ import annotations
@@ -24,19 +30,26 @@ class Bound:
     limit: float
     measured: float
     floor: bool = False  # the value must stay at or above ``limit`` (else at or below)
+    worst: float | None = None  # over the round-off variants (module docstring), where measured
+
+    def reference(self) -> float:
+        """What the bound's slack is measured from: the worst variant where there is one."""
+        return self.measured if self.worst is None else self.worst
 
     def ratio(self) -> float:
-        """How far the bound is from the measurement, ≥ 1 (inf for a zero measurement)."""
-        big, small = (self.measured, self.limit) if self.floor else (self.limit, self.measured)
+        """How far the bound is from its reference, ≥ 1 (inf for a zero reference; below 1 when
+        the worst variant is already outside it)."""
+        ref = self.reference()
+        big, small = (ref, self.limit) if self.floor else (self.limit, ref)
         return big / small if small > 0 else float("inf")
 
 
-def ceiling(limit: float, measured: float) -> Bound:
-    return Bound(limit, measured)
+def ceiling(limit: float, measured: float, worst: float | None = None) -> Bound:
+    return Bound(limit, measured, worst=worst)
 
 
-def floor(limit: float, measured: float) -> Bound:
-    return Bound(limit, measured, floor=True)
+def floor(limit: float, measured: float, worst: float | None = None) -> Bound:
+    return Bound(limit, measured, floor=True, worst=worst)
 
 
 # Keys: "<what>.<robot or run>.<quantity>"; units m/s, rad/s, rad, m; rms of the 1 s averaged
@@ -111,31 +124,33 @@ BOUNDS: dict[str, Bound] = {
     "headline.h1.vx_rms": ceiling(0.059, 0.0399),
     "headline.h1.vy_rms": ceiling(0.047, 0.0314),
     "headline.h1.wz_rms": ceiling(0.1, 0.0724),
-    # XO's momentum-controlled runs move with round-off (Dec 6): the hierarchy's null-space bases
-    # turned by a random rotation within the same subspaces (the same QPs in exact arithmetic) took
-    # the Table I walk's vx rms 0.0274 -> 0.0354 and step_end_L_error 0.031 -> 0.046, and the arc
-    # of test_turning to radii 0.77 and 1.11 (1.0 commanded); the same subspaces from a pivoted QR
-    # instead of the SVD, segment 4's rms 0.027 -> 0.042 and step_end_L_error 0.047. These bounds
-    # hold for the shipped arithmetic; a change of its round-off can cross them.
-    "headline.xo.centroidal_am_ratio": ceiling(0.04, 0.0268),
-    "headline.xo.segment0.rms": ceiling(0.072, 0.04814),
-    "headline.xo.segment1.rms": ceiling(0.066, 0.04445),
-    "headline.xo.segment2.rms": ceiling(0.037, 0.02485),
-    "headline.xo.segment3.rms": ceiling(0.077, 0.05141),
-    "headline.xo.segment4.rms": ceiling(0.039, 0.02659),
+    # XO's walks (and H1's under the momentum controller) move with round-off: `worst` is the worst of
+    # five arithmetics that solve the same QPs (tests/roundoff.py: the shipped pivoted QR, numpy's SVD,
+    # each basis turned by two random rotations, and the SVD turned; Dec 6). Table I's segments 1 and 8
+    # fall 9.0 % and 9.8 % short of their command under the shipped arithmetic (0.1-5 % under the
+    # others), so their shortfalls are listed. H1's vy stays below the 0.19 m/s its walk had with every
+    # linear row strict (test_h1_tracks_forward_speeds_without_drifting_sideways), at 1.26x its worst.
+    "headline.xo.centroidal_am_ratio": ceiling(0.053, 0.0357, worst=0.0357),
+    "headline.xo.segment0.rms": ceiling(0.072, 0.04814, worst=0.04867),
+    "headline.xo.segment1.mean_error": ceiling(0.13, 0.09027, worst=0.09027),
+    "headline.xo.segment1.rms": ceiling(0.066, 0.04505, worst=0.04505),
+    "headline.xo.segment2.rms": ceiling(0.037, 0.0261, worst=0.03042),
+    "headline.xo.segment3.rms": ceiling(0.077, 0.03904, worst=0.06139),
+    "headline.xo.segment4.rms": ceiling(0.062, 0.04177, worst=0.04177),
     # The stops after the lateral and the backward walks (segments 5, 7) are scored over their last
     # 0.55 s, while the 1 s average still holds the last steps: they vary with the step phase at the
     # stop, which round-off moves between hosts, and with them the BLAS kernel numpy picks for the CPU
     # (segment 5: 0.0343 on the host that recorded the others, 0.0700 on an AVX-512 EPYC; segment 7:
     # 0.0436 there, 0.0670 on an AVX2 EPYC, OPENBLAS_CORETYPE Haswell or Zen, 0.0558 with Sandybridge).
-    "headline.xo.segment5.rms": ceiling(0.071, 0.04748),
-    "headline.xo.segment6.rms": ceiling(0.067, 0.04643),
-    "headline.xo.segment7.rms": ceiling(0.1, 0.06699),
-    "headline.xo.segment8.rms": ceiling(0.045, 0.03053),
-    "headline.xo.step_end_L_error": ceiling(0.043, 0.0289),
-    "headline.xo.steps": floor(78, 87),
-    "headline.xo.vx_rms": ceiling(0.04, 0.0273),
-    "headline.xo.vy_rms": ceiling(0.051, 0.0344),
+    "headline.xo.segment5.rms": ceiling(0.065, 0.04366, worst=0.04366),
+    "headline.xo.segment6.rms": ceiling(0.067, 0.04284, worst=0.04504),
+    "headline.xo.segment7.rms": ceiling(0.1, 0.06179, worst=0.07364),
+    "headline.xo.segment8.mean_error": ceiling(0.14, 0.09819, worst=0.09819),
+    "headline.xo.segment8.rms": ceiling(0.057, 0.03539, worst=0.03841),
+    "headline.xo.step_end_L_error": ceiling(0.07, 0.0471, worst=0.0471),
+    "headline.xo.steps": floor(78, 87, worst=87),
+    "headline.xo.vx_rms": ceiling(0.04, 0.0275, worst=0.028),
+    "headline.xo.vy_rms": ceiling(0.051, 0.0396, worst=0.0396),
     "iekf.cassie.segment0.rms": ceiling(0.074, 0.0498),
     "iekf.cassie.segment1.rms": ceiling(0.065, 0.04386),
     "iekf.cassie.segment2.rms": ceiling(0.059, 0.03997),
@@ -158,14 +173,14 @@ BOUNDS: dict[str, Bound] = {
     "kalman.g1.steps": floor(7, 8),
     "kalman.g1.velocity_estimate_rms": ceiling(0.016, 0.0116),
     "kalman.g1.vx_rms": ceiling(0.025, 0.01704),
-    "momentum.h1.vx_rms": ceiling(0.053, 0.0403),
-    "momentum.h1.vy_rms": ceiling(0.15, 0.1037),
-    "momentum.xo.centroidal_am_ratio": ceiling(0.051, 0.0361),
-    "momentum.xo.step_end_L_error": ceiling(0.064, 0.0482),
-    "momentum.xo.step_end_L_steps": floor(19, 22),
-    "momentum.xo.steps": floor(19, 22),
-    "momentum.xo.vx_rms": ceiling(0.04, 0.0272),
-    "momentum.xo.vy_rms": ceiling(0.069, 0.0474),
+    "momentum.h1.vx_rms": ceiling(0.16, 0.0522, worst=0.1093),
+    "momentum.h1.vy_rms": ceiling(0.18, 0.1433, worst=0.1433),
+    "momentum.xo.centroidal_am_ratio": ceiling(0.051, 0.0315, worst=0.0344),
+    "momentum.xo.step_end_L_error": ceiling(0.064, 0.0383, worst=0.0432),
+    "momentum.xo.step_end_L_steps": floor(19, 22, worst=22),
+    "momentum.xo.steps": floor(19, 22, worst=22),
+    "momentum.xo.vx_rms": ceiling(0.04, 0.0255, worst=0.0321),
+    "momentum.xo.vy_rms": ceiling(0.069, 0.0474, worst=0.0474),
     "new_robot.fresh_g1.vx_rms": ceiling(0.016, 0.0108),
     "new_robot.fresh_g1.vy_rms": ceiling(0.036, 0.0241),
     "point_feet.bolt.steps": floor(14, 17),
@@ -215,11 +230,11 @@ BOUNDS: dict[str, Bound] = {
     "turning.talos.vx_rms": ceiling(0.026, 0.01788),
     "turning.talos.vy_rms": ceiling(0.078, 0.05244),
     "turning.talos.wz_rms": ceiling(0.0077, 0.005168),
-    "turning.xo.heading_lag": ceiling(0.097, 0.06525),
-    "turning.xo.rest_speed": ceiling(0.1, 0.06904),
-    "turning.xo.vx_rms": ceiling(0.07, 0.04677),
-    "turning.xo.vy_rms": ceiling(0.088, 0.05932),
-    "turning.xo.wz_rms": ceiling(0.032, 0.02171),
+    "turning.xo.heading_lag": ceiling(0.097, 0.06592, worst=0.06592),
+    "turning.xo.rest_speed": ceiling(0.029, 0.0002617, worst=0.01934),
+    "turning.xo.vx_rms": ceiling(0.067, 0.04512, worst=0.04512),
+    "turning.xo.vy_rms": ceiling(0.088, 0.05146, worst=0.06042),
+    "turning.xo.wz_rms": ceiling(0.032, 0.01863, worst=0.02359),
     "via_lcm.g1.steps": floor(7, 8),
     "via_lcm.g1.vx_rms": ceiling(0.018, 0.0125),
     # 1 m/s under the joint limits (test_draco_walks_at_one_metre_a_second_...): the robot trails the
@@ -235,11 +250,12 @@ BOUNDS: dict[str, Bound] = {
 def check(key: str, value: float) -> None:
     """Asserts ``value`` is inside ``BOUNDS[key]``; with ``$ROMOCO_MEASURED`` set, appends the
     value to that file first (how the measured column is filled in; a key without a bound yet
-    is only recorded)."""
+    is only recorded, and under a round-off variant, ``$ROMOCO_ROUNDOFF``, every key is only
+    recorded: those runs measure the spread the ``worst`` column holds)."""
     if recording():
         with open(os.environ["ROMOCO_MEASURED"], "a") as f:
             f.write(f"{key} {float(value)!r}\n")
-        if key not in BOUNDS:
+        if key not in BOUNDS or os.environ.get("ROMOCO_ROUNDOFF"):
             return
     bound = BOUNDS[key]
     inside = value >= bound.limit if bound.floor else value <= bound.limit
@@ -259,18 +275,21 @@ def main(argv: list[str]) -> int:
             key, value = line.split()
             seen[key] = float(value)
     loose = [k for k, b in BOUNDS.items() if b.ratio() > SLACK + 1e-9]
+    tight = [k for k, b in BOUNDS.items() if b.ratio() < 1.0]
     width = max(map(len, BOUNDS), default=10)
-    print(f"{'bound':{width}s}  {'kind':7s} {'limit':>9s} {'measured':>9s} {'ratio':>6s}"
+    print(f"{'bound':{width}s}  {'kind':7s} {'limit':>9s} {'measured':>9s} {'worst':>9s} {'ratio':>6s}"
           + ("  now" if seen else ""))
     for key, b in BOUNDS.items():
         now = f"  {seen[key]:.4g}" if key in seen else ""
-        flag = "  LOOSE" if key in loose else ""
+        flag = "  LOOSE" if key in loose else "  TIGHT" if key in tight else ""
+        worst = "" if b.worst is None else f"{b.worst:.4g}"
         print(f"{key:{width}s}  {'floor' if b.floor else 'ceiling':7s} {b.limit:9.4g} {b.measured:9.4g} "
-              f"{b.ratio():6.2f}{now}{flag}")
+              f"{worst:>9s} {b.ratio():6.2f}{now}{flag}")
     for key in sorted(set(seen) - set(BOUNDS)):
         print(f"{key:{width}s}  (no bound yet)  {seen[key]:.4g}")
-    print(f"{len(BOUNDS)} closed-loop bounds, {len(loose)} looser than {SLACK}x their measured value")
-    return 1 if loose else 0
+    print(f"{len(BOUNDS)} closed-loop bounds, {len(loose)} looser than {SLACK}x their measured (or worst) "
+          f"value, {len(tight)} inside their worst round-off variant")
+    return 1 if loose or tight else 0
 
 
 if __name__ == "__main__":

@@ -1,9 +1,16 @@
 """Shared test facts: the numbers from ../shared/robot-facts.md each robot must match; the lock
-that keeps tests starting a local Ray apart when the suite runs on several workers."""
+that keeps tests starting a local Ray apart when the suite runs on several workers; with
+``$ROMOCO_ROUNDOFF`` set, the momentum controller's round-off variant (tests/roundoff.py)."""
 
 import fcntl
+import os
 
 import pytest
+
+if os.environ.get("ROMOCO_ROUNDOFF"):
+    import roundoff
+
+    roundoff.install(os.environ["ROMOCO_ROUNDOFF"])
 
 # joints: 1-DoF joints besides the floating base; mass: fact-sheet total (kg), within mass_rel
 # (default 5 %). G1 and Cassie: the manufacturers' published totals, "about" figures, so ±10 %

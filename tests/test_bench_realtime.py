@@ -86,7 +86,7 @@ def test_realtime_replays_the_logged_run_exactly(tmp_path, monkeypatch):
     assert [push["t"] for push in r["pushes"]] == [1.2]  # named, and left out of the controller's diagram
     assert r["replay"]["commands_matched"] >= 749
     assert r["replay"]["max_torque_difference_nm"] == 0.0
-    assert r["step_qp"] == "compiled"
+    assert r["step_qp"] == "compiled" and r["null_space"] == "compiled"
     assert r["replay"]["stale_events"] == 0 and r["replay"]["safe_mode_entries"] == 0
     systems = r["systems_ms"]
     expected = {"receiver", "sender", "estimator", "controller", "embedding", "planner", "framework"}

@@ -198,7 +198,9 @@ def test_momentum_solution_is_dynamically_consistent_and_within_its_limits(name)
     np.testing.assert_allclose(J @ s.vdot + bias, 0.0, atol=1e-8)  # the stance sole does not slip
     lhs = kin.M @ s.vdot + kin.C
     np.testing.assert_allclose(lhs, robot.B @ s.tau + J.T @ s.wrenches, atol=1e-6 * np.abs(lhs).max())
-    assert np.all(np.abs(s.tau) <= robot.effort_limits + 1e-3)  # up to the lower levels' round-off relaxation
+    # Up to the lower levels' round-off relaxation, 1e-6 (1 + |G| |x|) (control/hqp.py), a few 1e-3 N·m
+    # here: round-off variants (tests/roundoff.py) reached 40.0004 on H1 and 250.0022 N·m on XO.
+    assert np.all(np.abs(s.tau) <= robot.effort_limits + 5e-3)
     assert np.max(hqp._cones["left"] @ s.wrenches) <= 1e-6 * np.abs(s.wrenches).max()
     standing = core.evaluate(kin, Mode.STANDING, 0.0, None, None)  # both feet
     s = hqp.compute(kin, standing)

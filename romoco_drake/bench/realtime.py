@@ -44,6 +44,7 @@ from romoco_drake.bench.callback_timer import timed_callbacks
 from romoco_drake.bench.rehearsal import bare_loop_s
 from romoco_drake.bench.walking import station_and_bare_plant_steps, station_callback_split
 from romoco_drake.config import LINK_TICK_OFFSET
+from romoco_drake.control import hqp
 from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces.lcm_codec import (
     BASE_STATE_CHANNEL,
@@ -222,6 +223,7 @@ def _report(scenario: Scenario, period: float, tick_ns: np.ndarray, split: _Repl
         "plant_step_ms": round(plant, 4), "tick_p99_to_plant_step": round(tick["p99"] / plant, 3),
         "replay": {k: replay.get(k) for k in (*keys, "commands_matched", "max_torque_difference_nm")},
         "step_qp": "compiled" if step_qp_kernel.AVAILABLE else "numpy",  # rom/step_qp_kernel.py
+        "null_space": "compiled" if hqp.COMPILED else "svd",  # control/hqp.py (the momentum controller)
         "recorded": None if recorded is None else {k: recorded.get(k) for k in keys},
     }
 
@@ -296,7 +298,8 @@ def _cmd_bench_realtime(args) -> int:
     print("  the timed replay's worst ticks:")
     for w in r["worst_ticks"]:
         print(f"    t {w['t_s']:8.3f} s  {w['ms']:7.3f} ms  {w['system']} {w['system_ms']:.3f} ms")
-    print(f"  replay: {r['replay']}; the step QP ran {r['step_qp']}")
+    print(f"  replay: {r['replay']}; the step QP ran {r['step_qp']}, "
+          f"the hierarchy's null spaces {r['null_space']}")
     if r["recorded"] is not None:
         print(f"  recorded run: {r['recorded']}")
     return 0

@@ -214,10 +214,8 @@ class MomentumHqp:
         J_rows.append(refs.holonomic.J[n_f:])
         bias_rows.append(refs.holonomic.Jdot_v[n_f:])
         Jc = np.vstack(J_rows)
-        U_r, s_r, V_r, Z = null_space(Jc)
+        Z, vdot0 = null_space(Jc, -np.concatenate(bias_rows) - self.k_h * (Jc @ kin.v))
         nv = self.robot.nv
-        vdot0 = V_r @ ((U_r.T @ (-np.concatenate(bias_rows) - self.k_h * (Jc @ kin.v))) / s_r) if len(s_r) \
-            else np.zeros(nv)
         nz, nl = Z.shape[1], Jc.shape[0]
         n = nz + nl
         # v̇ = vdot0 + P x;   generalized force rows F x + f0 = M v̇ + C − J_cᵀ λ.
