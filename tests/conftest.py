@@ -7,10 +7,17 @@ import os
 
 import pytest
 
-if os.environ.get("ROMOCO_ROUNDOFF"):
-    import roundoff
 
-    roundoff.install(os.environ["ROMOCO_ROUNDOFF"])
+def pytest_configure(config):
+    """Installs ``$ROMOCO_ROUNDOFF``'s variant before any test module is collected."""
+    if os.environ.get("ROMOCO_ROUNDOFF"):
+        import roundoff
+
+        try:
+            roundoff.install(os.environ["ROMOCO_ROUNDOFF"])
+        except ValueError as err:
+            raise pytest.UsageError(str(err)) from None
+
 
 # joints: 1-DoF joints besides the floating base; mass: fact-sheet total (kg), within mass_rel
 # (default 5 %). G1 and Cassie: the manufacturers' published totals, "about" figures, so ±10 %

@@ -9,7 +9,9 @@ numbers move with round-off alone (``worst`` in tests/closed_loop_bounds.py).
 A basis turned by an orthogonal matrix spans the same subspace, so each level of the hierarchy
 solves the same QP in exact arithmetic (control/hqp.py): a variant changes only the round-off,
 as another BLAS, CPU or numpy release would. The rotation depends only on the seed and the
-subspace's dimension, so a variant is deterministic on every pytest worker.
+subspace's dimension, so a variant is deterministic on every pytest worker. Run the closed-loop
+tests under a variant; the unit tests of ``null_space`` itself (tests/test_null_space.py) check
+the shipped bases and fail under a rotation.
 """
 
 from __future__ import annotations
@@ -19,8 +21,8 @@ import numpy as np
 from romoco_drake.control import hqp, momentum
 
 
-def install(variant: str) -> None:
-    """Routes the hierarchy's and the momentum controller's null spaces through ``variant``."""
+def varied_null_space(variant: str):
+    """``hqp.null_space`` under ``variant`` (module docstring); a ValueError names a bad one."""
     parts = variant.split("-")
     unknown = [p for p in parts if p not in ("qr", "svd") and not (p.startswith("rot") and p[3:].isdigit())]
     if unknown or not parts:
@@ -37,5 +39,9 @@ def install(variant: str) -> None:
             N = N @ (Q * np.sign(np.diag(R)))
         return N, x
 
-    hqp.null_space = varied
-    momentum.null_space = varied
+    return varied
+
+
+def install(variant: str) -> None:
+    """Routes the hierarchy's and the momentum controller's null spaces through ``variant``."""
+    hqp.null_space = momentum.null_space = varied_null_space(variant)

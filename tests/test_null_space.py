@@ -59,3 +59,33 @@ def test_the_raw_kernel_rejects_mismatched_buffers():
     out_n, out_x = np.empty(9), np.empty(3)
     with pytest.raises(ValueError, match="buffer sizes"):
         hqp._null_space.qr_null(np.ones(5), 2, 3, b"", False, 1e-9, out_n, out_x)
+
+
+def test_a_round_off_variant_solves_the_same_hierarchy(monkeypatch):
+    """tests/roundoff.py's premise: a null-space basis turned within its subspace leaves every
+    level the same QP, so the solution moves by round-off only, while the bases really differ."""
+    from roundoff import varied_null_space
+
+    rng = np.random.default_rng(3)
+    n = 24
+    E, G = rng.standard_normal((6, n)), rng.standard_normal((10, n))
+    e = E @ rng.standard_normal(n)
+    lower, upper = np.full(10, -1.0), np.full(10, 1.0)
+    levels = [hqp.Level(f"level{k}", rng.standard_normal((5, n)), rng.standard_normal(5), np.ones(5))
+              for k in range(3)]
+    shipped = hqp.solve_hierarchy(E, e, G, lower, upper, levels)
+    assert np.sum(np.abs(G @ shipped.x) > 1.0 - 1e-5) >= 3  # active inequalities: the active set matters
+    A = rng.standard_normal((6, n))
+    N = null_space(A)[0]
+    for variant in ("svd", "rot1", "svd-rot2"):
+        turned = varied_null_space(variant)
+        N_turned = turned(A)[0]
+        assert np.abs(N_turned - N).max() > 0.1  # another basis...
+        np.testing.assert_allclose(N_turned @ N_turned.T, N @ N.T, atol=1e-12)  # ...of the same subspace
+        monkeypatch.setattr(hqp, "null_space", turned)
+        result = hqp.solve_hierarchy(E, e, G, lower, upper, levels)
+        monkeypatch.undo()
+        assert result.failed is None and shipped.failed is None
+        np.testing.assert_allclose(result.x, shipped.x, atol=1e-8 * (1.0 + np.abs(shipped.x).max()))
+    with pytest.raises(ValueError, match="ROMOCO_ROUNDOFF"):
+        varied_null_space("rotten")
