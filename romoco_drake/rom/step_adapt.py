@@ -312,11 +312,11 @@ class SwingWindow:
         return s + d * np.where(crossed, least, low), s + d * np.where(crossed, least, high)
 
     def contains(self, u: Sequence[float], t_ss: float, compiled: bool = True) -> bool:
+        """Whether touchdown point ``u`` (x, y) is in the window at ``t_ss`` (by the C kernel if built)."""
         if compiled and step_qp_kernel.AVAILABLE:
             lo_x, lo_y, hi_x, hi_y = step_qp_kernel.window_interval(_WINDOW_SAMPLES, self, t_ss)
             return lo_x <= u[0] <= hi_x and lo_y <= u[1] <= hi_y
-        lo, hi = self.interval(t_ss)
-        return all(lo[i] <= u[i] <= hi[i] for i in range(2))
+        return all(lo <= x <= hi for x, lo, hi in zip(u, *self.interval(t_ss), strict=False))
 
 
 # The σ grid: points over the whole range, then rounds around the best so far; σ₂ takes _NEXT values.
