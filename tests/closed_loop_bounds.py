@@ -11,9 +11,10 @@ this machine's Drake, one run each (the runs are deterministic: noise comes from
 
 Runs whose numbers move with round-off alone (XO's and H1's momentum controller: its hierarchy
 amplifies a last-bit change into a different walk) also carry ``worst``: the worst value over
-the round-off variants of tests/roundoff.py (``ROMOCO_ROUNDOFF=svd``, ``rot1``, ``rot2`` and the
-shipped arithmetic). Their bound must hold every variant and sits at most 1.5× from that worst
-value, so a numpy, BLAS or CPU change that moves only the round-off does not fail CI.
+the round-off variants of tests/roundoff.py (``ROMOCO_ROUNDOFF=svd``, ``rot1``, ``rot2``,
+``svd-rot1`` and the shipped arithmetic) and OpenBLAS's Haswell kernels
+(``OPENBLAS_CORETYPE=Haswell``). Their bound must hold every variant and sits at most 1.5× from
+that worst value, so a numpy, BLAS or CPU change that moves only the round-off does not fail CI.
 """
 
 from __future__ import annotations
@@ -125,18 +126,20 @@ BOUNDS: dict[str, Bound] = {
     "headline.h1.vy_rms": ceiling(0.047, 0.0314),
     "headline.h1.wz_rms": ceiling(0.1, 0.0724),
     # XO's walks (and H1's under the momentum controller) move with round-off: `worst` is the worst of
-    # five arithmetics that solve the same QPs (tests/roundoff.py: the shipped pivoted QR, numpy's SVD,
-    # each basis turned by two random rotations, and the SVD turned; Dec 6). Table I's segments 1 and 8
-    # fall 9.0 % and 9.8 % short of their command under the shipped arithmetic (0.1-5 % under the
-    # others), so their shortfalls are listed. H1's vy stays below the 0.19 m/s its walk had with every
-    # linear row strict (test_h1_tracks_forward_speeds_without_drifting_sideways), at 1.26x its worst.
-    "headline.xo.centroidal_am_ratio": ceiling(0.053, 0.0357, worst=0.0357),
+    # six arithmetics (Dec 6): tests/roundoff.py's five (the shipped pivoted QR, numpy's SVD, each
+    # basis turned by two random rotations, the SVD turned), which solve the same QPs, and OpenBLAS's
+    # Haswell kernels (OPENBLAS_CORETYPE=Haswell, as on a CPU without AVX-512), under which the whole
+    # suite passes. Haswell alone took XO's and H1's values past the old bounds (step_end_L_error
+    # 0.049 > 0.043, segment 8 0.051 > 0.045, H1 vx 0.088 > 0.053 and vy 0.158 > 0.15), which held
+    # only for this machine's arithmetic. Table I's segments 1 and 8 fall 9.0 % and 9.8 % short of
+    # their command under the shipped arithmetic (0.1-9.1 % under the others): their shortfalls are listed.
+    "headline.xo.centroidal_am_ratio": ceiling(0.053, 0.0357, worst=0.0388),
     "headline.xo.segment0.rms": ceiling(0.072, 0.04814, worst=0.04867),
-    "headline.xo.segment1.mean_error": ceiling(0.13, 0.09027, worst=0.09027),
+    "headline.xo.segment1.mean_error": ceiling(0.13, 0.09027, worst=0.09128),
     "headline.xo.segment1.rms": ceiling(0.066, 0.04505, worst=0.04505),
-    "headline.xo.segment2.rms": ceiling(0.037, 0.0261, worst=0.03042),
+    "headline.xo.segment2.rms": ceiling(0.037, 0.0261, worst=0.03065),
     "headline.xo.segment3.rms": ceiling(0.077, 0.03904, worst=0.06139),
-    "headline.xo.segment4.rms": ceiling(0.062, 0.04177, worst=0.04177),
+    "headline.xo.segment4.rms": ceiling(0.062, 0.04177, worst=0.04222),
     # The stops after the lateral and the backward walks (segments 5, 7) are scored over their last
     # 0.55 s, while the 1 s average still holds the last steps: they vary with the step phase at the
     # stop, which round-off moves between hosts, and with them the BLAS kernel numpy picks for the CPU
@@ -146,11 +149,11 @@ BOUNDS: dict[str, Bound] = {
     "headline.xo.segment6.rms": ceiling(0.067, 0.04284, worst=0.04504),
     "headline.xo.segment7.rms": ceiling(0.1, 0.06179, worst=0.07364),
     "headline.xo.segment8.mean_error": ceiling(0.14, 0.09819, worst=0.09819),
-    "headline.xo.segment8.rms": ceiling(0.057, 0.03539, worst=0.03841),
-    "headline.xo.step_end_L_error": ceiling(0.07, 0.0471, worst=0.0471),
+    "headline.xo.segment8.rms": ceiling(0.077, 0.03539, worst=0.05136),
+    "headline.xo.step_end_L_error": ceiling(0.07, 0.0471, worst=0.0488),
     "headline.xo.steps": floor(78, 87, worst=87),
-    "headline.xo.vx_rms": ceiling(0.04, 0.0275, worst=0.028),
-    "headline.xo.vy_rms": ceiling(0.051, 0.0396, worst=0.0396),
+    "headline.xo.vx_rms": ceiling(0.04, 0.0275, worst=0.0322),
+    "headline.xo.vy_rms": ceiling(0.051, 0.0396, worst=0.0414),
     "iekf.cassie.segment0.rms": ceiling(0.074, 0.0498),
     "iekf.cassie.segment1.rms": ceiling(0.065, 0.04386),
     "iekf.cassie.segment2.rms": ceiling(0.059, 0.03997),
@@ -174,7 +177,7 @@ BOUNDS: dict[str, Bound] = {
     "kalman.g1.velocity_estimate_rms": ceiling(0.016, 0.0116),
     "kalman.g1.vx_rms": ceiling(0.025, 0.01704),
     "momentum.h1.vx_rms": ceiling(0.16, 0.0522, worst=0.1093),
-    "momentum.h1.vy_rms": ceiling(0.18, 0.1433, worst=0.1433),
+    "momentum.h1.vy_rms": ceiling(0.23, 0.1433, worst=0.1576),
     "momentum.xo.centroidal_am_ratio": ceiling(0.051, 0.0315, worst=0.0344),
     "momentum.xo.step_end_L_error": ceiling(0.064, 0.0383, worst=0.0432),
     "momentum.xo.step_end_L_steps": floor(19, 22, worst=22),
@@ -230,11 +233,11 @@ BOUNDS: dict[str, Bound] = {
     "turning.talos.vx_rms": ceiling(0.026, 0.01788),
     "turning.talos.vy_rms": ceiling(0.078, 0.05244),
     "turning.talos.wz_rms": ceiling(0.0077, 0.005168),
-    "turning.xo.heading_lag": ceiling(0.097, 0.06592, worst=0.06592),
+    "turning.xo.heading_lag": ceiling(0.12, 0.06592, worst=0.08098),
     "turning.xo.rest_speed": ceiling(0.029, 0.0002617, worst=0.01934),
     "turning.xo.vx_rms": ceiling(0.067, 0.04512, worst=0.04512),
     "turning.xo.vy_rms": ceiling(0.088, 0.05146, worst=0.06042),
-    "turning.xo.wz_rms": ceiling(0.032, 0.01863, worst=0.02359),
+    "turning.xo.wz_rms": ceiling(0.032, 0.01863, worst=0.02424),
     "via_lcm.g1.steps": floor(7, 8),
     "via_lcm.g1.vx_rms": ceiling(0.018, 0.0125),
     # 1 m/s under the joint limits (test_draco_walks_at_one_metre_a_second_...): the robot trails the
