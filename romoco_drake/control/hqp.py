@@ -80,7 +80,9 @@ class HqpResult:
 def null_space(A: np.ndarray, b: np.ndarray | None = None, compiled: bool = True
                ) -> tuple[np.ndarray, np.ndarray | None]:
     """(N, x): N (n × (n − rank)) an orthonormal basis of null(A), and with ``b`` the
-    minimum-norm x with A x = b (the least-squares one if there is none), else None.
+    minimum-norm x with A x = b, else None. Where A x = b has no solution, the SVD's x is the
+    least-squares one and the QR's solves the independent rows its pivoting picked: a caller
+    that can meet one checks the residual (:func:`solve_hierarchy` does).
 
     The rank counts what exceeds ``RANK_RTOL`` of A's largest singular value (SVD) or pivot
     (Householder QR with column pivoting, in C where it is built: ``_null_space.c``; its pivots
