@@ -1,10 +1,13 @@
 """Round-off variants of the momentum controller's arithmetic, to measure how far its closed-loop
 numbers move with round-off alone (``worst`` in tests/closed_loop_bounds.py).
 
-    ROMOCO_ROUNDOFF=qr        python -m pytest ...   # the shipped arithmetic (records only)
+    ROMOCO_ROUNDOFF=qr        python -m pytest ...   # the shipped arithmetic
     ROMOCO_ROUNDOFF=svd       python -m pytest ...   # numpy's SVD instead of the compiled QR
     ROMOCO_ROUNDOFF=rot3      python -m pytest ...   # every null-space basis turned (seed 3)
     ROMOCO_ROUNDOFF=svd-rot3  python -m pytest ...   # both
+
+With ``$ROMOCO_MEASURED`` set as well, the closed-loop checks under any variant record what they
+see and do not assert: such runs measure the spread. Without it they assert the bounds.
 
 A basis turned by an orthogonal matrix spans the same subspace, so each level of the hierarchy
 solves the same QP in exact arithmetic (control/hqp.py): a variant changes only the round-off,
