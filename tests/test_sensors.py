@@ -183,6 +183,26 @@ def test_same_seed_same_samples_and_contexts_replay():
     assert not np.array_equal(other.sensors.accel_bias, again.sensors.accel_bias)
 
 
+def test_each_sensor_keeps_its_own_noise_blocks_when_stations_step_in_turn(monkeypatch):
+    """Three stations stepped in turn each make a (port, block) generator once, as one station
+    does: a memo shared by the class made them again at every update (G1's station took 3.2-3.4x
+    the plant step, not 1.4x)."""
+    runs = [simulate(SensorConfig(seed=seed), standing=True) for seed in range(3)]
+    made, original = [], np.random.default_rng
+
+    def counted(seed=None):
+        made.append(tuple(seed))
+        return original(seed)
+
+    monkeypatch.setattr(np.random, "default_rng", counted)
+    for k in range(1, 51):
+        for run in runs:
+            run.simulator.AdvanceTo(k * TIME_STEP)
+            run.outputs()
+    assert len(made) == len(set(made)), "a noise block was drawn twice"
+    assert set(made) == {(seed, port, 0) for seed in range(3) for port in (0, 2, 3, 4)}
+
+
 def test_gyro_is_body_rate_in_the_base_frame():
     rotation = RotationMatrix(RollPitchYaw(0.3, -0.2, 0.8))
     w_WB = np.array([0.5, -1.0, 2.0])
