@@ -21,13 +21,22 @@ REPO = Path(__file__).resolve().parents[1]
 DATA_DIRS = ("robots", "models", "diagrams")
 
 
-def test_every_code_package_is_listed():
+def test_every_code_package_and_data_folder_is_listed():
+    """A data folder left out of the list ships only through a path setuptools deprecates (its
+    build warns that the folder "would be ignored")."""
     tomllib = pytest.importorskip("tomllib")
-    listed = set(tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    config = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]
+    listed = set(config["packages"])
     inits = (REPO / "romoco_drake").rglob("__init__.py")
     on_disk = {".".join(p.parent.relative_to(REPO).parts) for p in inits}
+    for folder in DATA_DIRS:
+        on_disk |= {".".join(("romoco_drake._data", *d.relative_to(REPO).parts))
+                    for d in [REPO / folder, *(REPO / folder).rglob("*")]
+                    if d.is_dir() and d.name != "__pycache__"}
     missing = sorted(on_disk - listed)
     assert not missing, f"add {missing} to [tool.setuptools] packages in pyproject.toml"
+    no_files = sorted({n for n in listed if n.startswith("romoco_drake._data")} - set(config["package-data"]))
+    assert not no_files, f"give {no_files} their files in [tool.setuptools.package-data]"
 
 
 def _run(args, **kwargs):
