@@ -9,6 +9,7 @@ import select
 import sys
 from pathlib import Path
 
+from romoco_drake.commands import output_dir, output_file
 from romoco_drake.errors import RomocoError
 
 
@@ -108,7 +109,7 @@ def _cmd_diagram(args) -> int:
     from romoco_drake.diagram_export import write_diagram
     from romoco_drake.scenario import load_scenario
 
-    out = args.out or Path(f"{Path(args.scenario).stem}.svg")
+    out = output_file(args.out or Path(f"{Path(args.scenario).stem}.svg"), "--out")
     print(f"wrote {write_diagram(load_scenario(args.scenario), out, args.depth)}")
     return 0
 
@@ -118,6 +119,7 @@ def _cmd_new_robot(args) -> int:
 
     if args.out.exists() and not args.force:
         raise RomocoError(f"--out {args.out}: exists (use --force to overwrite)")
+    output_file(args.out, "--out")
     model = model_file_path(args.model_file, args.package_path)
     _, notes = new_robot(model, args.out, args.package_path)
     print(f"wrote {args.out}")
@@ -131,7 +133,7 @@ def _cmd_new_robot(args) -> int:
 def _cmd_inertia_data(args) -> int:
     from romoco_drake.inertia.data import generate_dataset, save_dataset
 
-    out = args.out or _default_inertia_data(args.robot)
+    out = output_file(args.out or _default_inertia_data(args.robot), "--out")
     data = generate_dataset(args.robot, args.samples, seed=args.seed, points_per_motion=args.points,
                             progress=True)
     save_dataset(out, data)
@@ -145,7 +147,7 @@ def _cmd_train_inertia(args) -> int:
     from romoco_drake.inertia.train import train_inertia
     from romoco_drake.robots.source import MODELS_DIR
 
-    out = args.out or MODELS_DIR / args.robot
+    out = output_dir(args.out or MODELS_DIR / args.robot, "--out")
     s = train_inertia(args.robot, args.data or _default_inertia_data(args.robot), out, seed=args.seed)
     v, w = s["ccinn"]["validation"], s["wbo_integration"]
     print(f"wrote {out}/ccinn.npz, ccinn.yaml, wbo.npz, wbo.yaml in {s['wall_s']} s")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import sys
+from pathlib import Path
 
 from romoco_drake.errors import RomocoError
 
@@ -25,6 +26,34 @@ def numbers(text: str, flag: str) -> tuple[float, ...]:
     except ValueError:
         raise RomocoError(f"{flag}: '{text}' is not a comma-separated list of numbers") from None
     return values
+
+
+def count(value: int, flag: str, lo: int = 1, hi: int = 10_000_000) -> int:
+    """An integer option within [``lo``, ``hi``], or one line saying what is wrong."""
+    if not lo <= value <= hi:
+        raise RomocoError(f"{flag} must be an integer in [{lo}, {hi}], got {value}")
+    return value
+
+
+def output_dir(path: Path | None, flag: str) -> Path | None:
+    """``path`` made a directory before the command's work starts (None passes through), or one
+    line saying why it cannot be: a command that would fail writing its results fails at once."""
+    if path is not None:
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise RomocoError(f"{flag} {path}: cannot make the directory ({e.strerror})") from None
+    return path
+
+
+def output_file(path: Path | None, flag: str) -> Path | None:
+    """``path``'s directory made before the command's work starts (None passes through), or one
+    line saying why a file cannot be written there."""
+    if path is not None:
+        if path.is_dir():
+            raise RomocoError(f"{flag} {path}: is a directory, not a file")
+        output_dir(path.parent, flag)
+    return path
 
 
 def print_rows(as_json: bool, rows: list[dict], header: str, line) -> int:

@@ -18,7 +18,7 @@ import numpy as np
 from pydrake.geometry import Meshcat
 from pydrake.systems.analysis import Simulator
 
-from romoco_drake.commands import fall_text, live_meshcat
+from romoco_drake.commands import fall_text, live_meshcat, output_dir, output_file
 from romoco_drake.control.momentum_log import momentum_summary
 from romoco_drake.control.registry import traits
 from romoco_drake.errors import RomocoError
@@ -339,6 +339,8 @@ def _cmd_run(args) -> int:
         raise RomocoError("--teleop and --command exclude each other (the page gives the command)")
     if args.teleop and not traits(scenario.controller.name).walking:
         raise RomocoError(f"--teleop needs a walking controller, not '{scenario.controller.name}'")
+    output_dir(args.plot, "--plot")
+    output_file(args.record, "--record")
     summary = run_scenario(scenario, duration=args.duration, meshcat=live_meshcat(args.meshcat),
                            record=args.record, progress=stderr_progress, plot_dir=args.plot, link=link,
                            lcm_url=args.lcm_url, lcm_log=args.lcm_log, teleop=args.teleop)
@@ -439,7 +441,7 @@ def register_plot(sub) -> None:
 def _cmd_plot(args) -> int:
     from romoco_drake.interfaces.lcm_log import plot_status_log
 
-    s = plot_status_log(args.log, args.out)
+    s = plot_status_log(args.log, output_dir(args.out, "--out"))
     if args.json:
         print(json.dumps(s))
     else:

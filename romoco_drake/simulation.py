@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import os
 import signal
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable
@@ -147,12 +149,41 @@ def divergence(error: Exception, plant_state: np.ndarray | None) -> str | None:
 
 
 def make_lcm(url: str | None) -> DrakeLcm:
-    """A DrakeLcm on ``url`` (None: Drake's default UDP multicast), or one line saying why not."""
-    try:
-        return DrakeLcm(url) if url is not None else DrakeLcm()
-    except RuntimeError as e:
-        reason = str(e).splitlines()[0]
-        raise RomocoError(f"cannot open LCM on {url or 'the default URL'}: {reason}") from None
+    """A DrakeLcm on ``url`` (None: Drake's default UDP multicast), or one line saying why not.
+
+    A URL the LCM library cannot open (an unknown provider, a bad port) does not raise: the C
+    library prints "Error: ..." to the process's stderr and Drake goes on with a link that never
+    carries a message. That line, read off file descriptor 2 while the link is made, is the error.
+    """
+    with _stderr_of_c_code() as printed:
+        try:
+            lcm = DrakeLcm(url) if url is not None else DrakeLcm()
+        except RuntimeError as e:
+            reason = str(e).splitlines()[0]
+            raise RomocoError(f"cannot open LCM on {url or 'the default URL'}: {reason}") from None
+    failure = next((line for line in printed if line.startswith("Error:")), None)
+    if failure is not None:
+        raise RomocoError(f"cannot open LCM on {url or 'the default URL'}: {failure[6:].strip()}")
+    sys.stderr.writelines(line + "\n" for line in printed)
+    return lcm
+
+
+@contextlib.contextmanager
+def _stderr_of_c_code():
+    """Collects what is written to file descriptor 2 within (the yielded list of lines, filled on
+    exit), where C libraries print."""
+    lines: list[str] = []
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            lines.extend(sink.read().decode(errors="replace").splitlines())
 
 
 def stderr_progress(message: str) -> None:

@@ -96,6 +96,18 @@ def test_run_text_summary():
         (["bench", "rehearsal", "--scenario", "nope"], "unknown scenario 'nope'"),
         (["bench", "matrix", "--robots", "g1", "--planners", "hlip", "--estimator", "ekf"],
          "unknown estimator 'ekf'"),
+        (["bench", "agility", "--robot", "g1"], "g1_walk plans with 'hlip' (walks on the VI-MPC: draco"),
+        (["bench", "agility", "--robot", "atlas"], "unknown robot 'atlas'"),
+        (["bench", "tick", "--ticks", "0"], "--ticks must be an integer in [1, "),
+        (["bench", "embedding", "--ticks", "-1"], "--ticks must be an integer in [1, "),
+        (["bench", "framework", "--ticks", "0"], "--ticks must be an integer in [1, "),
+        (["bench", "engines", "--steps", "5"], "--steps must be an integer in [10, 100000]"),
+        (["inertia-data", "g1", "--samples", "3"], "no self-collision stand-in for robot 'g1'"),
+        (["inertia-data", "draco", "--points", "1"], "--points must be at least 2"),
+        (["inertia-data", "draco", "--seed", "-1"], "--seed must be non-negative"),
+        (["run", "g1_walk", "--hardware", "--lcm-url", "nope://x"],
+         'cannot open LCM on nope://x: LCM provider "nope" not found'),
+        (["robot-sim", "g1_walk", "--lcm-url", "udpm://239.255.76.67:99999"], 'Bad multicast port "99999"'),
     ],
 )
 def test_bad_input_is_one_line_exit_2(args, words):
@@ -104,6 +116,21 @@ def test_bad_input_is_one_line_exit_2(args, words):
     assert "Traceback" not in out.stderr
     lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and words in lines[0]
+
+
+@pytest.mark.parametrize("args", [
+    ["run", "g1_walk", "--plot", "{file}"], ["run", "g1_walk", "--record", "{file}/replay.html"],
+    ["plot", "{file}", "--out", "{file}"], ["bench", "rom", "--plot", "{file}"],
+    ["diagram", "g1_walk", "--out", "{file}/g1.svg"], ["reproduce", "xo", "--quick", "--out", "{file}"],
+])
+def test_an_output_path_that_cannot_be_written_is_one_line_before_any_work(tmp_path, args):
+    """A file where a directory must go fails at once, not after the run it would have saved."""
+    file = tmp_path / "a_file"
+    file.write_text("")
+    out = romoco(*(a.format(file=file) for a in args))
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and f"{file}: cannot make the directory (File exists)" in lines[0]
 
 
 def test_bad_scenario_file_is_one_line_exit_2(tmp_path):

@@ -44,8 +44,9 @@ from romoco_drake.errors import RomocoError
 from romoco_drake.metrics import AVERAGE_WINDOW_S, moving_average
 from romoco_drake.planners.heading import heading_velocity
 from romoco_drake.planners.vimpc import INERTIA_MODES
+from romoco_drake.robots.model import robot_names
 from romoco_drake.runner import add_overlay_arg, log_samples, run_scenario
-from romoco_drake.scenario import CommandPoint, Scenario, load_scenario
+from romoco_drake.scenario import CommandPoint, Scenario, load_scenario, scenario_names
 from romoco_drake.simulation import stderr_progress
 
 MOTIONS = {"forward": (1.0, 0.0, 0.0), "diagonal": (1.0, 1.0, 0.0), "turning": (0.0, 0.0, 1.0),
@@ -165,7 +166,16 @@ def bench_agility(robot: str = "draco", modes=INERTIA_MODES, motions=tuple(MOTIO
                   top: float | None = None, sweep: SweepOptions | None = None, progress=None,
                   overlays: Sequence[str] = ()) -> list[dict]:
     """One ramp per ramp rate × inertia mode × motion (module docstring); ``top`` defaults to 1.5×
-    the paper's best; ``overlays`` are merged onto the robot's walking scenario (the rows name them)."""
+    the paper's best; ``overlays`` are merged onto the robot's walking scenario (the rows name them).
+    A robot whose walk is not planned by the VI-MPC has no inertia modes to compare: one line says so."""
+    if robot not in robot_names():
+        raise RomocoError(f"unknown robot '{robot}' (known: {', '.join(robot_names())})")
+    planner = load_scenario(f"{robot}_walk", overlays).planner.name
+    if planner != "vimpc":
+        with_mpc = [n for n in scenario_names()
+                    if n.endswith("_walk") and load_scenario(n).planner.name == "vimpc"]
+        raise RomocoError(f"bench agility compares the VI-MPC's inertia modes, and {robot}_walk plans with "
+                          f"'{planner}' (walks on the VI-MPC: {', '.join(with_mpc)})")
     return run_sweep([v for rate in rates for v in agility_variants(robot, modes, motions, rate, top,
                                                                    overlays=overlays)], sweep, progress)
 

@@ -9,6 +9,7 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from romoco_drake.bench.rom import percentiles
+from romoco_drake.commands import count
 from romoco_drake.embedding.system import OutputEmbedding
 from romoco_drake.modes import Mode
 from romoco_drake.robots.kinematics import RobotKinematics
@@ -86,7 +87,7 @@ def register(bench) -> None:
 
 
 def _cmd_bench_embedding(args) -> int:
-    s = bench_embedding(args.robot, ticks=args.ticks)
+    s = bench_embedding(args.robot, ticks=count(args.ticks, "--ticks"))
     if args.json:
         print(json.dumps(s))
     else:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 
+from romoco_drake.commands import count
 from romoco_drake.errors import RomocoError
 
 ENGINE_NAMES = ("drake", "mujoco")
@@ -90,9 +91,7 @@ def _cmd_engines(args) -> int:
     from romoco_drake.bench.sim2sim import bench_engines
 
     robots, engines = _robots_and_engines(args)
-    if not 10 <= args.steps <= 100000:
-        raise RomocoError(f"--steps must be in [10, 100000], got {args.steps}")
-    rows = bench_engines(robots, engines, args.steps)
+    rows = bench_engines(robots, engines, count(args.steps, "--steps", 10, 100000))
     if args.json:
         print(json.dumps(rows))
         return 0

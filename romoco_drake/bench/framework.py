@@ -23,6 +23,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
 from romoco_drake.bench.rom import reference_ns
+from romoco_drake.commands import count
 from romoco_drake.values import SharedValue
 
 SYSTEMS = 10  # systems per diagram
@@ -164,7 +165,7 @@ def register(bench) -> None:
 
 
 def _cmd_bench_framework(args) -> int:
-    r = bench_framework(max(1, args.ticks))
+    r = bench_framework(count(args.ticks, "--ticks"))
     if args.json:
         print(json.dumps(r))
         return 0

@@ -19,6 +19,7 @@ import numpy as np
 from romoco_drake.bench.reproduce import PAPERS, QUICK_SHORTENS, REFERENCES, Claim, reproduce
 from romoco_drake.bench.reproduce_romoco import ERRORS, FIG7_CONTROLLERS, speed_error, tracking_error
 from romoco_drake.bench.sweep import add_sweep_args, sweep_options
+from romoco_drake.commands import output_dir
 from romoco_drake.errors import RomocoError
 from romoco_drake.simulation import stderr_progress
 
@@ -225,6 +226,7 @@ def _cmd_reproduce(args) -> int:
     if papers[0] not in PAPERS:
         raise RomocoError(f"unknown paper '{args.paper}' (known: {', '.join(PAPERS)}, all)")
     sweep = sweep_options(args)
+    output_dir(args.out, "--out")
     t0 = time.perf_counter()
     claims, rows = reproduce(papers, args.quick, sweep, progress=stderr_progress)
     scored = [c for c in claims if c.holds is not None]

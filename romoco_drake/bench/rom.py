@@ -13,6 +13,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
 
+from romoco_drake.commands import output_dir
 from romoco_drake.planners.command import CommandSegment, CommandSource
 from romoco_drake.planners.foot_placement import FootPlacementPlanner
 from romoco_drake.planners.template import GaitState, HybridLipTemplate
@@ -238,6 +239,7 @@ def register(bench) -> None:
 
 def _cmd_bench_rom(args) -> int:
     names = foot_placement_laws() if args.planner is None else [args.planner]
+    output_dir(args.plot, "--plot")
     results = []
     for name in names:
         summary = bench_rom(name, robot=args.robot, t_ds=args.t_ds, gain=args.gain, plot_dir=args.plot)

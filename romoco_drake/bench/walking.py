@@ -12,7 +12,7 @@ from pydrake.systems.framework import DiagramBuilder
 from romoco_drake.bench.callback_timer import timed_callbacks
 from romoco_drake.bench.rom import percentiles
 from romoco_drake.bench.sweep import SweepOptions, Variant, add_sweep_args, run_sweep, sweep_options
-from romoco_drake.commands import names, print_rows
+from romoco_drake.commands import count, names, print_rows
 from romoco_drake.control.gravity import contact_gravity_compensation
 from romoco_drake.control.registry import CONTROLLERS, traits
 from romoco_drake.errors import RomocoError
@@ -306,7 +306,8 @@ def _estimate_columns(r: dict) -> str:
 
 
 def _cmd_bench_tick(args) -> int:
-    s = bench_tick(scenario_from_args(args, ("planner", "controller", "solver")), ticks=args.ticks)
+    s = bench_tick(scenario_from_args(args, ("planner", "controller", "solver")),
+                   ticks=count(args.ticks, "--ticks"))
     if args.json:
         print(json.dumps(s))
     else:

@@ -164,6 +164,9 @@ class LegIk:
         self.q_fixed = robot.nominal.q.copy()
         self.q_fixed[robot.base_q_start:robot.base_q_start + 7] = [1, 0, 0, 0, 0, 0, 0]
         self.leg_joints = [n for n in robot.joint_names if n.startswith(LEG_PREFIXES)]
+        if not self.leg_joints:
+            prefixes = ", ".join(p + "*" for p in LEG_PREFIXES)
+            raise RomocoError(f"{robot.name} has no leg joints named {prefixes}")
         self.leg_q_index = np.array([plant.GetJointByName(n).position_start() for n in self.leg_joints])
         free = np.zeros(robot.nq, dtype=bool)
         free[self.leg_q_index] = True
@@ -222,10 +225,14 @@ def generate_dataset(robot_name: str, samples: int, seed: int = 0, points_per_mo
     """
     if samples < 1:
         raise RomocoError(f"--samples must be positive (got {samples})")
+    if points_per_motion < 2:
+        raise RomocoError(f"--points must be at least 2 (got {points_per_motion})")
+    if seed < 0:
+        raise RomocoError(f"--seed must be non-negative (got {seed})")
     bounds = bounds or MotionBounds()
     robot = load_robot(robot_name)
+    collision = SelfCollision(robot.plant, robot_name)  # first: a robot without a stand-in is one line
     ik = LegIk(robot)
-    collision = SelfCollision(robot.plant, robot_name)
     context = robot.plant.CreateDefaultContext()
     ankle_height = float(-robot.feet["left"].points[2].min())
     rng = np.random.default_rng(seed)
