@@ -178,7 +178,8 @@ def make_parser() -> argparse.ArgumentParser:
         rom,
         walking,
     )
-    from romoco_drake.runner import register_plot, register_robot_sim, register_run
+    from romoco_drake.interfaces.lcm_log import register_plot
+    from romoco_drake.runner import register_robot_sim, register_run
 
     parser = argparse.ArgumentParser(prog="romoco", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)

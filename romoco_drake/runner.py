@@ -342,7 +342,8 @@ def _cmd_run(args) -> int:
     output_dir(args.plot, "--plot")
     output_file(args.record, "--record")
     summary = run_scenario(scenario, duration=args.duration, meshcat=live_meshcat(args.meshcat),
-                           record=args.record, progress=stderr_progress, plot_dir=args.plot, link=link,
+                           record=output_file(args.record, "--record"), progress=stderr_progress,
+                           plot_dir=output_dir(args.plot, "--plot"), link=link,
                            lcm_url=args.lcm_url, lcm_log=args.lcm_log, teleop=args.teleop)
     if args.json:
         print(json.dumps(summary))
@@ -426,27 +427,4 @@ def _cmd_robot_sim(args) -> int:
         print(f"robot-sim {summary['robot']} on {summary['lcm_url']}: {summary['duration_s']} s; "
               f"{fall_text(summary)}; "
               + ", ".join(f"{k} {summary[k]}" for k in ("stale_events", "rejected_messages", "estop")))
-    return 0
-
-
-def register_plot(sub) -> None:
-    """``romoco plot``: a run's figures and tracking numbers from its LCM log (``romoco run --lcm-log``)."""
-    p = sub.add_parser("plot", help="plot a run from its LCM log (romoco run --lcm-log)")
-    p.add_argument("log", type=Path)
-    p.add_argument("--out", type=Path, default=Path("plots"), metavar="DIR", help="where to write PNGs")
-    p.add_argument("--json", action="store_true", help="print the summary as JSON (last line)")
-    p.set_defaults(func=_cmd_plot)
-
-
-def _cmd_plot(args) -> int:
-    from romoco_drake.interfaces.lcm_log import plot_status_log
-
-    s = plot_status_log(args.log, output_dir(args.out, "--out"))
-    if args.json:
-        print(json.dumps(s))
-    else:
-        print(f"{s['log']} ({s['robot']}, {s['duration_s']} s): velocity rms error (vx, vy, wz) "
-              f"{s['velocity_rms_error']}, mean velocity {s['mean_velocity']}")
-        for path in s["plots"]:
-            print(f"  wrote {path}")
     return 0

@@ -216,6 +216,16 @@ class _Progress:
         sys.stderr.flush()
 
 
+def _check_counts(samples: int, points_per_motion: int, seed: int) -> None:
+    """One line for a count :func:`generate_dataset` cannot use (its CLI flags' names)."""
+    if samples < 1:
+        raise RomocoError(f"--samples must be positive (got {samples})")
+    if points_per_motion < 2:
+        raise RomocoError(f"--points must be at least 2 (got {points_per_motion})")
+    if seed < 0:
+        raise RomocoError(f"--seed must be non-negative (got {seed})")
+
+
 def generate_dataset(robot_name: str, samples: int, seed: int = 0, points_per_motion: int = 20,
                      bounds: MotionBounds | None = None, progress: bool = False) -> dict:
     """IK samples until ``samples`` knots are kept; returns the dataset's arrays and metadata.
@@ -223,12 +233,7 @@ def generate_dataset(robot_name: str, samples: int, seed: int = 0, points_per_mo
     Arrays: ``features`` (N, 12), ``inertia`` (N, 6), ``q_legs`` (N, n_legs) in the order of
     ``leg_joints``, ``motion`` (N,) the motion's index and ``knot`` (N,) the knot's index in it.
     """
-    if samples < 1:
-        raise RomocoError(f"--samples must be positive (got {samples})")
-    if points_per_motion < 2:
-        raise RomocoError(f"--points must be at least 2 (got {points_per_motion})")
-    if seed < 0:
-        raise RomocoError(f"--seed must be non-negative (got {seed})")
+    _check_counts(samples, points_per_motion, seed)
     bounds = bounds or MotionBounds()
     robot = load_robot(robot_name)
     collision = SelfCollision(robot.plant, robot_name)  # first: a robot without a stand-in is one line

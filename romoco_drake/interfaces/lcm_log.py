@@ -3,11 +3,12 @@
 A run started with ``--lcm-log FILE`` records every channel (proprioception, motor commands,
 base state, estop, status) so ``lcm-logplayer`` can replay it; :func:`plot_status_log` turns
 the ``ROMOCO_STATUS`` messages of such a log into the same velocity and tracking plots as a
-simulated run, without the run's diagram.
+simulated run, without the run's diagram (`romoco plot`, registered here).
 """
 
 from __future__ import annotations
 
+import json
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -18,6 +19,7 @@ import lcm as lcm_py
 import numpy as np
 from pydrake.lcm import DrakeLcmInterface
 
+from romoco_drake.commands import output_dir
 from romoco_drake.embedding.system import ERROR_GROUPS
 from romoco_drake.errors import RomocoError
 from romoco_drake.interfaces.lcm_codec import STATUS_CHANNEL, MessageRejected, decode_controller_status
@@ -189,3 +191,24 @@ def plot_status_log(path: Path, out_dir: Path) -> dict:
         "skipped": log.skipped,
         "plots": [str(p) for p in plots],
     }
+
+
+def register_plot(sub) -> None:
+    """``romoco plot``: a run's figures and tracking numbers from its LCM log (``romoco run --lcm-log``)."""
+    p = sub.add_parser("plot", help="plot a run from its LCM log (romoco run --lcm-log)")
+    p.add_argument("log", type=Path)
+    p.add_argument("--out", type=Path, default=Path("plots"), metavar="DIR", help="where to write PNGs")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON (last line)")
+    p.set_defaults(func=_cmd_plot)
+
+
+def _cmd_plot(args) -> int:
+    s = plot_status_log(args.log, output_dir(args.out, "--out"))
+    if args.json:
+        print(json.dumps(s))
+    else:
+        print(f"{s['log']} ({s['robot']}, {s['duration_s']} s): velocity rms error (vx, vy, wz) "
+              f"{s['velocity_rms_error']}, mean velocity {s['mean_velocity']}")
+        for path in s["plots"]:
+            print(f"  wrote {path}")
+    return 0
