@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import types
 import typing
 from pathlib import Path
@@ -159,6 +160,16 @@ def _show(value: float) -> str:
     return f"{value:g}"
 
 
+class _Loader(yaml.SafeLoader):
+    """PyYAML's safe loader, reading 1e-3 and 2E+5 as numbers, as YAML 1.2 does: its YAML 1.1
+    floats need a dot (1.0e-3), so "time_step: 1e-3" was the text '1e-3' and a type error."""
+
+
+_Loader.add_implicit_resolver("tag:yaml.org,2002:float",
+                              re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+                              list("-+0123456789"))
+
+
 def load_yaml_file(path: Path) -> Any:
     """Reads a YAML file, turning I/O, encoding and syntax errors into ConfigError."""
     try:
@@ -169,7 +180,7 @@ def load_yaml_file(path: Path) -> Any:
         byte = f"byte 0x{e.object[e.start]:02x} at offset {e.start}"
         raise ConfigError(path, "", f"not UTF-8 text ({byte}); save the file as UTF-8") from None
     try:
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=_Loader)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         line = f" at line {mark.line + 1}" if mark is not None else ""

@@ -5,6 +5,7 @@ import shutil
 import pytest
 import yaml
 
+from romoco_drake.config import load_yaml_file
 from romoco_drake.control.registry import CONTROLLERS
 from romoco_drake.control.settings import ControllerSettings
 from romoco_drake.errors import ConfigError, RomocoError
@@ -146,6 +147,17 @@ def test_malformed_yaml(tmp_path):
     path.write_text("robot: [g1\n")
     with pytest.raises(ConfigError, match="invalid YAML at line"):
         load_scenario(str(path))
+
+
+def test_exponents_without_a_dot_are_numbers(tmp_path):
+    """YAML 1.2 reads 1e-3 as a number; PyYAML (YAML 1.1) alone read it as text."""
+    path = tmp_path / "exponents.yaml"
+    path.write_text("robot: g1\ntime_step: 1e-3\nduration_s: 2E+1\n")
+    assert load_yaml_file(path) == {"robot": "g1", "time_step": 0.001, "duration_s": 20.0}
+    (tmp_path / "text.yaml").write_text("a: 1e5x\nb: 1.5e3\n")
+    assert load_yaml_file(tmp_path / "text.yaml") == {"a": "1e5x", "b": 1500.0}
+    scenario = load_scenario(str(path))
+    assert scenario.time_step == 0.001 and scenario.duration_s == 20.0
 
 
 def _robot_data():
