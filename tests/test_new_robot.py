@@ -15,7 +15,7 @@ from romoco_drake.cli import main
 from romoco_drake.robots.model import RobotModel, load_robot_config, load_robot_config_file
 from romoco_drake.robots.model_geometry import read_mesh_vertices, sole_outline
 from romoco_drake.robots.onboard import new_robot
-from romoco_drake.robots.source import model_path
+from romoco_drake.robots.source import example_robot_data_root, model_path
 from romoco_drake.rom.polygon import convex_hull_2d
 
 
@@ -185,6 +185,18 @@ def test_new_robot_errors_are_one_line(tmp_path, capsys):
     (tmp_path / "z.yaml").write_text("keep")
     assert main(["new-robot", str(urdf), "--package-path", str(src), "--out", str(tmp_path / "z.yaml")]) == 2
     assert "--force" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("model, words", [
+    ("robots/go1_description/urdf/go1.urdf", "4 limbs reach the ground (FR_calf, FL_calf, RR_calf, RL_calf)"),
+    ("robots/panda_description/urdf/panda.urdf", "the base 'panda_link0' is -0.81 m above its lowest"),
+])
+def test_a_model_that_is_no_biped_is_one_line(tmp_path, capsys, model, words):
+    """A quadruped was written up as a biped on two of its legs, and an arm ended in a traceback."""
+    path = example_robot_data_root() / model
+    assert main(["new-robot", str(path), "--out", str(tmp_path / "x.yaml")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and words in err and not (tmp_path / "x.yaml").exists()
 
 
 @pytest.mark.slow

@@ -13,6 +13,8 @@ import numpy as np
 
 from romoco_drake.errors import RomocoError
 
+MIN_BASE_HEIGHT = 0.05  # m: a floating base this far above its chains' lowest end, or less, stands on no legs
+
 
 def _side_from_name(name: str) -> str | None:
     lowered = name.lower()
@@ -88,17 +90,38 @@ def foot_candidates(model_file: Path, tree: BodyTree, geometry: tuple[dict, dict
         return np.array([tree.X_WB[b].translation() for b in bodies]), "frame origins"
 
     distal = tree.distal()
-    candidates = {}
+    candidates, ends = {}, []
     for body in distal:
         cloud, kind = cloud_W(tree.welded_group(body))
         side = _side_from_name(body) or ("left" if left_W @ tree.X_WB[body].translation() > 0 else "right")
         low = cloud[:, 2].min()
+        ends.append((body, low, tree.X_WB[body].translation()[:2]))
         if side not in candidates or low < candidates[side][1]:
             candidates[side] = (body, low, cloud, kind)
     if set(candidates) != {"left", "right"}:
-        ends = ", ".join(distal) or "none"
-        raise RomocoError(f"{model_file}: cannot find two legs (bodies ending a joint chain: {ends})")
+        raise RomocoError(f"{model_file}: cannot find two legs (bodies ending a joint chain: "
+                          f"{', '.join(distal) or 'none'})")
+    _check_two_limbs_stand(model_file, tree, ends)
     return candidates
+
+
+def _check_two_limbs_stand(model_file: Path, tree: BodyTree, ends: list[tuple[str, float, np.ndarray]]):
+    """One line unless exactly two limbs reach the ground, below the base: a quadruped's four feet
+    (chain ends within a quarter of the base's height of the lowest, apart by more than half of it)
+    or an arm, whose chain ends above its base, would otherwise be written up as a biped."""
+    ground = min(low for _, low, _ in ends)
+    height = tree.X_WB[tree.base].translation()[2] - ground
+    if height < MIN_BASE_HEIGHT:
+        raise RomocoError(f"{model_file}: the base '{tree.base}' is {height:.2f} m above its lowest "
+                          "chain end: not a robot standing on legs")
+    limbs: list[np.ndarray] = []
+    for _, low, xy in sorted(ends, key=lambda e: e[1]):
+        if low - ground <= 0.25 * height and all(np.linalg.norm(xy - o) > 0.5 * height for o in limbs):
+            limbs.append(xy)
+    if len(limbs) > 2:
+        touching = [b for b, low, _ in ends if low - ground <= 0.25 * height]
+        raise RomocoError(f"{model_file}: {len(limbs)} limbs reach the ground ({', '.join(touching)}); "
+                          "romoco walks bipeds, which stand on two")
 
 
 def split_legs(tree: BodyTree, candidates: dict, notes: list[str]) -> tuple[dict, list[str], list]:
