@@ -108,6 +108,7 @@ def test_run_text_summary():
         (["run", "g1_walk", "--hardware", "--lcm-url", "nope://x"],
          'cannot open LCM on nope://x: LCM provider "nope" not found'),
         (["robot-sim", "g1_walk", "--lcm-url", "udpm://239.255.76.67:99999"], 'Bad multicast port "99999"'),
+        (["run", "bolt_walk", "--planner", "vimpc"], "bolt's feet are point feet"),
     ],
 )
 def test_bad_input_is_one_line_exit_2(args, words):

@@ -149,6 +149,9 @@ class VimpcPlanner(LeafSystem):
         self.adapts_timing = False  # what the loop wires (planners/registry.py)
         self.loop_inputs = ("kinematics", "gait_phase", "command", "mode")
         half = _sole_half_extent(robot)
+        if not half[0] > 0.0:
+            raise RomocoError(f"the VI-MPC plans each foot's wrench on a sole, and {robot.name}'s feet are "
+                              f"{robot.config.feet.type} feet: walk it on a foot-placement planner")
         self.mpc = SrbMpc(robot.total_mass, MpcWeights(np.array(config.q), np.array(config.r),
                                                        np.array(config.q_terminal)),
                           config.knots, config.dt, half[0], half[1],
