@@ -339,8 +339,6 @@ def _cmd_run(args) -> int:
         raise RomocoError("--teleop and --command exclude each other (the page gives the command)")
     if args.teleop and not traits(scenario.controller.name).walking:
         raise RomocoError(f"--teleop needs a walking controller, not '{scenario.controller.name}'")
-    output_dir(args.plot, "--plot")
-    output_file(args.record, "--record")
     summary = run_scenario(scenario, duration=args.duration, meshcat=live_meshcat(args.meshcat),
                            record=output_file(args.record, "--record"), progress=stderr_progress,
                            plot_dir=output_dir(args.plot, "--plot"), link=link,
