@@ -82,10 +82,12 @@ def _summary(process: subprocess.Popen, timeout: float, what: str) -> dict:
     return json.loads(lines[-1])
 
 
-def rehearse(scenario: str, duration: float, url: str, overlays: tuple[str, ...] = ()) -> dict:
-    """One rehearsal: ``{"robot": robot-sim's summary, "controller": run --hardware's summary}``."""
+def rehearse(scenario: str, duration: float, url: str, overlays: tuple[str, ...] = (),
+             robot_extra_s: float = RUN_EXTRA_S) -> dict:
+    """One rehearsal: ``{"robot": robot-sim's summary, "controller": run --hardware's summary}``;
+    the robot runs ``robot_extra_s`` longer than the controller (its own clock, paced at real time)."""
     extra = [a for name in overlays for a in ("--overlay", name)]
-    robot = _start("robot-sim", scenario, "--lcm-url", url, "--duration", f"{duration + RUN_EXTRA_S:g}",
+    robot = _start("robot-sim", scenario, "--lcm-url", url, "--duration", f"{duration + robot_extra_s:g}",
                    "--wait", f"{WAIT_S:g}", "--json", *extra)
     controller = _start("run", scenario, "--hardware", "--lcm-url", url, "--duration", f"{duration:g}",
                         "--json", *extra)
