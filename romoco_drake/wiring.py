@@ -312,6 +312,7 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
     With ``estop`` (a port of ROMOCO_ESTOP bytes) the controller's mode passes an
     :class:`EstopGate`."""
     period, offset, kin = 1.0 / scenario.controller.rate_hz, LINK_TICK_OFFSET, kinematics.kinematics_port
+    robot.walking_pose  # noqa: B018 (a walking height no pose reaches is a one-line error here)
     planner_system = _planner_system(scenario, robot, law)
     terrain = Terrain(scenario.terrain)
     steps = None if terrain.is_flat else TerrainSteps(robot, terrain, scenario.terrain.edge_margin)

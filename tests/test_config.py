@@ -49,6 +49,25 @@ def test_step_adaptation_without_a_reach_is_a_load_error(tmp_path, monkeypatch):
     assert not load_scenario(str(off)).planner.step_adaptation.enabled
 
 
+def test_a_walking_height_no_pose_reaches_is_a_one_line_error(tmp_path, monkeypatch):
+    """walking.z0 above what G1's legs reach (2.0 m against 0.65 m standing) walked it into a fall
+    at 0.48 s; building the walking loop now says why, naming the file and key."""
+    robots = tmp_path / "robots"
+    robots.mkdir()
+    data = yaml.safe_load((ROBOTS_DIR / "g1.yaml").read_text())
+    data["walking"]["z0"], data["name"] = 2.0, "g1_tall"
+    (robots / "g1_tall.yaml").write_text(yaml.safe_dump(data))
+    monkeypatch.setenv("ROMOCO_ROBOT_PATH", str(robots))
+    path = _write(tmp_path, "tall", _scenario(robot="g1_tall", controller={"name": "tscqp"},
+                                              planner={"name": "hlip"}))
+    scenario = load_scenario(str(path))
+    with pytest.raises(RomocoError) as info:
+        build_diagram(scenario)
+    message = str(info.value)
+    assert "\n" not in message and f"{robots / 'g1_tall.yaml'}: walking.z0: no standing pose" in message
+    assert "the nominal pose stands at 0.65 m" in message
+
+
 @pytest.mark.parametrize(
     "data, key, words",
     [

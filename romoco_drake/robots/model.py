@@ -418,6 +418,17 @@ class RobotModel:
 
         return solve_nominal_pose(self)
 
+    @functools.cached_property
+    def walking_pose(self):
+        """A standing pose with the CoM at ``walking.z0``, or the one-line error that no pose
+        reaches it: a z0 above what the legs reach walked G1 (z0 2.0) into a fall at 0.48 s
+        without a word of why. The walking loop asks for it when it is built."""
+        from romoco_drake.robots.nominal import solve_nominal_pose
+
+        z0 = self.config.walking.z0
+        same = abs(z0 - self.config.nominal.com_height) < 1e-9
+        return self.nominal if same else solve_nominal_pose(self, z0)
+
 
 @functools.cache
 def load_robot(name: str) -> RobotModel:

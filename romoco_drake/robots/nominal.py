@@ -71,35 +71,40 @@ def _add_stance_constraints(robot: RobotModel, ik: InverseKinematics) -> None:
         prog.AddLinearEqualityConstraint(q[i_f] - c.ratio * q[i_l] == 0.0)
 
 
-def solve_nominal_pose(robot: RobotModel) -> NominalPose:
-    """The standing pose of the module docstring, or a RomocoError naming what to change."""
+def solve_nominal_pose(robot: RobotModel, com_height: float | None = None) -> NominalPose:
+    """The standing pose of the module docstring, or a RomocoError naming what to change;
+    ``com_height`` instead of the nominal one: the walking height ``walking.z0``, which the
+    walking controllers hold the CoM at (:meth:`RobotModel.walking_pose`)."""
     plant, cfg = robot.plant, robot.config.nominal
+    key, height = ("nominal", cfg.com_height) if com_height is None else ("walking.z0", com_height)
     context = plant.CreateDefaultContext()
     ik = InverseKinematics(plant, with_joint_limits=True)
     q, prog, world = ik.q(), ik.get_mutable_prog(), plant.world_frame()
     _add_stance_constraints(robot, ik)
     com = prog.NewContinuousVariables(3, "com")
     prog.AddConstraint(ComPositionConstraint(plant, None, world, context), np.concatenate([q, com]))
-    prog.AddBoundingBoxConstraint([0.0, 0.0, cfg.com_height], [0.0, 0.0, cfg.com_height], com)
+    prog.AddBoundingBoxConstraint([0.0, 0.0, height], [0.0, 0.0, height], com)
 
     q_guess = plant.GetPositions(context).copy()
-    q_guess[robot.base_q_start + 6] = cfg.com_height
+    q_guess[robot.base_q_start + 6] = height
     for name, value in cfg.joint_guess.items():
         q_guess[plant.GetJointByName(name).position_start()] = value
     weights = np.ones(robot.nq)
     weights[robot.base_q_start:robot.base_q_start + 7] = 0.0
     prog.AddQuadraticErrorCost(np.diag(weights), q_guess, q)
     prog.SetInitialGuess(q, q_guess)
-    prog.SetInitialGuess(com, [0.0, 0.0, cfg.com_height])
+    prog.SetInitialGuess(com, [0.0, 0.0, height])
     result = Solve(prog)
     # SNOPT sometimes stops short of its optimality tolerance at a feasible point; the
     # pose only has to satisfy the constraints.
     violated = result.GetInfeasibleConstraintNames(prog, 1e-6)
     if not result.is_success() and violated:
+        fix = "check these and joint_guess" if com_height is None else (
+            f"the nominal pose stands at {cfg.com_height} m: a z0 the legs reach")
         raise RomocoError(
-            f"{robot.yaml_path}: nominal: no standing pose found by IK "
-            f"(com_height {cfg.com_height} m, foot_separation {cfg.foot_separation} m; "
-            f"violated: {', '.join(violated[:3])}); check these and joint_guess"
+            f"{robot.yaml_path}: {key}: no standing pose found by IK "
+            f"(com_height {height} m, foot_separation {cfg.foot_separation} m; "
+            f"violated: {', '.join(violated[:3])}); {fix}"
         )
     q_sol = result.GetSolution(q)
     quat = q_sol[robot.base_q_start:robot.base_q_start + 4]
