@@ -30,7 +30,7 @@ def numbers(text: str, flag: str) -> tuple[float, ...]:
 
 def count(value: int, flag: str, lo: int = 1, hi: int = 10_000_000) -> int:
     """An integer option within [``lo``, ``hi``], or one line saying what is wrong."""
-    if not lo <= value <= hi:
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
         raise RomocoError(f"{flag} must be an integer in [{lo}, {hi}], got {value}")
     return value
 

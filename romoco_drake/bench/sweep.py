@@ -23,6 +23,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+from romoco_drake.commands import count
 from romoco_drake.errors import RomocoError
 from romoco_drake.runner import run_scenario
 from romoco_drake.scenario import Scenario
@@ -64,8 +65,7 @@ class SweepOptions:
     address: str | None = None
 
     def __post_init__(self):
-        if not isinstance(self.workers, int) or not 1 <= self.workers <= 1024:
-            raise RomocoError(f"--workers must be an integer in [1, 1024], got {self.workers}")
+        count(self.workers, "--workers", 1, 1024)
         if self.uses_ray and importlib.util.find_spec("ray") is None:
             raise RomocoError(NO_RAY)
         if self.address is not None and self.address not in ("auto", "local"):
