@@ -65,6 +65,7 @@ STATUS_PERIOD = 0.01  # s, controller status messages on LCM links (for logs)
 # The slower periodic work on the hardware controller runs in ticks of its own, not in the ticks
 # that sample the logs: G1's hardware tick was 0.2 ms longer every 10 ms with the fall monitor
 # (the estimate's body poses), the status message and the logs in one tick (romoco bench realtime).
+# The monitor runs at its tick's instant, on the loop's evaluation of the estimate.
 MONITOR_TICKS, STATUS_TICKS = 2, 3
 
 
@@ -180,16 +181,24 @@ def build_diagram(scenario: Scenario, meshcat: Meshcat | None = None,
         monitor = plant_station.GetSubsystemByName("monitor")
         state_log = plant_station.GetSubsystemByName("truth_log")
     else:
-        monitor = builder.AddNamedSystem("monitor", FallMonitor(robot, terrain=Terrain(scenario.terrain),
-                                                                offset=MONITOR_TICKS * period))
-        builder.Connect(estimator.state_output, monitor.state_input)
-        state_log = estimate_log
+        monitor, state_log = _add_estimate_monitor(builder, scenario, robot, kinematics, period), estimate_log
     diagram = builder.Build()
     diagram.set_name(scenario.name or scenario.robot)
     logs = RunLogs([state_log, estimate_log, command_log] + (
         [] if walking is None else [walking.tick_log, walking.error_log, walking.momentum_log]))
     return BuiltDiagram(diagram, robot, station, monitor, state_log, estimate_log, kinematics, deadline,
                         command, walking, plant_station, robot_sim, estimator, command_log, logs)
+
+
+def _add_estimate_monitor(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel,
+                          kinematics: RobotKinematicsSystem, period: float) -> FallMonitor:
+    """The controller side's fall monitor (no simulated plant to watch): it watches the estimate
+    through the loop's own evaluation of it, at a tick's instant (``MONITOR_TICKS``)."""
+    monitor = builder.AddNamedSystem("monitor", FallMonitor(
+        robot, terrain=Terrain(scenario.terrain), offset=MONITOR_TICKS * period + LINK_TICK_OFFSET,
+        shared_kinematics=True))
+    builder.Connect(kinematics.kinematics_port, monitor.kinematics_input)
+    return monitor
 
 
 def _check_link(scenario: Scenario, meshcat: Meshcat | None, link: str, lcm: DrakeLcmInterface | None,

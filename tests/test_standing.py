@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from pydrake.systems.analysis import Simulator
 
 from romoco_drake.control.gravity import contact_gravity_compensation
 from romoco_drake.interfaces.monitor import FallMonitor, reach_bounds
@@ -61,6 +62,34 @@ def test_fall_monitor_detects_each_kind_of_fall():
     bad = x.copy()
     bad[0] = np.nan
     assert monitor.check(bad)[0] == "invalid_state"
+
+
+def test_fall_monitor_on_a_kinematics_port_records_what_it_records_on_the_state():
+    """The controller side's monitor reads the loop's evaluation of the estimate (its
+    ``kinematics`` input) instead of loading the state into a context of its own: over a run of
+    samples it records the same fall, time, heights and joint-speed counts."""
+    robot = load_robot("g1")
+    x = np.concatenate([robot.nominal.q, np.zeros(robot.nv)])
+    low, tilted, kneeling, fast = x.copy(), x.copy(), x.copy(), x.copy()
+    low[robot.base_q_start + 6] *= 0.4
+    tilted[robot.base_q_start:robot.base_q_start + 4] = [np.cos(0.45), np.sin(0.45), 0, 0]
+    kneeling[robot.base_q_start + 6] = 0.40
+    fast[robot.nq + robot.joint_v_index[3]] = 50.0  # beyond the knee's velocity limit
+    for state in (x, low, tilted, kneeling, fast):
+        summaries = []
+        for shared in (False, True):
+            monitor = FallMonitor(robot, shared_kinematics=shared)
+            simulator = Simulator(monitor)
+            context = simulator.get_mutable_context()
+            if shared:
+                monitor.kinematics_input.FixValue(context, RobotKinematics(robot, state))
+            else:
+                monitor.state_input.FixValue(context, state)
+            simulator.AdvanceTo(0.035)
+            summaries.append(monitor.summary(context))
+        assert summaries[0] == summaries[1]
+        assert summaries[0]["fell"] == (state is not x and state is not fast), summaries[0]
+    assert summaries[0]["joint_speed_over_limit"] == 1.0
 
 
 @pytest.mark.parametrize("name", ["g1", "cassie", "xo"])

@@ -9,8 +9,10 @@ replay is open loop, but the controller is deterministic: fed the messages its o
 received, it computes that run's ticks again, and the report says how closely its motor
 commands match the logged ones.
 
-A tick is every simulator event from the tick's instant to half a period later: the messages'
-delivery and decoding, the controller's updates, the motor command's publication. Ticks are
+A tick is every simulator event after the last tick's motor command up to this tick's: the step
+to the tick, the messages' delivery and decoding, the controller's updates, the command's
+publication (``PUBLISH_DELAY`` after the tick). A robot's loop runs exactly these steps; a replay
+that stopped anywhere else would add a step of its own to each tick (about 40 µs on G1). Ticks are
 released at the control rate on the wall clock (a robot's loop sleeps between ticks; the
 caches and clocks it meets are an idle loop's, not a back-to-back benchmark's). A tick misses
 its deadline when it takes longer than the period. The deadline numbers come from a replay
@@ -52,6 +54,7 @@ from romoco_drake.interfaces.lcm_codec import (
     PROPRIOCEPTION_CHANNEL,
     decode_motor_command,
 )
+from romoco_drake.interfaces.link import PUBLISH_DELAY
 from romoco_drake.rom import step_qp_kernel
 from romoco_drake.runner import add_overlay_arg, run_scenario, run_summary, scenario_from_args
 from romoco_drake.scenario import Scenario
@@ -174,7 +177,7 @@ def _replay(scenario: Scenario, events: list[tuple[float, str, bytes]], ticks: i
             if timer is not None:
                 timer.lap()
             start = time.perf_counter_ns()
-            simulator.AdvanceTo(t + 0.5 * period)
+            simulator.AdvanceTo(t + PUBLISH_DELAY)
             tick_ns.append(time.perf_counter_ns() - start)
             if timer is not None:
                 parts.append(timer.lap())
