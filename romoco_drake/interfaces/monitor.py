@@ -49,8 +49,9 @@ class FallMonitor(LeafSystem):
 
     ``shared_kinematics``: the state comes evaluated on the ``kinematics`` port, as the controller
     side's watch on its estimate gets it from the loop's own evaluation: at the loop's tick the
-    body poses are then read from the context the tick already loaded, not from a second one
-    (G1's hardware tick was 0.09 ms longer in the ticks the monitor ran; romoco bench realtime).
+    body poses are then read from the context the tick already loaded, not from a second one (G1's
+    hardware ticks with the monitor were 0.10 ms longer than the plainest, now 0.06; romoco bench
+    realtime).
     """
 
     def __init__(self, robot: RobotModel, period: float = 0.01, height_fraction: float = 0.5,
