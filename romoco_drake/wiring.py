@@ -366,7 +366,7 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
         if name in planner.loop_inputs:
             builder.Connect(embedding.GetOutputPort(name), planner.GetInputPort(name))
     momentum_log, horizon_log = _add_loop_logs(builder, scenario, robot, kin, embedding, planner, heading,
-                                               rom_state)
+                                               rom_state, machine)
     return WalkingLoop(machine, planner, embedding, controller,
                        LogVectorOutput(controller.tick_ms_port, builder, period),
                        LogVectorOutput(embedding.tracking_error_port, builder, STATE_LOG_PERIOD),
@@ -393,7 +393,7 @@ EMBEDDING_SIGNALS = ("swing_reference", "swing_surface")
 
 
 def _add_loop_logs(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, kin, embedding, planner,
-                   heading, rom_state) -> tuple[VectorLogSink | None, VectorLogSink | None]:
+                   heading, rom_state, machine) -> tuple[VectorLogSink | None, VectorLogSink | None]:
     """The momentum record (controllers that regulate momentum) and the VI-MPC's inertia horizon."""
     period = 1.0 / scenario.controller.rate_hz
     momentum_log = None
@@ -401,7 +401,7 @@ def _add_loop_logs(builder: DiagramBuilder, scenario: Scenario, robot: RobotMode
         recorder = builder.AddNamedSystem("momentum_log", MomentumLog(robot, period, LINK_TICK_OFFSET))
         for source, port in ((kin, recorder.kinematics_port),
                              (embedding.task_references_port, recorder.task_references_port),
-                             (planner.planner_output_port, recorder.planner_output_port),
+                             (machine.gait_phase_port, recorder.gait_phase_port),
                              (heading.command_port, recorder.command_port),
                              (rom_state.rom_state_port, recorder.rom_state_port)):
             builder.Connect(source, port)

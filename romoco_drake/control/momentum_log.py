@@ -21,7 +21,7 @@ from romoco_drake.embedding.references import TaskReferences
 from romoco_drake.modes import Mode
 from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_value
 from romoco_drake.robots.model import RobotModel
-from romoco_drake.rom.types import COMMAND_SIZE, ROM_STATE_SIZE, PlannerOutput
+from romoco_drake.rom.types import COMMAND_SIZE, GAIT_PHASE_SIZE, ROM_STATE_SIZE
 
 COMMAND_ON = 1e-3  # m/s: a commanded |vx| or |vy| above this is walking somewhere
 
@@ -84,12 +84,19 @@ class MomentumLog(LeafSystem):
     |---|---|---|---|
     | ``kinematics`` | in | abstract | :class:`~romoco_drake.robots.kinematics.RobotKinematics` of the state |
     | ``task_references`` | in | abstract | :class:`~romoco_drake.embedding.references.TaskReferences` |
-    | ``planner_output`` | in | abstract | :class:`~romoco_drake.rom.types.PlannerOutput` |
+    | ``gait_phase`` | in | 2 | the state machine's stance (+1 left, −1 right) and time in step [s] |
     | ``command`` | in | 6 | the walking command from the heading hold (before a velocity trim) |
     | ``rom_state`` | in | 6 | [p, L_c] about the stance contact frame {c} (the planner's input) |
     | ``record`` | out | 26 | the tick's packed :class:`MomentumRecord`, held |
 
-    One periodic discrete update every ``period`` s at ``offset``, the controller's tick.
+    One periodic discrete update every ``period`` s at ``offset``, the controller's tick. The step-end
+    prediction is the plan the references follow (``TaskReferences.plan``), the one the embedding
+    latched at the tick: reading the planner's port after the tick's updates made the planner plan
+    a second time every walking tick (XO: 1.67 plans a tick against 1.0; romoco bench realtime).
+    At the tick the state machine ends a step the references still follow it (the embedding
+    latches the next step at the next tick): that sample is recorded as the next step's start,
+    at the state machine's time in step and with no prediction, which keeps it out of the
+    ending step's figures (its ROM state is about the new stance already).
     """
 
     def __init__(self, robot: RobotModel, period: float, offset: float = 0.0):
@@ -98,17 +105,17 @@ class MomentumLog(LeafSystem):
         self.kinematics_port = self.DeclareAbstractInputPort("kinematics", kinematics_model_value(robot))
         self.task_references_port = self.DeclareAbstractInputPort(
             "task_references", AbstractValue.Make(placeholder_references(robot)))
-        self.planner_output_port = self.DeclareAbstractInputPort(
-            "planner_output", AbstractValue.Make(PlannerOutput.placeholder()))
+        self.gait_phase_port = self.DeclareVectorInputPort("gait_phase", GAIT_PHASE_SIZE)
         self.command_port = self.DeclareVectorInputPort("command", COMMAND_SIZE)
         self.rom_state_port = self.DeclareVectorInputPort("rom_state", ROM_STATE_SIZE)
         self._record = self.DeclareDiscreteState(np.full(MOMENTUM_LOG_SIZE, np.nan))
         self.record_port = self.DeclareStateOutputPort("record", self._record)
         self.DeclarePeriodicDiscreteUpdateEvent(period, offset, self._update)
 
-    def record(self, kin: RobotKinematics, refs: TaskReferences, plan: PlannerOutput, command: np.ndarray,
+    def record(self, kin: RobotKinematics, refs: TaskReferences, phase: np.ndarray, command: np.ndarray,
                rom_state: np.ndarray) -> MomentumRecord:
-        """The record of one tick (NaN where a quantity does not apply)."""
+        """The record of one tick (NaN where a quantity does not apply; ``phase``: the state
+        machine's gait phase, class docstring)."""
         if not kin.finite:
             return MomentumRecord(command=command[:2].copy())
         m = self.robot.total_mass
@@ -127,16 +134,21 @@ class MomentumLog(LeafSystem):
                     "l_com": h[:3], "momentum": h[3:], "momentum_desired": momentum_desired}
         if not (refs.mode == Mode.WALKING and refs.domain.single_support):
             return MomentumRecord(**measured)
+        plan, stance = refs.plan, 1.0 if refs.stance_side == "left" else -1.0
         predicted = np.full(2, np.nan)
-        if plan.valid and plan.stance_side == refs.stance_side:
-            predicted[:] = -m * plan.pre_impact[1, 1], m * plan.pre_impact[0, 1]
-        return MomentumRecord(1.0 if refs.stance_side == "left" else -1.0, plan.t_ss - plan.time_to_touchdown,
+        if phase[0] != stance:  # the step the references follow has ended
+            t_in_step = float(phase[1])
+        else:
+            t_in_step = plan.t_ss - plan.time_to_touchdown
+            if plan.valid and plan.stance_side == refs.stance_side:
+                predicted[:] = -m * plan.pre_impact[1, 1], m * plan.pre_impact[0, 1]
+        return MomentumRecord(stance, t_in_step,
                               l_contact=rom_state[3:].copy(), com_in_contact=rom_state[:2].copy(),
                               l_contact_predicted=predicted, **measured)
 
     def _update(self, context, discrete_state) -> None:
         record = self.record(self.kinematics_port.Eval(context), self.task_references_port.Eval(context),
-                             self.planner_output_port.Eval(context), self.command_port.Eval(context),
+                             self.gait_phase_port.Eval(context), self.command_port.Eval(context),
                              self.rom_state_port.Eval(context))
         discrete_state.get_mutable_vector(self._record).SetFromVector(record.pack())
 

@@ -90,6 +90,9 @@ class TaskReferences(SharedValue):
     # The moment (N·m, world x, y) the stance forces are to have about the sole centre: the weight
     # at the plan's shifted CoP (PlannerOutput.cop_shift), or None (the pivot).
     pivot_moment: np.ndarray | None = None
+    # The plan these references follow (walking), else None: what a record of the tick reads, so
+    # that it need not evaluate the planner again after the tick's updates.
+    plan: PlannerOutput | None = None
 
     @functools.cached_property
     def com_plan(self) -> np.ndarray | None:
@@ -331,8 +334,8 @@ class EmbeddingCore:
         if single and swing.com_start is not None:
             flow = (swing.com_start, tau, plan.com_height, self.robot.total_mass)
             shift = swing.cop_shift, swing.cop_reach
-        return self._pack(Mode.WALKING, domain, stance, out, y_d, yd_d, ydd_d, active, kin, flow, plan.mpc,
-                          plan.step_bounded, *shift)
+        return self._pack(Mode.WALKING, domain, stance, out, y_d, yd_d, ydd_d, active, kin, flow, plan,
+                          *shift)
 
     def _follow_ground(self, kin: RobotKinematics, swing: SwingState, plan: PlannerOutput, tau: float,
                        t_ss: float, y_d, yd_d, ydd_d) -> None:
@@ -393,13 +396,14 @@ class EmbeddingCore:
                           np.zeros(k), np.ones(k, dtype=bool), kin)
 
     def _pack(self, mode: Mode, domain: Domain, stance: str, out: Output, y_d, yd_d, ydd_d, active,
-              kin: RobotKinematics, com_flow: tuple | None = None,
-              mpc: MpcReference | None = None, recovering: bool = False, cop_shift: float = 0.0,
-              cop_reach: float = 0.0) -> TaskReferences:
-        """The references of one tick; ``cop_shift``: the stance CoP's planned shift along the stance
-        heading in single support (``com_flow``'s), the pivot moment's target; ``cop_reach``: the
-        largest this step has planned, which tightens the stance foot's torsion limit for the rest
-        of it (the limit does not loosen as the shift eases off mid-step)."""
+              kin: RobotKinematics, com_flow: tuple | None = None, plan: PlannerOutput | None = None,
+              cop_shift: float = 0.0, cop_reach: float = 0.0) -> TaskReferences:
+        """The references of one tick; ``plan``: the walking plan followed (its MPC reference and
+        whether its step was bounded are the references' too); ``cop_shift``: the stance CoP's
+        planned shift along the stance heading in single support (``com_flow``'s), the pivot
+        moment's target; ``cop_reach``: the largest this step has planned, which tightens the stance
+        foot's torsion limit for the rest of it (the limit does not loosen as the shift eases off
+        mid-step)."""
         holonomic = self.contact.constraints(kin, domain)
         blocks = [self.contact.friction_constraints(kin, side, cop_reach) for side in domain.feet]
         if len(blocks) == 1:
@@ -416,8 +420,9 @@ class EmbeddingCore:
         if cop_shift != 0.0:
             heading, weight = com_flow[0][2], self.robot.total_mass * GRAVITY
             moment = cop_shift * weight * np.array([math.sin(heading), -math.cos(heading)])
+        mpc, recovering = (None, False) if plan is None else (plan.mpc, plan.step_bounded)
         return TaskReferences(mode, domain, stance, out.names, out.y, out.J, out.Jdot_v, y_d, yd_d, ydd_d,
-                              active, holonomic, n_f, A_f, b_f, com_flow, mpc, recovering, moment)
+                              active, holonomic, n_f, A_f, b_f, com_flow, mpc, recovering, moment, plan)
 
 
 def alip_com_flow(start: tuple[float, ...], tau: float, height: float, mass: float) -> np.ndarray:
