@@ -8,6 +8,7 @@ import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.tree import JacobianWrtVariable, MultibodyForces
 from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import LeafSystem, UnrestrictedUpdateEvent, WitnessFunctionDirection
 from walk_support import closed_loop
 
 from romoco_drake import runner
@@ -162,6 +163,65 @@ def test_closed_loop_plans_once_per_tick(monkeypatch):
     simulator.AdvanceTo(2.0 + ticks / scenario.controller.rate_hz)
     assert ticks <= len(set(plan_times)) <= ticks + 1
     assert len(plan_times) == len(set(plan_times))
+
+
+def test_the_momentum_loop_evaluates_the_plan_once_per_walking_tick(monkeypatch):
+    """XO's momentum log records the step-end prediction of the plan the references follow, so
+    nothing evaluates the planner's port again after the tick's updates. It fails on the old log,
+    which read the port: two evaluations a walking tick."""
+    plan_times = []
+    original = FootPlacementPlanner._calc_plan
+
+    def counting(self, context, value):
+        plan_times.append(round(context.get_time(), 6))
+        original(self, context, value)
+
+    monkeypatch.setattr(FootPlacementPlanner, "_calc_plan", counting)
+    scenario = load_scenario("xo_walk")
+    built, simulator, root, _ = closed_loop(scenario)
+    simulator.AdvanceTo(3.0)  # standing, then walking from 2 s
+    plan_times.clear()
+    ticks = 250  # 0.5 s: a step switch at least
+    simulator.AdvanceTo(3.0 + ticks / scenario.controller.rate_hz)
+    assert built.walking.state_machine.schedule(built.walking.state_machine.GetMyContextFromRoot(root)).mode \
+        == Mode.WALKING
+    assert ticks <= len(plan_times) <= ticks + 1
+
+
+def test_a_python_system_s_own_witness_function_still_triggers_its_event():
+    """romoco_drake names a C++ method as LeafSystem.DoGetWitnessFunctions, so that pybind11 stops
+    looking for a Python override at every step (romoco_drake/__init__.py); a system that defines
+    its own still has it called: a falling point's witness at zero height stops it there."""
+
+    class Falling(LeafSystem):
+        """Height x₀ falling at 1 m/s until its witness sets the landed flag x₁."""
+
+        def __init__(self):
+            super().__init__()
+            self.DeclareContinuousState(2)
+            self.crossing = self.MakeWitnessFunction(
+                "ground", WitnessFunctionDirection.kPositiveThenNonPositive,
+                lambda context: context.get_continuous_state_vector().GetAtIndex(0),
+                UnrestrictedUpdateEvent(self._land))
+
+        def DoCalcTimeDerivatives(self, context, derivatives):
+            landed = context.get_continuous_state_vector().GetAtIndex(1)
+            derivatives.get_mutable_vector().SetFromVector([0.0 if landed else -1.0, 0.0])
+
+        def DoGetWitnessFunctions(self, context):
+            return [self.crossing]
+
+        def _land(self, context, event, state):
+            state.get_mutable_continuous_state().get_mutable_vector().SetFromVector([0.0, 1.0])
+
+    system = Falling()
+    simulator = Simulator(system)
+    simulator.get_mutable_context().SetAccuracy(1e-6)  # witness localisation needs one
+    simulator.get_mutable_context().SetContinuousState([1.0, 0.0])
+    simulator.AdvanceTo(0.5)
+    assert simulator.get_context().get_continuous_state_vector().GetAtIndex(0) == pytest.approx(0.5)
+    simulator.AdvanceTo(2.0)
+    assert simulator.get_context().get_continuous_state_vector().CopyToVector() == pytest.approx([0.0, 1.0])
 
 
 def test_the_link_controller_adapts_a_step_once_per_tick(monkeypatch):
