@@ -54,7 +54,6 @@ _SINGLE_SUPPORT = {"left": Domain.LEFT, "right": Domain.RIGHT}
 COP_MARGIN = 0.01
 
 
-
 @dataclass(frozen=True)
 class TaskReferences(SharedValue):
     """Everything a whole-body controller needs for one tick.
@@ -90,9 +89,7 @@ class TaskReferences(SharedValue):
     # The moment (N·m, world x, y) the stance forces are to have about the sole centre: the weight
     # at the plan's shifted CoP (PlannerOutput.cop_shift), or None (the pivot).
     pivot_moment: np.ndarray | None = None
-    # The plan these references follow (walking), else None: what a record of the tick reads, so
-    # that it need not evaluate the planner again after the tick's updates.
-    plan: PlannerOutput | None = None
+    plan: PlannerOutput | None = None  # the plan followed (walking): a tick's record reads it here
 
     @functools.cached_property
     def com_plan(self) -> np.ndarray | None:
@@ -399,11 +396,9 @@ class EmbeddingCore:
               kin: RobotKinematics, com_flow: tuple | None = None, plan: PlannerOutput | None = None,
               cop_shift: float = 0.0, cop_reach: float = 0.0) -> TaskReferences:
         """The references of one tick; ``plan``: the walking plan followed (its MPC reference and
-        whether its step was bounded are the references' too); ``cop_shift``: the stance CoP's
-        planned shift along the stance heading in single support (``com_flow``'s), the pivot
-        moment's target; ``cop_reach``: the largest this step has planned, which tightens the stance
-        foot's torsion limit for the rest of it (the limit does not loosen as the shift eases off
-        mid-step)."""
+        step bound are the references' too); ``cop_shift``: the stance CoP's planned shift along the
+        heading in single support, the pivot moment's target; ``cop_reach``: the largest this step
+        has planned, which tightens the stance foot's torsion limit for the rest of the step."""
         holonomic = self.contact.constraints(kin, domain)
         blocks = [self.contact.friction_constraints(kin, side, cop_reach) for side in domain.feet]
         if len(blocks) == 1:
@@ -420,9 +415,9 @@ class EmbeddingCore:
         if cop_shift != 0.0:
             heading, weight = com_flow[0][2], self.robot.total_mass * GRAVITY
             moment = cop_shift * weight * np.array([math.sin(heading), -math.cos(heading)])
-        mpc, recovering = (None, False) if plan is None else (plan.mpc, plan.step_bounded)
         return TaskReferences(mode, domain, stance, out.names, out.y, out.J, out.Jdot_v, y_d, yd_d, ydd_d,
-                              active, holonomic, n_f, A_f, b_f, com_flow, mpc, recovering, moment, plan)
+                              active, holonomic, n_f, A_f, b_f, com_flow, None if plan is None else plan.mpc,
+                              plan is not None and plan.step_bounded, moment, plan)
 
 
 def alip_com_flow(start: tuple[float, ...], tau: float, height: float, mass: float) -> np.ndarray:
