@@ -65,7 +65,8 @@ def damping_command(robot: RobotModel, x: np.ndarray) -> np.ndarray:
 
 def command_torque(robot: RobotModel, command: np.ndarray, x: np.ndarray) -> np.ndarray:
     """τ the motor command gives at state x, clipped to the effort limits."""
-    q_d, v_d, tau_ff, kp, kd = command.reshape(5, robot.nu)
+    blocks = command.reshape(5, robot.nu)
+    q_d, v_d, tau_ff, kp, kd = blocks[0], blocks[1], blocks[2], blocks[3], blocks[4]
     if not (kp.any() or kd.any()):  # a torque command
         return np.clip(tau_ff, -robot.effort_limits, robot.effort_limits)
     if not np.isfinite(x).all():

@@ -149,7 +149,7 @@ class OutputEmbedding(LeafSystem):
             if not isinstance(new, StandState):
                 self._count_step(context, state, swing)
                 new = self.core.start_standing(kin, context.get_time())
-            sign, tau = self.gait_phase_port.Eval(context)
+            sign, tau = self.gait_phase_port.Eval(context).tolist()
             if tau < 0.0 and new.shift is None:  # a weight shift before the first step began
                 new = self.core.start_shift(new, kin, side_from_sign(sign), context.get_time())
         elif mode != Mode.WALKING:
@@ -171,7 +171,7 @@ class OutputEmbedding(LeafSystem):
     def _current_swing(self, context) -> tuple[SwingState | None, float]:
         """The latched swing if it is this step's (else None), and the time into the step."""
         swing = self.swing_state(context)
-        sign, tau = self.gait_phase_port.Eval(context)
+        sign, tau = self.gait_phase_port.Eval(context).tolist()
         if (swing is None or swing.trajectory is None or swing.stance_side != side_from_sign(sign)
                 or abs(swing.step_start - (context.get_time() - tau)) > 1e-6):
             return None, float(tau)

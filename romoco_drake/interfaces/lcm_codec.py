@@ -305,7 +305,7 @@ def _doubles(data: bytes, lcm_type, header: str, count: int, tail: int = 0) -> t
 
 def _unit_or_none(quaternion: np.ndarray) -> np.ndarray | None:
     """``quaternion`` normalised as the generated path does, or None beyond the norm tolerance."""
-    norm = math.hypot(*quaternion)
+    norm = math.hypot(*quaternion.tolist())
     return quaternion / norm if abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE else None
 
 

@@ -174,7 +174,7 @@ class Inbox:
         if not data or data == context.get_abstract_state(int(self.seen)).get_value():
             return True
         state.get_mutable_abstract_state(int(self.seen)).set_value(data)
-        utime, _, _ = context.get_discrete_state(self.meta).value()
+        utime = context.get_discrete_state(self.meta).GetAtIndex(0)
         try:
             msg_utime, values = self._decoded(data)
         except MessageRejected:
@@ -188,14 +188,14 @@ class Inbox:
 
     def fresh(self, context, state, timeout: float) -> bool:
         """Whether, after this update's ``take``, a message arrived within ``timeout``."""
-        _, arrival, received = state.get_discrete_state().get_vector(int(self.meta)).value()
+        _, arrival, received = state.get_discrete_state().get_vector(int(self.meta)).value().tolist()
         return bool(received) and context.get_time() - arrival <= timeout
 
     def age(self, context, state=None) -> float:
         """Time since the last good message arrived (inf before the first); ``state``: after
         this update's ``take``."""
         source = context if state is None else state
-        _, arrival, received = source.get_discrete_state().get_vector(int(self.meta)).value()
+        _, arrival, received = source.get_discrete_state().get_vector(int(self.meta)).value().tolist()
         return context.get_time() - arrival if received else np.inf
 
 

@@ -149,7 +149,8 @@ class BlindPredictor:
         catch-up, or starts, steps or ends the prediction (the receiver's docstring)."""
         blind, missed = self.current(context), context.get_abstract_state(int(self._missed)).get_value()
         abstract = state.get_mutable_abstract_state
-        _, arrival, received = state.get_discrete_state().get_vector(int(self.proprioception.meta)).value()
+        meta = state.get_discrete_state().get_vector(int(self.proprioception.meta))
+        _, arrival, received = meta.value().tolist()
         if not received or arrival == context.get_time():
             if blind is not None:
                 abstract(int(self._blind)).set_value(None)

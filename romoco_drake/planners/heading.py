@@ -15,7 +15,7 @@ def base_yaw(robot: RobotModel, x: np.ndarray) -> float | np.ndarray:
     """Heading of the floating base (rad) from its quaternion in state ``x`` ((nq+nv,) or one
     state per column)."""
     i = robot.base_q_start
-    w, qx, qy, qz = x[i:i + 4]
+    w, qx, qy, qz = x[i], x[i + 1], x[i + 2], x[i + 3]  # one state or a row each
     return np.arctan2(2.0 * (w * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
 
 
