@@ -269,7 +269,8 @@ def _check_controller(scenario: Scenario, where: str | Path) -> None:
     """A controller term that cannot act is an error, not a silent no-op: a point foot carries a
     force only, so there is no centre of pressure for the ankle strategy to move; the hip strategy
     ``when: recovering`` acts only while a step adapter bounds the step, and ``target: mpc`` only
-    beside a wrench MPC."""
+    beside a wrench MPC; the locked joints' recovery hold needs the adapter, the hip strategy to
+    swing them and locked joints."""
     momentum = getattr(scenario.controller, "angular_momentum", None)
     adapts = isinstance(scenario.planner, FootPlacementConfig) and scenario.planner.step_adaptation.enabled
     if momentum is not None and momentum.weight > 0.0 and momentum.when == "recovering" and not adapts:
@@ -279,6 +280,17 @@ def _check_controller(scenario: Scenario, where: str | Path) -> None:
             and not isinstance(scenario.planner, VimpcConfig)):
         raise ConfigError(where, "controller.angular_momentum.target", "'mpc' needs a wrench MPC's plan "
                           "(planner: {name: vimpc}), which this scenario does not have")
+    hold = getattr(scenario.controller, "locked_hold", None)
+    if hold is not None and hold.recovery is not None:
+        key = "controller.locked_hold.recovery"
+        if not adapts:
+            raise ConfigError(where, key, "needs the planner's step adaptation (planner.step_adaptation."
+                              "enabled), which tells when a recovery's first step cannot go toward the push")
+        if momentum is None or momentum.weight <= 0.0:
+            raise ConfigError(where, key, "needs the angular-momentum term (controller.angular_momentum."
+                              "weight > 0), which swings the locked joints it loosens")
+        if not load_robot_config(scenario.robot).locked_joints:
+            raise ConfigError(where, key, f"robot '{scenario.robot}' has no locked joints to loosen")
     ankle = getattr(scenario.controller, "ankle", None)
     if ankle is not None and ankle.gain > 0.0 and load_robot_config(scenario.robot).feet.type == "point":
         raise ConfigError(where, "controller.ankle.gain", f"robot '{scenario.robot}' has point feet: they "

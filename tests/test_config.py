@@ -23,6 +23,9 @@ def _write(tmp_path, name, data):
     return path
 
 
+_HOLD = {"kp": 50.0, "kd": 14.0, "weight": 0.1}  # a locked_hold.recovery
+
+
 def _scenario(**overrides):
     data = {"robot": "g1", "duration_s": 1.0, "controller": {"name": "standing", "rate_hz": 500.0}}
     data.update(overrides)
@@ -95,6 +98,22 @@ def test_a_walking_height_no_pose_reaches_is_a_one_line_error(tmp_path, monkeypa
          "controller.angular_momentum.target", "'mpc' needs a wrench MPC's plan"),
         (_scenario(controller={"name": "tscqp", "locked_hold": {"kp": -1.0}}), "controller.locked_hold.kp",
          "must be in"),
+        (_scenario(controller={"name": "tscqp", "locked_hold": {"recovery": {**_HOLD, "weight": -1.0}},
+                               "angular_momentum": {"weight": 30.0}}, planner={"name": "hlip"}),
+         "controller.locked_hold.recovery.weight", "must be in"),
+        (_scenario(controller={"name": "tscqp", "locked_hold": {"recovery": {"kp": 50.0, "kd": 14.0}}}),
+         "controller.locked_hold.recovery.weight", "missing required key"),
+        (_scenario(controller={"name": "tscqp", "locked_hold": {"recovery": _HOLD},
+                               "angular_momentum": {"weight": 30.0}},
+                   planner={"name": "hlip", "step_adaptation": {"enabled": False}}),
+         "controller.locked_hold.recovery", "needs the planner's step adaptation"),
+        (_scenario(controller={"name": "tscqp", "locked_hold": {"recovery": _HOLD}},
+                   planner={"name": "hlip"}),
+         "controller.locked_hold.recovery", "needs the angular-momentum term"),
+        (_scenario(robot="cassie", planner={"name": "hlip"},
+                   controller={"name": "tscqp", "locked_hold": {"recovery": _HOLD},
+                               "angular_momentum": {"weight": 30.0}}),
+         "controller.locked_hold.recovery", "robot 'cassie' has no locked joints to loosen"),
         (_scenario(controller={"name": "mpc"}), "controller.name", "unknown controller 'mpc'"),
         (_scenario(planner={"name": "lipm"}), "planner.name", "unknown planner 'lipm' (known: alip, hlip"),
         (_scenario(planner={"name": "alip_general", "gain": "lqr"}), "planner.gain", "supports gains"),

@@ -254,7 +254,7 @@ def test_xo_walks_forward_then_sideways_like_the_alip_template():
 
 def test_alip_com_flow_integrates_the_alip_model():
     """The CoM plan: the flow of ṗ = L_c/(mH) (lateral sign flipped), L̇_c = m g p in {c}, mapped to world."""
-    from romoco_drake.embedding.references import alip_com_flow
+    from romoco_drake.rom.alip import alip_com_flow
 
     m, H, g = 150.0, 1.0, 9.81
     start = (0.3, -0.2, 0.4, 0.05, 0.02, -0.12, 20.0, 35.0)  # origin x, y, heading, τ₀, p_x, p_y, L_cx, L_cy

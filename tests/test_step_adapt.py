@@ -52,6 +52,7 @@ def test_reachable_plan_passes_unchanged(law_name):
     np.testing.assert_allclose(adapted.swing_target, plan.swing_target, atol=1e-9)
     assert adapted.t_ss == pytest.approx(plan.t_ss, abs=1e-9)
     assert adapted.timing_adapted and not plan.timing_adapted
+    assert not (adapted.step_bounded or adapted.step_across)
 
 
 @pytest.mark.parametrize("law_name", foot_placement_laws())
@@ -76,6 +77,7 @@ def test_outward_push_lands_earlier_at_the_bound(law_name):
     assert plan.swing_target[1] < -BOUNDS.lateral_max  # the law alone asks beyond reach
     assert adapted.swing_target[1] == pytest.approx(-BOUNDS.lateral_max)
     assert adapted.t_ss < plan.t_ss - 0.03
+    assert adapted.step_bounded and not adapted.step_across  # bounded, but toward the push
 
 
 def test_inward_push_never_crosses_and_steps_early():
@@ -85,6 +87,21 @@ def test_inward_push_never_crosses_and_steps_early():
     assert plan.swing_target[1] > -BOUNDS.lateral_min
     assert adapted.swing_target[1] == pytest.approx(-BOUNDS.lateral_min)
     assert adapted.t_ss < plan.t_ss - 0.03
+    assert adapted.step_bounded and adapted.step_across
+
+
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_a_law_step_across_the_stance_foot_is_flagged_until_touchdown(side):
+    """The law's step across the stance foot (inside the no-crossing band) is flagged before and
+    after the commit point, on either stance; a step within the band's edge is not."""
+    sign = 1.0 if side == "left" else -1.0
+    state = rom_state((0.0, -sign * 0.05), (0.4, sign * 0.9))
+    for tau in (0.05, 0.28):  # before and after 0.85 of the 0.3 s step
+        plan, adapted = _plan_and_adapt("hlip", state, side, tau)
+        assert -sign * plan.swing_target[1] < BOUNDS.lateral_min
+        assert adapted.step_across and adapted.step_bounded
+    edge = dataclasses.replace(plan, swing_target=np.array([0.1, -sign * BOUNDS.lateral_min, 0.0]))
+    assert not ADAPTER.adapt(edge, state, 0.05).step_across
 
 
 def test_late_step_lands_where_the_swing_can_still_reach():

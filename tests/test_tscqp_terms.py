@@ -20,7 +20,7 @@ from romoco_drake.control.terms.mpc_tracking import MpcComTracking, MpcTrackingC
 from romoco_drake.control.terms.pivot_moment import PivotMoment, PivotMomentConfig
 from romoco_drake.control.terms.regularization import Regularization, RegularizationConfig
 from romoco_drake.control.terms.tasks import TaskTracking
-from romoco_drake.control.tscqp import LockedHold, TscQp, TscqpConfig
+from romoco_drake.control.tscqp import LockedHold, RecoveryHold, TscQp, TscqpConfig
 from romoco_drake.embedding.outputs import sole_frame
 from romoco_drake.embedding.references import EmbeddingCore
 from romoco_drake.errors import RomocoError
@@ -227,6 +227,24 @@ def test_locked_hold_sets_the_locked_joints_task_gains_and_weight():
     np.testing.assert_array_equal(tasks.kd[k_out:], 9.0)
     np.testing.assert_array_equal(tasks.weight[k_out:], 0.03)
     np.testing.assert_array_equal(tasks.weight[:k_out], default.weight[:k_out])  # the outputs' as they were
+
+
+def test_the_recovery_hold_applies_only_while_the_upper_body_helps():
+    """locked_hold.recovery sets the locked joints' task while TaskReferences.upper_body; the hold
+    stays the shipped one otherwise, and without a recovery hold upper_body changes nothing."""
+    robot, contact, kin, refs, ctx = _tick("walking")
+    k_out = int(np.count_nonzero(refs.active))
+    held = TscQp(robot, contact, TscqpConfig(locked_hold=LockedHold(recovery=RecoveryHold(50.0, 14.0, 0.1))))
+    helping = dataclasses.replace(refs, upper_body=True)
+    tasks = held.context(kin, helping).tasks
+    np.testing.assert_array_equal(tasks.kp[k_out:], 50.0)
+    np.testing.assert_array_equal(tasks.kd[k_out:], 14.0)
+    np.testing.assert_array_equal(tasks.weight[k_out:], 0.1)
+    np.testing.assert_array_equal(tasks.weight[:k_out], ctx.tasks.weight[:k_out])
+    for qp, r in ((held, refs), (TscQp(robot, contact), helping)):
+        shipped = qp.context(kin, r).tasks
+        for name in ("kp", "kd", "weight"):
+            np.testing.assert_array_equal(getattr(shipped, name), getattr(ctx.tasks, name))
 
 
 def test_joint_limit_bounds_stop_each_leg_joint_at_its_limits_within_the_horizon():

@@ -451,9 +451,11 @@ def test_a_fall_is_scored_up_to_the_fall():
     robot = load_robot("g1")
     s = with_overrides(load_scenario("g1_walk"), command="0:0,0,0;0.5:0.3,0,0")
     # The overreaching law must fell the robot: step adaptation would bound its steps (and without
-    # it the hip strategy, which acts while recovering, has nothing to act on).
+    # it the hip strategy and the locked joints' recovery hold, which act while recovering, have
+    # nothing to act on).
     s.planner.step_adaptation.enabled = False
     s.controller.angular_momentum.weight = 0.0
+    s.controller.locked_hold.recovery = None
     summary = run_scenario(s, duration=6.0, law=_OverreachingLaw(PlannerParams(mass=robot.total_mass)))
     assert summary["fell"] and summary["fall_time_s"] < 6.0
     assert summary["base_height_drift_m"] < robot.nominal.base_height

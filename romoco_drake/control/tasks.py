@@ -92,8 +92,9 @@ class TaskStack:
     """Builds :class:`Tasks` from references: active outputs, then the locked joints."""
 
     def __init__(self, robot: RobotModel, gains: tuple[TaskGain, ...] = DEFAULT_TASK_GAINS,
-                 locked: TaskGain = LOCKED_GAIN):
-        """``locked``: the gains and weight of the locked joints' tasks."""
+                 locked: TaskGain = LOCKED_GAIN, recovery: TaskGain | None = None):
+        """``locked``: the gains and weight of the locked joints' tasks; ``recovery``: theirs while the
+        upper body helps a push's recovery (``TaskReferences.upper_body``; None: ``locked`` throughout)."""
         self.gains = gains
         mask = robot.locked_actuator_mask
         self._locked_q = robot.actuated_q_index[mask]
@@ -101,21 +102,24 @@ class TaskStack:
         n = len(self._locked_q)
         self._J_locked = np.zeros((n, robot.nv))
         self._J_locked[np.arange(n), robot.actuated_v_index[mask]] = 1.0
-        self._locked_gains = (np.full(n, locked.kp), np.full(n, locked.kd), np.full(n, locked.weight))
-        self._cache: dict[tuple[tuple[str, ...], bytes], tuple[np.ndarray, ...]] = {}
+        self._recovers = recovery is not None
+        holds = {False: locked, True: recovery} if self._recovers else {False: locked}
+        self._locked_gains = {k: (np.full(n, g.kp), np.full(n, g.kd), np.full(n, g.weight))
+                              for k, g in holds.items()}
+        self._cache: dict[tuple[tuple[str, ...], bytes, bool], tuple[np.ndarray, ...]] = {}
 
-    def _rows(self, names: tuple[str, ...], active: np.ndarray):
+    def _rows(self, names: tuple[str, ...], active: np.ndarray, upper_body: bool):
         """(indices of the active outputs, kp, kd, weight of every task row), made once per output set."""
-        key = (names, active.tobytes())
+        key = (names, active.tobytes(), upper_body)
         if key not in self._cache:
-            kp, kd, w = (np.concatenate([g[active], locked])
-                         for g, locked in zip(task_gains(names, self.gains), self._locked_gains, strict=True))
+            kp, kd, w = (np.concatenate([g[active], locked]) for g, locked in
+                         zip(task_gains(names, self.gains), self._locked_gains[upper_body], strict=True))
             self._cache[key] = np.flatnonzero(active), kp, kd, w
         return self._cache[key]
 
     def evaluate(self, refs: TaskReferences, q: np.ndarray) -> Tasks:
         """The task rows of ``refs``; the locked joints' errors are read from the configuration ``q``."""
-        rows, kp, kd, w = self._rows(refs.names, refs.active)
+        rows, kp, kd, w = self._rows(refs.names, refs.active, refs.upper_body and self._recovers)
         k = len(rows)
         J = np.empty((k + len(self._locked_q), self._J_locked.shape[1]))
         J[:k] = refs.J[rows]

@@ -58,22 +58,39 @@ _DAQP_EQUALITY, _DAQP_ACTIVE_UPPER, _DAQP_ACTIVE_LOWER = 5, 1, 3  # its constrai
 
 
 @dataclass
+class RecoveryHold:
+    """The locked joints' task while the upper body helps a push's recovery (``locked_hold.recovery``):
+    ``kp`` (1/s²), ``kd`` (1/s), ``weight``, as :class:`LockedHold`'s."""
+
+    kp: float
+    kd: float
+    weight: float
+
+    def gain(self) -> TaskGain:
+        return TaskGain("locked", self.kp, self.kd, self.weight)
+
+
+@dataclass
 class LockedHold:
     """The locked joints' task (``controller.locked_hold``): ``kp`` (1/s²), ``kd`` (1/s) and
     ``weight`` of the joint PD that holds each at its nominal angle (the shared
     :data:`~romoco_drake.control.tasks.LOCKED_GAIN` by default). Held loosely, the arms give way
-    to the other terms: the angular-momentum rows then swing them."""
+    to the other terms: the angular-momentum rows then swing them. ``recovery``: the hold while a
+    push's recovery began with a step that could not go toward the push (it would have crossed the
+    stance foot; ``TaskReferences.upper_body``), until the recovery ends; None: this one throughout."""
 
     kp: float = LOCKED_GAIN.kp
     kd: float = LOCKED_GAIN.kd
     weight: float = LOCKED_GAIN.weight
+    recovery: RecoveryHold | None = None
 
     def gain(self) -> TaskGain:
         return TaskGain("locked", self.kp, self.kd, self.weight)
 
 
 # As the output tasks' gains (100-400 /s², 20-40 /s) and weights (1-100).
-declare_ranges(LockedHold, kp=Range(0.0, 1e4, "1/s²"), kd=Range(0.0, 1e3, "1/s"), weight=Range(0.0, 1e4))
+for _hold in (LockedHold, RecoveryHold):
+    declare_ranges(_hold, kp=Range(0.0, 1e4, "1/s²"), kd=Range(0.0, 1e3, "1/s"), weight=Range(0.0, 1e4))
 
 
 @dataclass
@@ -254,8 +271,9 @@ class TscQp:
         self._rows_a = np.argmax(B, axis=0)  # the velocity row each actuator drives, actuator order
         self._rows_u = np.flatnonzero(B.sum(axis=1) == 0.0)
         self._effort = robot.effort_limits
-        self._tasks = TaskStack(robot, weighted_gains(robot, gains, config.task_weights),
-                                config.locked_hold.gain())
+        hold = config.locked_hold
+        self._tasks = TaskStack(robot, weighted_gains(robot, gains, config.task_weights), hold.gain(),
+                                None if hold.recovery is None else hold.recovery.gain())
         self.terms = self.make_terms(config)
         self._costs = [t for t in self.terms if isinstance(t, CostTerm)]
         self._limits = [t for t in self.terms if isinstance(t, ConstraintTerm) and t.size]

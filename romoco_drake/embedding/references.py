@@ -40,6 +40,7 @@ from romoco_drake.embedding.terrain import StepGround, TerrainSteps, committed_s
 from romoco_drake.modes import Domain, Mode
 from romoco_drake.robots.kinematics import RobotKinematics
 from romoco_drake.robots.model import RobotModel
+from romoco_drake.rom.alip import alip_com_flow
 from romoco_drake.rom.types import SWING_COMMIT_FRACTION, MpcReference, PlannerOutput, other_side
 from romoco_drake.spatial import GRAVITY
 from romoco_drake.values import SharedValue
@@ -86,6 +87,9 @@ class TaskReferences(SharedValue):
     mpc: MpcReference | None = None
     # The plan's step was bounded by the step adapter: the robot is recovering from a push.
     recovering: bool = False
+    # The recovery's first step could not go toward the push (SwingState.recovery): the upper body
+    # helps until the recovery ends (the TSC-QP's locked_hold.recovery).
+    upper_body: bool = False
     # The moment (N·m, world x, y) the stance forces are to have about the sole centre: the weight
     # at the plan's shifted CoP (PlannerOutput.cop_shift), or None (the pivot).
     pivot_moment: np.ndarray | None = None
@@ -129,6 +133,20 @@ class SwingState(SharedValue):
     # the largest one this step has planned (m).
     cop_shift: float = 0.0
     cop_reach: float = 0.0
+    # A push's recovery while the plan is bounded: (stance side of its first step, whether the law asked
+    # that step to cross the stance foot, PlannerOutput.step_across), over the recovery's steps; else None.
+    recovery: tuple[str, bool] | None = None
+
+
+def next_recovery(recovery: tuple[str, bool] | None, stance_side: str, plan: PlannerOutput
+                  ) -> tuple[str, bool] | None:
+    """:attr:`SwingState.recovery` after a tick on ``stance_side`` following ``plan``: it begins with
+    the first bounded plan and ends with an unbounded one; a step across the stance foot counts only
+    in its first step (a later one, after a push late in a swing, is the stepping's own to catch)."""
+    if not plan.step_bounded:
+        return None
+    first, across = recovery or (stance_side, False)
+    return first, across or (plan.step_across and stance_side == first)
 
 
 @dataclass(frozen=True)
@@ -190,9 +208,9 @@ class EmbeddingCore:
         self._walking_active = {"single": ss, "double": ds}
 
     def start_step(self, kin: RobotKinematics, stance_side: str, t: float, plan: PlannerOutput,
-                   tau: float = 0.0) -> SwingState:
-        """Latches lift-off, ``tau`` s into the step that began at t: the swing sole's pose, the
-        stance hip yaw, the swing sole's yaw, and the ALIP state about the contact frame."""
+                   tau: float = 0.0, recovery: tuple[str, bool] | None = None) -> SwingState:
+        """Latches lift-off, ``tau`` s into the step that began at t: the swing sole's pose, the stance hip
+        yaw, the swing sole's yaw, the ALIP state about the contact frame, the last step's recovery."""
         out = self.walking.evaluate(kin, stance_side)
         q = kin.q
         i = self._swing_index
@@ -213,7 +231,7 @@ class EmbeddingCore:
         p_x, p_y, _, l_cx, l_cy, _ = contact_frame_state(kin, origin, heading).tolist()
         com_start = (float(origin[0]), float(origin[1]), heading, tau, p_x, p_y, l_cx, l_cy)
         return SwingState(stance_side, t, yaws, trajectory, float(out.y[0]), com_start, ground, plan,
-                          plan.cop_shift, abs(plan.cop_shift))
+                          plan.cop_shift, abs(plan.cop_shift), next_recovery(recovery, stance_side, plan))
 
     def update_swing(self, swing: SwingState, tau: float, plan: PlannerOutput) -> SwingState:
         """Replans the swing toward the plan's latest target, from the trajectory's own state at
@@ -222,6 +240,9 @@ class EmbeddingCore:
         On terrain the foothold keeps its surface once the step is committed to it
         (:func:`~romoco_drake.embedding.terrain.committed_surface`)."""
         shift = plan.cop_shift
+        recovery = next_recovery(swing.recovery, swing.stance_side, plan)
+        if recovery != swing.recovery:
+            swing = replace(swing, recovery=recovery)
         if (swing.trajectory is not None and tau < SWING_COMMIT_FRACTION * swing.trajectory.duration
                 and shift != swing.cop_shift):
             swing = replace(swing, cop_shift=shift, cop_reach=max(swing.cop_reach, abs(shift)))
@@ -332,7 +353,7 @@ class EmbeddingCore:
             flow = (swing.com_start, tau, plan.com_height, self.robot.total_mass)
             shift = swing.cop_shift, swing.cop_reach
         return self._pack(Mode.WALKING, domain, stance, out, y_d, yd_d, ydd_d, active, kin, flow, plan,
-                          *shift)
+                          *shift, upper_body=swing.recovery is not None and swing.recovery[1])
 
     def _follow_ground(self, kin: RobotKinematics, swing: SwingState, plan: PlannerOutput, tau: float,
                        t_ss: float, y_d, yd_d, ydd_d) -> None:
@@ -394,7 +415,7 @@ class EmbeddingCore:
 
     def _pack(self, mode: Mode, domain: Domain, stance: str, out: Output, y_d, yd_d, ydd_d, active,
               kin: RobotKinematics, com_flow: tuple | None = None, plan: PlannerOutput | None = None,
-              cop_shift: float = 0.0, cop_reach: float = 0.0) -> TaskReferences:
+              cop_shift: float = 0.0, cop_reach: float = 0.0, upper_body: bool = False) -> TaskReferences:
         """The references of one tick; ``plan``: the walking plan followed (its MPC reference and
         step bound are the references' too); ``cop_shift``: the stance CoP's planned shift along the
         heading in single support, the pivot moment's target; ``cop_reach``: the largest this step
@@ -417,28 +438,7 @@ class EmbeddingCore:
             moment = cop_shift * weight * np.array([math.sin(heading), -math.cos(heading)])
         return TaskReferences(mode, domain, stance, out.names, out.y, out.J, out.Jdot_v, y_d, yd_d, ydd_d,
                               active, holonomic, n_f, A_f, b_f, com_flow, None if plan is None else plan.mpc,
-                              plan is not None and plan.step_bounded, moment, plan)
-
-
-def alip_com_flow(start: tuple[float, ...], tau: float, height: float, mass: float) -> np.ndarray:
-    """The horizontal CoM (p, ṗ, p̈; world x, y) of the ALIP flow from ``start`` at time tau.
-
-    ``start`` is :attr:`SwingState.com_start`. In LIP units l = ṗ (l_x = L_cy/(mH),
-    l_y = −L_cx/(mH)) both planes obey ṗ = l, l̇ = ℓ² p, so p(t) = cosh(ℓt) p₀ + sinh(ℓt) l₀/ℓ
-    and p̈ = ℓ² p.
-    """
-    ox, oy, heading, tau0, p_x, p_y, l_cx, l_cy = start
-    mh = mass * height
-    ell = math.sqrt(GRAVITY / height)
-    dt = max(tau - tau0, 0.0)
-    ch, sh = math.cosh(ell * dt), math.sinh(ell * dt)
-    p0 = np.array([p_x, p_y])
-    l0 = np.array([l_cy / mh, -l_cx / mh])
-    p = ch * p0 + sh / ell * l0
-    v = ell * sh * p0 + ch * l0
-    c, s = math.cos(heading), math.sin(heading)
-    R = np.array([[c, -s], [s, c]])
-    return np.vstack([R @ p + (ox, oy), R @ v, ell * ell * (R @ p)])
+                              plan is not None and plan.step_bounded, upper_body, moment, plan)
 
 
 def _blend(start: float, goal: float, t: float, duration: float) -> tuple[float, float, float]:

@@ -165,7 +165,7 @@ class OutputEmbedding(LeafSystem):
                 new = self.core.update_swing(swing, tau, plan)
             else:
                 self._count_step(context, state, swing)
-                new = self.core.start_step(kin, side, step_start, plan, tau)
+                new = self.core.start_step(kin, side, step_start, plan, tau, swing and swing.recovery)
         state.get_mutable_abstract_state(int(self._swing)).set_value(new)
 
     def _current_swing(self, context) -> tuple[SwingState | None, float]:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from romoco_drake.rom.lip import omega
 from romoco_drake.spatial import GRAVITY
 
@@ -36,3 +38,24 @@ def alip_step(p_pre: float, l_pre: float, l_target: float, cosh_t: float, ks_t: 
     ``cosh_t`` = cosh λT and ``ks_t`` = z0 λ sinh λT for the next step's time T.
     """
     return (cosh_t * l_pre + ks_t * p_pre - l_target) / ks_t
+
+
+def alip_com_flow(start: tuple[float, ...], tau: float, height: float, mass: float) -> np.ndarray:
+    """The horizontal CoM (p, ṗ, p̈; world x, y) of the ALIP flow from ``start`` at time tau.
+
+    ``start`` is the embedding's ``SwingState.com_start``. In LIP units l = ṗ (l_x = L_cy/(mH),
+    l_y = −L_cx/(mH)) both planes obey ṗ = l, l̇ = ℓ² p, so p(t) = cosh(ℓt) p₀ + sinh(ℓt) l₀/ℓ
+    and p̈ = ℓ² p.
+    """
+    ox, oy, heading, tau0, p_x, p_y, l_cx, l_cy = start
+    mh = mass * height
+    ell = math.sqrt(GRAVITY / height)
+    dt = max(tau - tau0, 0.0)
+    ch, sh = math.cosh(ell * dt), math.sinh(ell * dt)
+    p0 = np.array([p_x, p_y])
+    l0 = np.array([l_cy / mh, -l_cx / mh])
+    p = ch * p0 + sh / ell * l0
+    v = ell * sh * p0 + ch * l0
+    c, s = math.cos(heading), math.sin(heading)
+    R = np.array([[c, -s], [s, c]])
+    return np.vstack([R @ p + (ox, oy), R @ v, ell * ell * (R @ p)])

@@ -28,18 +28,19 @@ stance CoP along the heading (:class:`CopShift`): the DCM passes a far foothold 
 
 The reachable box is in the stance yaw frame: forward/backward, and a lateral band on the swing
 foot's own side of the stance foot (at least ``lateral_min`` away), so a crossing step is never
-asked for. A step must also be one the swing leg can still make (when the planner is given the
-swing's position s, velocity v and acceleration a): the embedding replans the swing as a quintic
-from its state to the target, at rest on landing, and the touchdown point is one such quintic
-from (s, v, a) reaches in T − t without exceeding the peak speed of a swing from rest covering
-``swing_speed``·D in D (1.875 ``swing_speed``), per axis (:class:`SwingWindow`). A step shortened
-late in the swing is then not asked to land far away (the swing would land fast and slide, or
-late), and a foot already moving keeps the target it is moving toward: a window of
-``swing_speed``·(T − t) about s alone shrank under a swing that starts slowly (G1 pushed forward at
-phase 0.75: the third step's target retreated from 0.37 to 0.17 m while the foot accelerated
-toward it, and the robot fell). That window depends on σ through T = ln σ / λ, so the QP is solved
-over σ₁ on a grid refined around its best point and over σ₂ on a grid, with (u₁, u₂) minimised
-exactly for each pair (:func:`solve_step_qp`; in C where it is built, :mod:`.step_qp_kernel`).
+asked for; a law's step across it is flagged (``step_across``). A step must also be one the swing
+leg can still make (when the planner is given the swing's position s, velocity v and acceleration
+a): the embedding replans the swing as a quintic from its state to the target, at rest on landing,
+and the touchdown point is one such quintic from (s, v, a) reaches in T − t without exceeding the
+peak speed of a swing from rest covering ``swing_speed``·D in D (1.875 ``swing_speed``), per axis
+(:class:`SwingWindow`). A step shortened late in the swing is then not asked to land far away (the
+swing would land fast and slide, or late), and a foot already moving keeps the target it is moving
+toward: a window of ``swing_speed``·(T − t) about s alone shrank under a swing that starts slowly
+(G1 pushed forward at phase 0.75: the third step's target retreated from 0.37 to 0.17 m while the
+foot accelerated toward it, and the robot fell). That window depends on σ through T = ln σ / λ, so
+the QP is solved over σ₁ on a grid refined around its best point and over σ₂ on a grid, with (u₁,
+u₂) minimised exactly for each pair (:func:`solve_step_qp`; in C where it is built,
+:mod:`.step_qp_kernel`).
 """
 
 from __future__ import annotations
@@ -96,9 +97,8 @@ class StepBounds:
 
 @dataclass(frozen=True)
 class StepAdaptWeights:
-    """Weights of the QP (module docstring): foothold (per m²), σ = e^{λT} (dimensionless), DCM
-    offset (per m²), CoP shift (per m², :class:`CopShift`). Only their ratios matter, and only
-    once a bound is active."""
+    """Weights of the QP (module docstring): foothold (per m²), σ = e^{λT} (dimensionless), DCM offset
+    (per m²), CoP shift (per m², :class:`CopShift`). Only their ratios matter, once a bound is active."""
 
     step: float = 1.0
     timing: float = 0.01
@@ -143,26 +143,25 @@ class StepAdapter:
               swing_foot: Sequence[float] | None = None, step_t_ss: float | None = None,
               region: tuple[tuple[float, float], tuple[float, float]] | None = None,
               cop: tuple[float, float] | None = None) -> PlannerOutput:
-        """``plan`` with its foothold and single-support time adapted; ``rom_state`` is the six numbers of
-        the ``rom_state`` port (stance yaw frame, momentum about the stance contact); ``swing_foot`` the
-        swing sole's (x, y) relative to the stance contact, its velocity and its acceleration in the same
-        frame (None: the step is not bounded by what the swing can still reach); ``step_t_ss`` the current
-        step's own single-support time as the state machine runs it (None: the law's), whose
+        """``plan`` with its foothold and single-support time adapted; ``rom_state`` is the six numbers of the
+        ``rom_state`` port (stance yaw frame, momentum about the stance contact); ``swing_foot`` the swing
+        sole's (x, y) relative to the stance contact, its velocity and its acceleration in the same frame
+        (None: the step is not bounded by what the swing can still reach); ``step_t_ss`` the current step's
+        own single-support time as the state machine runs it (None: the law's), whose
         ``SWING_COMMIT_FRACTION`` is the commit point. An adapted step longer than the law's is still being
-        adapted after the law's own commit point: with the law's, the adapter handed the state machine and
-        the swing the law's unbounded step (G1, pushed forward: 0.5 m asked 0.04 s before touchdown, the
-        foot swung at 5-8 m/s and slid on landing). ``region`` (same frame): where the ground supports the
-        sole (terrain, from :meth:`~romoco_drake.embedding.terrain.TerrainSteps.region`); the first step
-        stays in it and in reach (where they do not meet, in reach), and the timing follows. ``cop``: the
-        sagittal CoP shifts (lo, hi) it may plan (:class:`CopShift`; None: the pivot), as ``cop_shift``."""
+        adapted after the law's own commit point: with the law's, the adapter handed the state machine and the
+        swing the law's unbounded step (G1, pushed forward: 0.5 m asked 0.04 s before touchdown, the foot
+        swung at 5-8 m/s and slid on landing). ``region`` (same frame): where the ground supports the sole
+        (terrain, :meth:`~romoco_drake.embedding.terrain.TerrainSteps.region`); the first step stays in it and
+        in reach (in reach where they do not meet), the timing following. ``cop``: the sagittal CoP shifts
+        (lo, hi) it may plan (:class:`CopShift`; None: the pivot), as ``cop_shift``."""
         if not plan.valid or not math.isfinite(t_in_step):
             return plan
         b = self.bounds
         lam = math.sqrt(self.g / plan.com_height)
         mk = self.mass * plan.com_height * lam
         p_x, p_y, _, l_x, l_y, _ = rom_state
-        # DCM ξ = p + L/(m z0 λ) per plane, L signed as in the planners (sagittal L_y, lateral
-        # −L_x); its value at time T in the step is dcm0 σ with σ = e^{λT}.
+        # DCM ξ = p + L/(m z0 λ) per plane (L_y, −L_x as in the planners); at T in the step dcm0 e^{λT}.
         decay = math.exp(-lam * t_in_step)
         dcm0 = ((p_x + l_y / mk) * decay, (p_y - l_x / mk) * decay)
         if not all(map(math.isfinite, dcm0)):
@@ -179,11 +178,12 @@ class StepAdapter:
                                             else step_t_ss)
         # A push: the law's step is out of reach or leaves an offset the next steps cannot catch.
         pushed = not (offset_n == implied and b.t_ss_min <= plan.t_ss <= b.t_ss_max and reach_ok)
+        across = u_n[1] > -b.lateral_min if plan.stance_side == "left" else u_n[1] < b.lateral_min
         unsupported = not all(lo <= u <= hi for u, (lo, hi) in zip(u_n, box, strict=True))
         if t_in_step >= t_commit:
             # Committed: the state machine and the swing no longer follow the plan's time or target;
             # the push (the hip strategy's cue) lasts to the touchdown.
-            return replace(plan, timing_adapted=True, step_bounded=pushed)
+            return replace(plan, timing_adapted=True, step_bounded=pushed, step_across=across)
         if not pushed and not unsupported and (window is None or window.contains(u_n, plan.t_ss)):
             # The law's own step is reachable and viable: the QP's minimum (zero), at any phase.
             return replace(plan, timing_adapted=True)
@@ -198,7 +198,7 @@ class StepAdapter:
         t_ss = math.log(sigma) / lam
         target = np.array([u[0], u[1], float(plan.swing_target[2])])
         return replace(plan, swing_target=target, t_ss=t_ss, time_to_touchdown=max(t_ss - t_in_step, 0.0),
-                       timing_adapted=True, step_bounded=pushed, cop_shift=shift)
+                       timing_adapted=True, step_bounded=pushed, step_across=across, cop_shift=shift)
 
     def _window(self, swing_foot: Sequence[float] | None, t_in_step: float, lam: float) -> SwingWindow | None:
         """Where the swing can still land (None: no swing state, or no speed limit)."""
@@ -248,8 +248,7 @@ class StepAdapter:
 
 
 def _within(reach, region):
-    """The reach box cut to the terrain's ``region`` (both per axis (lo, hi)); the reach alone
-    where there is no region or the two do not meet."""
+    """The reach box cut to the terrain's ``region`` (per axis (lo, hi)); the reach if None or apart."""
     if region is None:
         return reach
     both = tuple((max(lo, r_lo), min(hi, r_hi)) for (lo, hi), (r_lo, r_hi) in zip(reach, region, strict=True))

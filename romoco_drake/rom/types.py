@@ -120,6 +120,9 @@ class PlannerOutput(SharedValue):
     # offset the next steps cannot catch (not merely a swing foot lagging its path), which is when
     # the controller's hip strategy may help (``angular_momentum.when: recovering``).
     step_bounded: bool = False
+    # The law's step lay across the stance foot, beyond the adapter's no-crossing band: this step
+    # cannot go toward the push (the embedding's upper-body recovery, TaskReferences.upper_body).
+    step_across: bool = False
     # The stance centre of pressure's planned shift from the sole centre along the stance heading
     # for the rest of this single support (m; negative: toward the heel; rom/step_adapt.py CopShift).
     cop_shift: float = 0.0
