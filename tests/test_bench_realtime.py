@@ -95,7 +95,9 @@ def test_realtime_replays_the_logged_run_exactly(tmp_path, monkeypatch):
     assert r["tick_ms"]["median"] <= r["tick_ms"]["p99"] <= r["tick_ms"]["max"]
     # The split comes from a second replay, its callbacks timed; the deadline numbers from the first.
     assert r["timed_tick_ms"]["median"] <= r["timed_tick_ms"]["max"]
-    assert all(w["ms"] <= r["timed_tick_ms"]["max"] + 5e-4 for w in r["worst_ticks"])  # 3 vs 4 decimals
+    # 3 vs 4 decimals: rounding to 3 adds up to 5e-4 ms, to 4 takes up to 5e-5 (1.23451 ms: 1.235 against
+    # 1.2345, which 5e-4 alone missed by a float's round-off)
+    assert all(w["ms"] <= r["timed_tick_ms"]["max"] + 6e-4 for w in r["worst_ticks"])
     assert 0.0 <= r["deadline_miss_fraction"] <= 1.0
     assert r["deadline_misses"] == round(r["deadline_miss_fraction"] * r["ticks"])
     assert (r["miss_bursts"]["count"] == 0) == (r["deadline_misses"] == 0)
