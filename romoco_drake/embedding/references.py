@@ -36,6 +36,7 @@ import numpy as np
 from romoco_drake.embedding.bezier import BezierCurve, SwingTrajectory, plan_swing, quintic_bezier
 from romoco_drake.embedding.contact import ContactModel, contact_frame, contact_frame_state
 from romoco_drake.embedding.outputs import InAirOutputs, Output, StandingOutputs, WalkingOutputs
+from romoco_drake.embedding.recovery import next_recovery, upper_body_helps
 from romoco_drake.embedding.terrain import StepGround, TerrainSteps, committed_surface
 from romoco_drake.modes import Domain, Mode
 from romoco_drake.robots.kinematics import RobotKinematics
@@ -88,7 +89,7 @@ class TaskReferences(SharedValue):
     # The plan's step was bounded by the step adapter: the robot is recovering from a push.
     recovering: bool = False
     # The recovery's first step could not go toward the push (SwingState.recovery): the upper body
-    # helps until the recovery ends (the TSC-QP's locked_hold.recovery).
+    # helps in that step and the next (the TSC-QP's locked_hold.recovery; embedding/recovery.py).
     upper_body: bool = False
     # The moment (N·m, world x, y) the stance forces are to have about the sole centre: the weight
     # at the plan's shifted CoP (PlannerOutput.cop_shift), or None (the pivot).
@@ -134,19 +135,8 @@ class SwingState(SharedValue):
     cop_shift: float = 0.0
     cop_reach: float = 0.0
     # A push's recovery while the plan is bounded: (stance side of its first step, whether the law asked
-    # that step to cross the stance foot, PlannerOutput.step_across), over the recovery's steps; else None.
-    recovery: tuple[str, bool] | None = None
-
-
-def next_recovery(recovery: tuple[str, bool] | None, stance_side: str, plan: PlannerOutput
-                  ) -> tuple[str, bool] | None:
-    """:attr:`SwingState.recovery` after a tick on ``stance_side`` following ``plan``: it begins with
-    the first bounded plan and ends with an unbounded one; a step across the stance foot counts only
-    in its first step (a later one, after a push late in a swing, is the stepping's own to catch)."""
-    if not plan.step_bounded:
-        return None
-    first, across = recovery or (stance_side, False)
-    return first, across or (plan.step_across and stance_side == first)
+    # that step to cross the stance foot (PlannerOutput.step_across), steps begun since); else None.
+    recovery: tuple[str, bool, int] | None = None
 
 
 @dataclass(frozen=True)
@@ -208,7 +198,7 @@ class EmbeddingCore:
         self._walking_active = {"single": ss, "double": ds}
 
     def start_step(self, kin: RobotKinematics, stance_side: str, t: float, plan: PlannerOutput,
-                   tau: float = 0.0, recovery: tuple[str, bool] | None = None) -> SwingState:
+                   tau: float = 0.0, recovery: tuple[str, bool, int] | None = None) -> SwingState:
         """Latches lift-off, ``tau`` s into the step that began at t: the swing sole's pose, the stance hip
         yaw, the swing sole's yaw, the ALIP state about the contact frame, the last step's recovery."""
         out = self.walking.evaluate(kin, stance_side)
@@ -230,8 +220,9 @@ class EmbeddingCore:
                 float(out.y[self._swing_yaw_index]) if self._swing_yaw_index is not None else 0.0)
         p_x, p_y, _, l_cx, l_cy, _ = contact_frame_state(kin, origin, heading).tolist()
         com_start = (float(origin[0]), float(origin[1]), heading, tau, p_x, p_y, l_cx, l_cy)
+        recovery = next_recovery(recovery, stance_side, plan, new_step=True)
         return SwingState(stance_side, t, yaws, trajectory, float(out.y[0]), com_start, ground, plan,
-                          plan.cop_shift, abs(plan.cop_shift), next_recovery(recovery, stance_side, plan))
+                          plan.cop_shift, abs(plan.cop_shift), recovery)
 
     def update_swing(self, swing: SwingState, tau: float, plan: PlannerOutput) -> SwingState:
         """Replans the swing toward the plan's latest target, from the trajectory's own state at
@@ -353,7 +344,7 @@ class EmbeddingCore:
             flow = (swing.com_start, tau, plan.com_height, self.robot.total_mass)
             shift = swing.cop_shift, swing.cop_reach
         return self._pack(Mode.WALKING, domain, stance, out, y_d, yd_d, ydd_d, active, kin, flow, plan,
-                          *shift, upper_body=swing.recovery is not None and swing.recovery[1])
+                          *shift, upper_body=upper_body_helps(swing.recovery))
 
     def _follow_ground(self, kin: RobotKinematics, swing: SwingState, plan: PlannerOutput, tau: float,
                        t_ss: float, y_d, yd_d, ydd_d) -> None:
