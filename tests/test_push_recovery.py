@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from romoco_drake.bench.push import RECOVERY_TOL, push_job, pushed, step_clock, walking_scenario
+from romoco_drake.bench.push import RECOVERY_TOL, _print_push, push_job, pushed, step_clock, walking_scenario
 from romoco_drake.embedding.bezier import plan_swing
 from romoco_drake.embedding.recovery import UPPER_BODY_STEPS, next_recovery, upper_body_helps
 from romoco_drake.errors import ConfigError
@@ -198,3 +198,19 @@ def test_g1_recovers_left_at_the_switch_with_the_upper_body(impulse, upper_body)
     if upper_body:
         vx, vy, _ = row["end_velocity"]
         assert abs(vx - 0.4) <= RECOVERY_TOL and abs(vy) <= RECOVERY_TOL
+
+
+def test_bench_push_lists_a_cell_that_is_up_but_off_its_command(capsys):
+    """A cell that failed without a fall (the velocity check) is listed under the table with its end
+    velocity; a fall is not."""
+    cell = {"direction": "left", "phase": 0.0, "survived": 15.0, "failed_at": 20.0, "fall_time_s": None,
+            "end_velocity": [-0.11, 0.91, 0.05]}
+    fell = cell | {"direction": "right", "failed_at": 25.0, "survived": 20.0, "fall_time_s": 7.2,
+                   "end_velocity": None}
+    result = {"robot": "g1", "speed_mps": 0.4, "push_s": 0.1, "engine": "drake", "estimator": "ground_truth",
+              "overlays": [], "criterion": "c", "step_s": 0.3, "cells": [cell, fell],
+              "per_direction": {"left": 15.0, "right": 20.0}}
+    _print_push(result, (0.0,), ("left", "right"))
+    out = capsys.readouterr().out
+    assert "left/0 at 20 N·s: up, but not walking at its command (vx -0.11, vy 0.91 m/s" in out
+    assert "right/0 at 25" not in out

@@ -77,7 +77,8 @@ class LockedHold:
     :data:`~romoco_drake.control.tasks.LOCKED_GAIN` by default). Held loosely, the arms give way
     to the other terms: the angular-momentum rows then swing them. ``recovery``: the hold while a
     push's recovery began with a step that could not go toward the push (it would have crossed the
-    stance foot; ``TaskReferences.upper_body``), until the recovery ends; None: this one throughout."""
+    stance foot; ``TaskReferences.upper_body``), in that step and the next (embedding/recovery.py);
+    None: this one throughout."""
 
     kp: float = LOCKED_GAIN.kp
     kd: float = LOCKED_GAIN.kd
