@@ -119,18 +119,18 @@ def test_the_upper_body_recovery_begins_only_with_a_first_step_across():
     plan = dataclasses.replace(PlannerOutput.placeholder(), valid=True, step_bounded=True)
     across, toward, free = (dataclasses.replace(plan, step_across=True), plan,
                             dataclasses.replace(plan, step_bounded=False))
-    r = next_recovery(None, "left", across)
-    assert r == ("left", True, 0) and upper_body_helps(r)
-    second = next_recovery(r, "right", toward, new_step=True)
-    assert second == ("left", True, 1) and upper_body_helps(second)
-    third = next_recovery(second, "left", toward, new_step=True)
-    assert third == ("left", True, 2) and not upper_body_helps(third) and UPPER_BODY_STEPS == 2
-    assert next_recovery(r, "right", free) is None and not upper_body_helps(None)
-    later = next_recovery(next_recovery(None, "left", toward), "left", toward)
-    assert later == ("left", False, 0) and next_recovery(later, "left", across) == ("left", True, 0)
-    assert next_recovery(next_recovery(later, "right", toward, new_step=True), "right", across) == (
-        "left", False, 1)  # across only in the second step: the first went toward the push
-    assert next_recovery(None, "left", free) is None
+    r = next_recovery(None, across)
+    assert r == (True, 0) and upper_body_helps(r)
+    second = next_recovery(r, toward, new_step=True)
+    assert second == (True, 1) and upper_body_helps(second)
+    third = next_recovery(second, toward, new_step=True)
+    assert third == (True, 2) and not upper_body_helps(third) and UPPER_BODY_STEPS == 2
+    assert next_recovery(r, free) is None and not upper_body_helps(None)
+    later = next_recovery(next_recovery(None, toward), toward)
+    assert later == (False, 0) and next_recovery(later, across) == (True, 0)  # still the first step
+    assert next_recovery(next_recovery(later, toward, new_step=True), across) == (
+        False, 1)  # across only in the second step: the first went toward the push
+    assert next_recovery(None, free) is None
 
 
 def test_swing_retimed_mid_step_is_continuous_and_lands_on_time():

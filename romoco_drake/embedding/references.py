@@ -134,9 +134,9 @@ class SwingState(SharedValue):
     # the largest one this step has planned (m).
     cop_shift: float = 0.0
     cop_reach: float = 0.0
-    # A push's recovery while the plan is bounded: (stance side of its first step, whether the law asked
-    # that step to cross the stance foot (PlannerOutput.step_across), steps begun since); else None.
-    recovery: tuple[str, bool, int] | None = None
+    # A push's recovery while the plan is bounded: (whether the law asked its first step to cross the
+    # stance foot, PlannerOutput.step_across; steps begun since); else None (embedding/recovery.py).
+    recovery: tuple[bool, int] | None = None
 
 
 @dataclass(frozen=True)
@@ -198,7 +198,7 @@ class EmbeddingCore:
         self._walking_active = {"single": ss, "double": ds}
 
     def start_step(self, kin: RobotKinematics, stance_side: str, t: float, plan: PlannerOutput,
-                   tau: float = 0.0, recovery: tuple[str, bool, int] | None = None) -> SwingState:
+                   tau: float = 0.0, recovery: tuple[bool, int] | None = None) -> SwingState:
         """Latches lift-off, ``tau`` s into the step that began at t: the swing sole's pose, the stance hip
         yaw, the swing sole's yaw, the ALIP state about the contact frame, the last step's recovery."""
         out = self.walking.evaluate(kin, stance_side)
@@ -220,7 +220,7 @@ class EmbeddingCore:
                 float(out.y[self._swing_yaw_index]) if self._swing_yaw_index is not None else 0.0)
         p_x, p_y, _, l_cx, l_cy, _ = contact_frame_state(kin, origin, heading).tolist()
         com_start = (float(origin[0]), float(origin[1]), heading, tau, p_x, p_y, l_cx, l_cy)
-        recovery = next_recovery(recovery, stance_side, plan, new_step=True)
+        recovery = next_recovery(recovery, plan, new_step=True)
         return SwingState(stance_side, t, yaws, trajectory, float(out.y[0]), com_start, ground, plan,
                           plan.cop_shift, abs(plan.cop_shift), recovery)
 
@@ -231,7 +231,7 @@ class EmbeddingCore:
         On terrain the foothold keeps its surface once the step is committed to it
         (:func:`~romoco_drake.embedding.terrain.committed_surface`)."""
         shift = plan.cop_shift
-        recovery = next_recovery(swing.recovery, swing.stance_side, plan)
+        recovery = next_recovery(swing.recovery, plan)
         if recovery != swing.recovery:
             swing = replace(swing, recovery=recovery)
         if (swing.trajectory is not None and tau < SWING_COMMIT_FRACTION * swing.trajectory.duration
