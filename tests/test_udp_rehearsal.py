@@ -15,13 +15,15 @@ from romoco_drake.interfaces.link import LinkConfig
 
 @pytest.mark.slow
 def test_robot_sim_and_hardware_controller_talk_over_udp():
-    """The robot outlives the controller by 6 s of its real-time clock. With 2 s, a suite run on two
+    """The robot outlives the controller by 14 s of its real-time clock. With 2 s, a suite run on two
     busy cores ended the robot before the controller's last commands (the last it took was stamped
-    1.926 s of 2.0: the controller ran at under about half real time)."""
-    run = rehearse("g1_walk", 2.0, udp_url(7000 + os.getpid() % 997), robot_extra_s=6.0)  # a port of its own
+    1.926 s of 2.0: the controller ran at under about half real time); with 6 s, a fresh venv's suite
+    (Dec 7) ended it at the controller's 1.72 s (the controller at about 0.2x real time beside the
+    other test worker)."""
+    run = rehearse("g1_walk", 2.0, udp_url(7000 + os.getpid() % 997), robot_extra_s=14.0)  # a port of its own
     theirs, ours = run["robot"], run["controller"]
     # The robot started (it waits for a first motor command) and took every command it got.
-    assert theirs["robot"] == "g1" and theirs["duration_s"] == 8.0
+    assert theirs["robot"] == "g1" and theirs["duration_s"] == 16.0
     assert theirs["wall_s"] > 0.0 and 0.0 < theirs["realtime_factor"] <= 1.1  # paced at real time at most
     assert theirs["rejected_messages"] == 0 and theirs["estop"] == 0
     # When its command stream first went stale (the controller stopping, or on a busy machine sooner).
