@@ -7,6 +7,8 @@ from romoco_drake.bench.agility import (
     MOTIONS,
     START_S,
     TOLERANCE,
+    paired_difference,
+    paired_ordering,
     ramp,
     rate_summary,
     reached_speed,
@@ -99,3 +101,33 @@ def test_rate_summary_averages_each_mode_over_the_rates_and_judges_the_ordering(
     assert network["ordering_holds"] and summary["forward", "nominal"]["ordering_holds"]
     assert summary["circle", "network"]["ordering_holds"] is False
     assert summary["turning", "network"]["ordering_holds"] is None  # one mode: nothing to order
+
+
+def _rows(settled: dict[str, list[float]], rates=(0.08, 0.1, 0.125)) -> list[dict]:
+    return [{"motion": "forward", "inertia": mode, "rate": rate, "settled": x}
+            for mode, xs in settled.items() for rate, x in zip(rates, xs, strict=True)]
+
+
+def test_paired_difference_is_the_mean_over_common_rates_with_a_students_t_interval():
+    mean, half = paired_difference({0.08: 1.3, 0.1: 1.2, 0.125: 1.4, 0.2: 9.0},
+                                   {0.08: 1.2, 0.1: 1.2, 0.125: 1.2})
+    d = np.array([0.1, 0.0, 0.2])  # rate 0.2 ran in one mode only: not paired
+    assert mean == round(d.mean(), 4)
+    assert abs(half - 4.303 * d.std(ddof=1) / np.sqrt(3)) < 1e-4  # t(0.975, 2 dof)
+    assert paired_difference({0.1: 1.0}, {0.1: 0.9}) is None  # one pair: no interval
+
+
+def test_paired_ordering_is_shown_only_beyond_the_noise_and_reversed_by_either_gap():
+    shown = paired_ordering(_rows({"network": [1.40, 1.42, 1.41], "updated": [1.30, 1.31, 1.30],
+                                   "nominal": [1.20, 1.20, 1.21]}))
+    assert shown["ordering_paired"] == "shown"
+    assert shown["network_minus_updated"][0] > shown["network_minus_updated"][1] > 0.0
+    # The means keep the order (1.30 ≥ 1.297 ≥ 1.29), but by less than the ramps scatter.
+    noisy = _rows({"network": [1.20, 1.40, 1.30], "updated": [1.35, 1.25, 1.29],
+                   "nominal": [1.28, 1.30, 1.29]})
+    assert paired_ordering(noisy)["ordering_paired"] == "unresolved"
+    assert {r["ordering_holds"] for r in rate_summary(noisy)} == {True}
+    reversed_ = paired_ordering(_rows({"network": [1.00, 1.02, 1.01], "updated": [1.10, 1.11, 1.10],
+                                       "nominal": [1.10, 1.10, 1.12]}))
+    assert reversed_["ordering_paired"] == "reversed"
+    assert paired_ordering(_rows({"network": [1.0], "updated": [1.0], "nominal": [1.0]}, rates=(0.1,))) == {}

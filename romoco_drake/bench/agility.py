@@ -24,7 +24,11 @@ One ramp's score moves by up to ±0.05 m/s with small changes anywhere in the lo
 of the inertia modes read off one ramp each can be noise. With several ramp rates (``--rate
 0.08,0.1,0.125``) the bench also prints, per motion and mode, the mean, lowest and highest
 ``settled`` over the rates, and whether the mean keeps the paper's ordering (network ≥ updated
-≥ nominal) in that motion.
+≥ nominal) in that motion. Means can keep or break the ordering by less than one ramp's noise, so
+the bench also pairs the modes rate by rate (the same command profile, so the rate's own effect
+cancels): the mean of network − updated and of updated − nominal with its 95 % interval (Student's
+t over the rates). The ordering is ``shown`` when both differences are above zero beyond their
+intervals, ``reversed`` when either is below zero beyond its interval, and ``unresolved`` otherwise.
 
 A motion's command is ``speed`` times its direction (vx, vy, wz): the diagonal walks
 vx = vy = speed, the circle v = speed with ω = speed (the paper's 0.9 m/s with 0.9 rad/s).
@@ -184,6 +188,12 @@ ORDERING_TEXT = {True: "yes", False: "no", None: "-"}  # None: not every inertia
 RAMP_HEADER = "motion     inertia   rate    settled   tracked   reached   paper (case 3 / cases 1-2)   ended"
 SUMMARY_HEADER = ("motion     inertia   settled over the rates: mean   lowest   highest   "
                   "network >= updated >= nominal")
+PAIRED_HEADER = "motion     network - updated   updated - nominal   ordering (paired over the rates, 95 %)"
+# Student's t, 97.5th percentile, by degrees of freedom 1-30 (a two-sided 95 % interval); beyond, the
+# normal distribution's 1.96.
+T_975 = (12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160, 2.145,
+         2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048,
+         2.045, 2.042)
 
 
 def rate_summary(rows: list[dict]) -> list[dict]:
@@ -201,10 +211,44 @@ def rate_summary(rows: list[dict]) -> list[dict]:
                         "settled_min": min(scores), "settled_max": max(scores)})
         ordered = (means["network"] >= means["updated"] >= means["nominal"]
                    if set(INERTIA_MODES) <= set(means) else None)
+        paired = paired_ordering([r for r in rows if r["motion"] == motion]) if ordered is not None else {}
         for row in out:
             if row["motion"] == motion:
                 row["ordering_holds"] = ordered
+                row.update(paired)
     return out
+
+
+def paired_difference(first: dict[float, float], second: dict[float, float]) -> tuple[float, float] | None:
+    """Mean of ``first − second`` over the rates both ran (rate → settled) and the half-width of its
+    95 % interval (Student's t); None with fewer than two common rates."""
+    common = sorted(first.keys() & second.keys())
+    if len(common) < 2:
+        return None
+    d = np.array([first[r] - second[r] for r in common])
+    dof = len(d) - 1
+    t = T_975[dof - 1] if dof <= len(T_975) else 1.96
+    half = t * float(np.std(d, ddof=1)) / np.sqrt(len(d))
+    return round(float(np.mean(d)), 4), round(float(half), 4)
+
+
+def paired_ordering(rows: list[dict]) -> dict:
+    """One motion's ramps paired rate by rate (module docstring): ``network_minus_updated`` and
+    ``updated_minus_nominal`` as (mean, 95 % half-width), and ``ordering_paired``: ``shown``,
+    ``reversed`` or ``unresolved`` (empty with fewer than two rates per mode)."""
+    settled = {m: {r["rate"]: r["settled"] for r in rows if r["inertia"] == m} for m in INERTIA_MODES}
+    upper = paired_difference(settled["network"], settled["updated"])
+    lower = paired_difference(settled["updated"], settled["nominal"])
+    if upper is None or lower is None:
+        return {}
+    if any(mean + half < 0.0 for mean, half in (upper, lower)):
+        verdict = "reversed"
+    elif all(mean - half > 0.0 for mean, half in (upper, lower)):
+        verdict = "shown"
+    else:
+        verdict = "unresolved"
+    return {"network_minus_updated": list(upper), "updated_minus_nominal": list(lower),
+            "ordering_paired": verdict}
 
 
 def register(bench) -> None:
@@ -244,4 +288,14 @@ def _cmd_bench_agility(args) -> int:
                    lambda r: f"{r['motion']:10s} {r['inertia']:9s} {r['settled_mean']:35.3f}   "
                              f"{r['settled_min']:6.2f}   {r['settled_max']:7.2f}   "
                              f"{ORDERING_TEXT[r['ordering_holds']]}")
+        paired = [r for r in summary if r["inertia"] == "network" and "ordering_paired" in r]
+        if paired:
+            print()
+            print_rows(False, paired, PAIRED_HEADER,
+                       lambda r: f"{r['motion']:10s} {_pm(r['network_minus_updated']):19s} "
+                                 f"{_pm(r['updated_minus_nominal']):19s} {r['ordering_paired']}")
     return 0
+
+
+def _pm(pair: list[float]) -> str:
+    return f"{pair[0]:+.3f} ± {pair[1]:.3f}"
