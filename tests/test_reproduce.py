@@ -178,6 +178,27 @@ def test_vimpc_claims_score_settled_at_the_papers_number():
     assert holds(vimpc_claims(ramps))[:3] == [False, True, False]
 
 
+def test_vimpc_paired_row_needs_the_network_ahead_of_both_baselines_beyond_the_scatter():
+    def ramps(network, updated, nominal):
+        rows = []
+        for rate, scores in zip((0.1, 0.08, 0.125), zip(network, updated, nominal, strict=True), strict=True):
+            for inertia, settled in zip(("network", "updated", "nominal"), scores, strict=True):
+                row = _ramp("circle", inertia, settled) | {"rate": rate}
+                row["part"] = "agility" if rate == 0.1 else "agility_pair"
+                rows.append(row)
+        return rows
+
+    one_ramp = [r for r in ramps((1.1, 1.2, 1.3), (1.0,) * 3, (1.0,) * 3) if r["part"] == "agility"]
+    assert len(vimpc_claims(one_ramp)) == 3  # no other rates ran (--quick): no paired row
+    claims = vimpc_claims(ramps((1.10, 1.12, 1.11), (1.00, 1.01, 1.00), (0.98, 1.00, 0.99)))
+    paired = claims[-1]
+    assert "paired over 3 ramp rates" in paired.claim and paired.holds
+    assert "network − updated +0.107" in paired.ours
+    # Ahead at 0.1, the one-ramp row's rate, but behind at the others: the one-ramp row holds, this one not.
+    claims = vimpc_claims(ramps((1.20, 1.00, 1.02), (1.10, 1.05, 1.06), (1.05, 1.04, 1.05)))
+    assert claims[1].holds and not claims[-1].holds
+
+
 def test_horizon_errors_compare_each_knot_with_where_the_run_got(monkeypatch):
     """A stand-in plant whose inertia is (1 + q) I with q = t: knot 0 predicted right, knot 1
     10 % high, at two solves."""

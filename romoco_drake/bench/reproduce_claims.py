@@ -26,6 +26,7 @@ class Settings:
     xo_duration: float | None  # None: Table I's 44 s
     agility_motions: tuple[str, ...]
     agility_rate: float
+    agility_pair_rates: tuple[float, ...]  # more ramp rates, to pair the modes over (none: no paired row)
     solve_ticks: int
     circle_duration: float | None  # None: no Fig. 6 run
 
