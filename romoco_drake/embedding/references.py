@@ -253,12 +253,12 @@ class EmbeddingCore:
         return replace(swing, trajectory=trajectory, ground=ground, plan=plan)
 
     def _lateral_end(self, plan: PlannerOutput, trajectory: SwingTrajectory | None = None) -> float:
-        """When the swing's lateral motion ends: at the robot's ``swing_lateral_end`` on a step that
-        began bounded by the step adapter (a push's recovery steps: a fast sideways swing that lags its
-        reference lands sliding and spinning on its sole), at touchdown otherwise, including the step a
-        push interrupts (an outward slide there still helped: G1 pushed right at 20 N·s fell without
-        it). A step keeps the setting it began with (``trajectory``: the step's latched swing)."""
-        bounded = plan.step_bounded if trajectory is None else trajectory.lateral_end < 1.0
+        """When the swing's lateral motion ends: at the robot's ``swing_lateral_end`` once the step
+        adapter has bounded the step, from the tick it does (a push's recovery steps and the step a
+        push interrupts: a fast sideways swing that lags its reference lands still moving sideways,
+        and slides and spins on its sole), at touchdown otherwise. Once set it stays for the rest of
+        the step (``trajectory``: the step's latched swing)."""
+        bounded = plan.step_bounded or (trajectory is not None and trajectory.lateral_end < 1.0)
         return self.swing_lateral_end if bounded else 1.0
 
     @staticmethod
