@@ -281,8 +281,8 @@ def _paired_claim(motion: str, ramps: list[dict]) -> Claim | None:
                  ", ".join(f"network − {m} {mean:+.3f} ± {half:.3f} {unit}"
                            for m, (mean, half) in gaps.items()),
                  "", all(mean - half > 0.0 for mean, half in gaps.values()),
-                 f"Ramp rates {', '.join(f'{r:g}' for r in rates)} ({unit})/s; each difference's mean over the rates "
-                 "with its 95 % interval (Student's t). Our rule: both intervals above zero.")
+                 f"Ramp rates {', '.join(f'{r:g}' for r in rates)} ({unit})/s; each difference's mean over "
+                 "the rates with its 95 % interval (Student's t). Our rule: both intervals above zero.")
 
 
 def _horizon_claim(probe: dict) -> Claim:
