@@ -163,10 +163,10 @@ def test_swing_reference_is_the_latched_swing_of_this_step_only():
     assert np.all(np.isnan(system.swing_reference_port.Eval(context)))
 
 
-def test_only_a_step_that_begins_bounded_ends_its_sideways_swing_early():
-    """G1's ``swing_lateral_end`` (0.85) applies to a step whose plan is bounded by the step adapter
-    when it begins (a push's recovery step) and stays with it; an unbounded step, and one that a push
-    bounds only mid-swing, keep the sideways motion to touchdown (README: push recovery)."""
+def test_a_step_ends_its_sideways_swing_early_from_the_tick_it_is_bounded():
+    """G1's ``swing_lateral_end`` (0.85) applies to a step from the tick the step adapter bounds it,
+    at its start (a push's recovery step) or mid-swing (the step a push interrupts), and stays with
+    it; an unbounded step keeps the sideways motion to touchdown (README: push recovery)."""
     from romoco_drake.embedding.references import EmbeddingCore
 
     robot = load_robot("g1")
@@ -182,5 +182,8 @@ def test_only_a_step_that_begins_bounded_ends_its_sideways_swing_early():
     recovery = core.start_step(kin, "left", 0.0, bounded)
     assert recovery.trajectory.lateral_end == 0.85
     assert core.update_swing(recovery, 0.1, plan).trajectory.lateral_end == 0.85
+    unpushed = core.update_swing(core.start_step(kin, "left", 0.0, plan), 0.1, plan)
+    assert unpushed.trajectory.lateral_end == 1.0
     pushed_mid_swing = core.update_swing(core.start_step(kin, "left", 0.0, plan), 0.1, bounded)
-    assert pushed_mid_swing.trajectory.lateral_end == 1.0
+    assert pushed_mid_swing.trajectory.lateral_end == 0.85
+    assert core.update_swing(pushed_mid_swing, 0.15, plan).trajectory.lateral_end == 0.85  # bound lifted

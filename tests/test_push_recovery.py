@@ -4,7 +4,6 @@ adaptation; reach bounds that contradict themselves are one-line config errors."
 
 import dataclasses
 import functools
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -13,7 +12,6 @@ import yaml
 from romoco_drake.bench.push import RECOVERY_TOL, _print_push, push_job, pushed, step_clock, walking_scenario
 from romoco_drake.embedding.bezier import plan_swing
 from romoco_drake.embedding.recovery import UPPER_BODY_STEPS, next_recovery, upper_body_helps
-from romoco_drake.embedding.references import EmbeddingCore
 from romoco_drake.errors import ConfigError
 from romoco_drake.modes import Mode
 from romoco_drake.planners.state_machine import GaitSchedule, GaitStateMachine
@@ -143,20 +141,6 @@ def test_swing_retimed_mid_step_is_continuous_and_lands_on_time():
     p, v, a = retimed.evaluate(0.2)
     np.testing.assert_allclose(p, [0.25, -0.3, 0.0], atol=1e-12)
     np.testing.assert_allclose(v, 0.0, atol=1e-9)
-
-
-def test_a_step_ends_its_sideways_swing_early_from_the_tick_it_is_bounded():
-    """``swing_lateral_end`` applies from the tick the step adapter bounds the step, the step a push
-    interrupts included, and stays for the rest of that step."""
-    core = SimpleNamespace(swing_lateral_end=0.85)
-    free, bounded = SimpleNamespace(step_bounded=False), SimpleNamespace(step_bounded=True)
-    plain = plan_swing(np.zeros(3), np.array([0.2, 0.1, 0.0]), 0.3, 0.1)
-    early = plan_swing(np.zeros(3), np.array([0.2, 0.1, 0.0]), 0.3, 0.1, lateral_end=0.85)
-    assert EmbeddingCore._lateral_end(core, free) == 1.0  # a step that begins unbounded
-    assert EmbeddingCore._lateral_end(core, bounded) == 0.85  # a step that begins bounded
-    assert EmbeddingCore._lateral_end(core, bounded, plain) == 0.85  # bounded mid-step: the push's step
-    assert EmbeddingCore._lateral_end(core, free, early) == 0.85  # the bound lifted: the step keeps it
-    assert EmbeddingCore._lateral_end(core, free, plain) == 1.0
 
 
 @pytest.mark.parametrize(("key", "value", "message"), [
