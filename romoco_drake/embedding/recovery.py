@@ -10,7 +10,8 @@ Why only two steps: held over the whole recovery, G1 pushed 20 N·s to the left 
 the weight (``romoco bench push`` cell left/0) fell into a sideways gait at 0.9 m/s, every step bounded
 at its shortest time, the latch never clearing, and fell 6 s after the push; over two steps it
 walks on at its command 2 s after the push, at 20 and at 30 N·s (three steps: the sideways gait again).
-On the invariant EKF that cell at 20 N·s still falls into the sideways gait (README, push recovery).
+On the invariant EKF that cell at 20 N·s still fell into the sideways gait until the step a push
+interrupts also ended its sideways swing early (``EmbeddingCore._lateral_end``); it now walks on.
 """
 
 from __future__ import annotations
