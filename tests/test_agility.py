@@ -1,4 +1,4 @@
-"""The agility bench's scoring (VI-MPC paper §IV-B): ramps, the 20 % rule, falls."""
+"""The agility bench's scoring (VI-MPC paper §IV-B): ramps, the 20 % rule, falls; constant-command holds."""
 
 import numpy as np
 
@@ -131,3 +131,49 @@ def test_paired_ordering_is_shown_only_beyond_the_noise_and_reversed_by_either_g
                                        "nominal": [1.10, 1.10, 1.12]}))
     assert reversed_["ordering_paired"] == "reversed"
     assert paired_ordering(_rows({"network": [1.0], "updated": [1.0], "nominal": [1.0]}, rates=(0.1,))) == {}
+
+
+def test_a_hold_ramps_to_its_speed_and_then_holds_it():
+    from romoco_drake.bench.agility_hold import HOLD_S, hold_scenario
+
+    scenario = hold_scenario("draco", "updated", "diagonal", 0.6, 0.1)
+    last = scenario.command[-1]
+    assert (last.vx, last.vy, last.wz) == (0.6, 0.6, 0.0)
+    assert last.t < START_S + 6.0 + 1e-9
+    assert scenario.duration_s == START_S + 6.0 + HOLD_S
+    assert scenario.planner.inertia == "updated"
+
+
+def test_maintained_speed_is_the_slowest_commanded_component_over_the_holds_end():
+    from romoco_drake.bench.agility_hold import WINDOW_S, maintained_speed
+
+    times = np.arange(0.0, 10.0, 0.01)
+    late = times > times[-1] - WINDOW_S
+    measured = np.zeros((len(times), 3))
+    measured[:, 0] = np.where(late, 1.0, 2.0)  # faster before the window: not counted
+    measured[:, 1] = np.where(late, 0.8 + 0.1 * np.sin(20.0 * times), 0.0)
+    measured[:, 2] = 0.7
+    assert abs(maintained_speed(times, measured, MOTIONS["diagonal"], times[-1]) - 0.8) < 0.01
+    assert abs(maintained_speed(times, measured, MOTIONS["forward"], times[-1]) - 1.0) < 1e-9
+    assert abs(maintained_speed(times, measured, MOTIONS["circle"], times[-1]) - 0.7) < 1e-9
+    assert abs(maintained_speed(times, measured, MOTIONS["turning"], times[-1]) - 0.7) < 1e-9
+
+
+def test_the_best_hold_is_the_fastest_maintained_by_a_hold_that_stood():
+    from romoco_drake.bench.agility_hold import best_holds
+
+    def row(inertia, command, maintained):
+        return {"motion": "forward", "inertia": inertia, "command": command, "stood": maintained is not None,
+                "maintained": maintained}
+
+    rows = [row("network", 1.0, 0.97), row("network", 1.2, 1.04), row("network", 1.3, None),
+            row("updated", 1.0, 0.99), row("updated", 1.2, None),
+            row("nominal", 1.0, None)]
+    best = {r["inertia"]: r for r in best_holds(rows)}
+    assert (best["network"]["maintained_best"], best["network"]["at_command"]) == (1.04, 1.2)
+    assert (best["updated"]["maintained_best"], best["updated"]["at_command"]) == (0.99, 1.0)
+    assert (best["nominal"]["maintained_best"], best["nominal"]["at_command"]) == (0.0, None)
+    assert all(r["ordering_holds"] is True for r in best.values())
+    rows[1] = row("network", 1.2, 0.98)
+    assert all(r["ordering_holds"] is False for r in best_holds(rows))  # 0.98 < 0.99
+    assert all(r["ordering_holds"] is None for r in best_holds(rows[:3]))

@@ -30,6 +30,9 @@ cancels): the mean of network − updated and of updated − nominal with its 95
 t over the rates). The ordering is ``shown`` when both differences are above zero beyond their
 intervals, ``reversed`` when either is below zero beyond its interval, and ``unresolved`` otherwise.
 
+``--hold`` runs the paper's test as a constant-command hold instead, scoring the robot's own speed
+with no tolerance (:mod:`~romoco_drake.bench.agility_hold`).
+
 A motion's command is ``speed`` times its direction (vx, vy, wz): the diagonal walks
 vx = vy = speed, the circle v = speed with ω = speed (the paper's 0.9 m/s with 0.9 rad/s).
 Every commanded component must be within 20 % of its command.
@@ -172,6 +175,14 @@ def bench_agility(robot: str = "draco", modes=INERTIA_MODES, motions=tuple(MOTIO
     """One ramp per ramp rate × inertia mode × motion (module docstring); ``top`` defaults to 1.5×
     the paper's best; ``overlays`` are merged onto the robot's walking scenario (the rows name them).
     A robot whose walk is not planned by the VI-MPC has no inertia modes to compare: one line says so."""
+    check_vimpc_robot(robot, overlays)
+    return run_sweep([v for rate in rates for v in agility_variants(robot, modes, motions, rate, top,
+                                                                   overlays=overlays)], sweep, progress)
+
+
+def check_vimpc_robot(robot: str, overlays: Sequence[str] = ()) -> None:
+    """A one-line error unless ``robot`` is known and its walking scenario plans with the VI-MPC (the
+    inertia modes the bench compares)."""
     if robot not in robot_names():
         raise RomocoError(f"unknown robot '{robot}' (known: {', '.join(robot_names())})")
     planner = load_scenario(f"{robot}_walk", overlays).planner.name
@@ -180,8 +191,6 @@ def bench_agility(robot: str = "draco", modes=INERTIA_MODES, motions=tuple(MOTIO
                     if n.endswith("_walk") and load_scenario(n).planner.name == "vimpc"]
         raise RomocoError(f"bench agility compares the VI-MPC's inertia modes, and {robot}_walk plans with "
                           f"'{planner}' (walks on the VI-MPC: {', '.join(with_mpc)})")
-    return run_sweep([v for rate in rates for v in agility_variants(robot, modes, motions, rate, top,
-                                                                   overlays=overlays)], sweep, progress)
 
 
 ORDERING_TEXT = {True: "yes", False: "no", None: "-"}  # None: not every inertia mode ran
@@ -261,6 +270,8 @@ def register(bench) -> None:
     p.add_argument("--rate", default="0.1", help="command ramp, (m/s or rad/s) per s; several, "
                    "comma-separated, add each motion and mode's mean over them")
     p.add_argument("--top", type=float, default=None, help="ramp ceiling (default: 1.5x the paper's best)")
+    p.add_argument("--hold", help="comma-separated command speeds: instead of one ramp, ramp to each at "
+                   "--rate and hold it (bench/agility_hold.py), scoring the robot's own speed")
     p.add_argument("--json", action="store_true", help="print one JSON list (last line)")
     add_overlay_arg(p)
     add_sweep_args(p)
@@ -273,6 +284,8 @@ def _cmd_bench_agility(args) -> int:
     rates = numbers(args.rate, "--rate")
     if not all(r > 0.0 for r in rates):
         raise RomocoError(f"--rate must be positive, got {args.rate}")
+    if args.hold:
+        return _hold_bench(args, modes, motions, rates)
     rows = bench_agility(args.robot, modes, motions, rates, args.top, sweep_options(args),
                          progress=stderr_progress, overlays=args.overlay or ())
     summary = rate_summary(rows) if len(set(rates)) > 1 else []
@@ -295,6 +308,33 @@ def _cmd_bench_agility(args) -> int:
                        lambda r: f"{r['motion']:10s} {_pm(r['network_minus_updated']):19s} "
                                  f"{_pm(r['updated_minus_nominal']):19s} {r['ordering_paired']}")
     return 0
+
+
+def _hold_bench(args, modes, motions, rates) -> int:
+    """``--hold``: the constant-command holds (:mod:`~romoco_drake.bench.agility_hold`) at the first rate."""
+    from romoco_drake.bench.agility_hold import BEST_HEADER, HOLD_HEADER, best_holds, hold_variants
+
+    speeds = numbers(args.hold, "--hold")
+    if len(rates) > 1 or not all(v > 0.0 for v in speeds):
+        raise RomocoError(f"--hold takes positive speeds and one --rate, got --hold {args.hold} "
+                          f"--rate {args.rate}")
+    check_vimpc_robot(args.robot, args.overlay or ())
+    rows = run_sweep(hold_variants(args.robot, modes, motions, speeds, rates[0], args.overlay or ()),
+                     sweep_options(args), stderr_progress)
+    best = best_holds(rows)
+    if args.json:
+        return print_rows(True, rows + best, "", str)
+    print_rows(False, rows, HOLD_HEADER,
+               lambda r: f"{r['motion']:10s} {r['inertia']:9s} {r['command']:<7g}   "
+                         f"{'yes' if r['stood'] else 'no':5s}   "
+                         f"{'-' if r['maintained'] is None else format(r['maintained'], '.3f'):10s}   "
+                         f"{PAPER[r['motion']][0]:.1f} / {PAPER[r['motion']][1]:.1f}{'':20s} "
+                         f"{'' if r['fall_time_s'] is None else r['fall_time_s']}")
+    print()
+    return print_rows(False, best, BEST_HEADER,
+                      lambda r: f"{r['motion']:10s} {r['inertia']:9s} {r['maintained_best']:33.3f}   "
+                                f"{'-' if r['at_command'] is None else format(r['at_command'], 'g'):10s}   "
+                                f"{ORDERING_TEXT[r['ordering_holds']]}")
 
 
 def _pm(pair: list[float]) -> str:
