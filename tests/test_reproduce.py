@@ -346,3 +346,21 @@ def test_reproduce_all_quick_on_two_workers(tmp_path, capsys, ray_alone):
     page = (tmp_path / "report.html").read_text()
     assert page.count("data:image/png;base64,") >= 6  # Fig. 7 (2), Fig. 8, XO (≥ 2), Fig. 3
     assert json.loads(capsys.readouterr().out.splitlines()[-1])["runs"] == len(runs)
+
+
+def test_vimpc_hold_rows_score_the_speed_maintained_with_no_tolerance():
+    def hold(inertia, command, maintained):
+        return {"part": "agility_hold", "motion": "turning", "inertia": inertia, "command": command,
+                "rate": 0.1, "stood": maintained is not None, "maintained": maintained}
+
+    rows = [_ramp("turning", m, 3.0) for m in ("network", "updated", "nominal")]
+    rows += [hold("network", 2.0, 1.98), hold("network", 2.3, 2.27), hold("updated", 2.0, 1.99),
+             hold("updated", 2.3, None), hold("nominal", 2.0, None), hold("nominal", 2.3, None)]
+    maintains, beats = vimpc_claims(rows)[3:5]
+    assert maintains.holds and maintains.ours == "2.27"  # the 2.3 hold maintained 2.27 ≥ 2.0
+    assert beats.holds and "updated 1.99, nominal 0.00" in beats.ours
+    assert "Stood: network 2, 2.3; updated 2; nominal none." in beats.note
+    rows[4] = hold("network", 2.3, None)  # only the 2.0 hold stood: 1.98 < 2.0, no allowance
+    maintains, beats = vimpc_claims(rows)[3:5]
+    assert not maintains.holds and not beats.holds  # 1.98 < updated's 1.99
+    assert len(vimpc_claims(rows[:3])) == 3  # no holds ran (--quick): no held rows

@@ -45,8 +45,9 @@ REFERENCES = {
     "vimpc": "S. H. Bang, J. Lee, C. Gonzalez and L. Sentis, \"Variable Inertia Model Predictive Control for "
              "Fast Bipedal Maneuvers\", preprint, 2024, arXiv:2407.16811.",
 }
-FULL = Settings(FIG7_ROBOTS, None, 10.0, 10.0, None, tuple(MOTIONS), 0.1, (0.08, 0.125), 2000, 12.0)
-QUICK = Settings(("cassie",), 6.0, 7.0, 6.0, 10.0, ("forward",), 0.5, (), 200, None)
+FULL = Settings(FIG7_ROBOTS, None, 10.0, 10.0, None, tuple(MOTIONS), 0.1, (0.08, 0.125), (1.0, 1.15), 2000,
+                12.0)
+QUICK = Settings(("cassie",), 6.0, 7.0, 6.0, 10.0, ("forward",), 0.5, (), (), 200, None)
 QUICK_SHORTENS = ("Fig. 7 on Cassie only, first 6 s of its profile, without the IK runs under our own "
                   "feedforward; Fig. 8 7 s instead of 10 s; Fig. 9 6 s instead of 10 s; the XO walk its "
                   "first 10 s (0.225, 0.45 m/s forward) of 44 s; agility the forward ramp only, at 0.5 "

@@ -27,6 +27,7 @@ class Settings:
     agility_motions: tuple[str, ...]
     agility_rate: float
     agility_pair_rates: tuple[float, ...]  # more ramp rates, to pair the modes over (none: no paired row)
+    agility_hold_factors: tuple[float, ...]  # holds at these multiples of the paper's numbers (none: no row)
     solve_ticks: int
     circle_duration: float | None  # None: no Fig. 6 run
 
