@@ -102,6 +102,7 @@ def test_run_text_summary():
         (["bench", "agility", "--hold", "0"], "--hold takes positive speeds and one --rate"),
         (["bench", "agility", "--hold", "1.0", "--rate", "0.1,0.2"], "--hold takes positive speeds and one"),
         (["bench", "agility", "--hold", "1.0", "--robot", "g1"], "g1_walk plans with 'hlip'"),
+        (["bench", "agility", "--hold", "1.0", "--top", "2"], "--top is the ramps' ceiling"),
         (["bench", "tick", "--ticks", "0"], "--ticks must be an integer in [1, "),
         (["bench", "embedding", "--ticks", "-1"], "--ticks must be an integer in [1, "),
         (["bench", "framework", "--ticks", "0"], "--ticks must be an integer in [1, "),

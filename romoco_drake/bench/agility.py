@@ -312,12 +312,19 @@ def _cmd_bench_agility(args) -> int:
 
 def _hold_bench(args, modes, motions, rates) -> int:
     """``--hold``: the constant-command holds (:mod:`~romoco_drake.bench.agility_hold`) at the first rate."""
-    from romoco_drake.bench.agility_hold import BEST_HEADER, HOLD_HEADER, best_holds, hold_variants
+    from romoco_drake.bench.agility_hold import (  # here: that module builds on this one
+        BEST_HEADER,
+        HOLD_HEADER,
+        best_holds,
+        hold_variants,
+    )
 
     speeds = numbers(args.hold, "--hold")
     if len(rates) > 1 or not all(v > 0.0 for v in speeds):
         raise RomocoError(f"--hold takes positive speeds and one --rate, got --hold {args.hold} "
                           f"--rate {args.rate}")
+    if args.top is not None:
+        raise RomocoError("--top is the ramps' ceiling; with --hold each ramp ends at its held speed")
     check_vimpc_robot(args.robot, args.overlay or ())
     rows = run_sweep(hold_variants(args.robot, modes, motions, speeds, rates[0], args.overlay or ()),
                      sweep_options(args), stderr_progress)
@@ -329,7 +336,7 @@ def _hold_bench(args, modes, motions, rates) -> int:
                          f"{'yes' if r['stood'] else 'no':5s}   "
                          f"{'-' if r['maintained'] is None else format(r['maintained'], '.3f'):10s}   "
                          f"{PAPER[r['motion']][0]:.1f} / {PAPER[r['motion']][1]:.1f}{'':20s} "
-                         f"{'' if r['fall_time_s'] is None else r['fall_time_s']}")
+                         f"{'' if r['fall_time_s'] is None else format(r['fall_time_s'], '.2f')}")
     print()
     return print_rows(False, best, BEST_HEADER,
                       lambda r: f"{r['motion']:10s} {r['inertia']:9s} {r['maintained_best']:33.3f}   "
