@@ -104,12 +104,19 @@ def tracked_speed(times: np.ndarray, measured: np.ndarray, wanted: np.ndarray, d
     return (float(speed[:end][good].max()) if good.any() else 0.0), reason
 
 
+def speed_along(velocity: np.ndarray, direction) -> np.ndarray:
+    """The speed of heading-frame (vx, vy, wz) ``velocity`` (..., 3) along a motion's ``direction``:
+    its slowest commanded component, scaled as the command (each component over its direction entry,
+    times the largest entry)."""
+    axes = [i for i, d in enumerate(direction) if d != 0.0]
+    scale = max(abs(d) for d in direction)
+    return np.min(velocity[..., axes] / np.array([direction[i] for i in axes]), axis=-1) * scale
+
+
 def reached_speed(times: np.ndarray, measured: np.ndarray, direction, until: float | None) -> float:
     """The largest 1 s average speed the robot walked along ``direction`` before ``until`` (module
     docstring); ``measured`` as in :func:`tracked_speed`."""
-    axes = [i for i, d in enumerate(direction) if d != 0.0]
-    scale = max(abs(d) for d in direction)
-    along = np.min(measured[:, axes] / np.array([direction[i] for i in axes]), axis=1) * scale
+    along = speed_along(measured, direction)
     end = len(times) if until is None else int(np.searchsorted(times, until))
     return float(along[:end].max()) if end else 0.0
 

@@ -20,7 +20,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from romoco_drake.bench.agility import MOTIONS, PAPER, START_S, ramp
+from romoco_drake.bench.agility import MOTIONS, PAPER, START_S, ramp, speed_along
 from romoco_drake.bench.sweep import Variant
 from romoco_drake.planners.heading import heading_velocity
 from romoco_drake.runner import log_samples, run_scenario
@@ -46,13 +46,11 @@ def hold_scenario(robot: str, inertia: str, motion: str, speed: float, rate: flo
 
 
 def maintained_speed(times: np.ndarray, measured: np.ndarray, direction, end: float) -> float:
-    """The mean speed along ``direction`` over the ``WINDOW_S`` before ``end``: per commanded
-    component its mean over the window divided by the direction's entry, the slowest of them,
-    scaled as the command. ``measured``: (N, 3) heading-frame (vx, vy, wz) at ``times``."""
-    axes = [i for i, d in enumerate(direction) if d != 0.0]
+    """The speed along ``direction`` (:func:`~romoco_drake.bench.agility.speed_along`) of the mean
+    velocity over the ``WINDOW_S`` before ``end``. ``measured``: (N, 3) heading-frame (vx, vy, wz)
+    at ``times``."""
     window = (times > end - WINDOW_S) & (times <= end)
-    means = measured[window][:, axes].mean(axis=0)
-    return float(np.min(means / np.array([direction[i] for i in axes])) * max(abs(d) for d in direction))
+    return float(speed_along(measured[window].mean(axis=0), direction))
 
 
 def hold_job(scenario: Scenario, motion: str) -> dict:
