@@ -376,7 +376,7 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
 def _add_velocity_trim(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, state, heading,
                        machine) -> VelocityTrim | None:
     """The planner's velocity trim between the heading hold and the planner, when its settings
-    turn it on (foot-placement planners only)."""
+    turn it on (the foot-placement laws and the VI-MPC have one)."""
     config = getattr(scenario.planner, "velocity_trim", None)
     if config is None or not config.enabled:
         return None

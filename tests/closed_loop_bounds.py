@@ -97,11 +97,11 @@ BOUNDS: dict[str, Bound] = {
     "headline.draco.mpc_solves": floor(1512, 1680),
     "headline.draco.segment0.rms": ceiling(0.056, 0.03755),
     "headline.draco.segment1.rms": ceiling(0.018, 0.01213),
-    "headline.draco.segment2.rms": ceiling(0.022, 0.01477),
-    "headline.draco.segment3.rms": ceiling(0.019, 0.01277),
-    "headline.draco.segment4.rms": ceiling(0.0096, 0.007934),
+    "headline.draco.segment2.rms": ceiling(0.022, 0.01476),
+    "headline.draco.segment3.rms": ceiling(0.019, 0.01282),
+    "headline.draco.segment4.rms": ceiling(0.0096, 0.008087),
     "headline.draco.steps": floor(21, 24),
-    "headline.draco.vx_rms": ceiling(0.012, 0.0097),
+    "headline.draco.vx_rms": ceiling(0.012, 0.0096),
     "headline.draco.vy_rms": ceiling(0.026, 0.0175),
     "headline.g1.segment0.rms": ceiling(0.11, 0.07974),
     "headline.g1.segment1.rms": ceiling(0.05, 0.03362),
@@ -200,12 +200,12 @@ BOUNDS: dict[str, Bound] = {
     "turning.cassie.vy_rms": ceiling(0.1, 0.07128),
     "turning.cassie.wz_rms": ceiling(0.036, 0.02443),
     "turning.draco.heading_lag": ceiling(0.1, 0.07183),
-    "turning.draco.rest_speed": ceiling(0.0014, 0.0009413),
-    "turning.draco.vx_rms": ceiling(0.019, 0.01411),
-    "turning.draco.vy_rms": ceiling(0.024, 0.016),
-    "turning.draco.wz_rms": ceiling(0.018, 0.01262),
-    "terrain.g1_slope.vx_rms": ceiling(0.055, 0.0368),
-    "terrain.g1_slope.invariant_ekf.vx_rms": ceiling(0.071, 0.0477),
+    "turning.draco.rest_speed": ceiling(0.0014, 0.001088),
+    "turning.draco.vx_rms": ceiling(0.014, 0.009553),
+    "turning.draco.vy_rms": ceiling(0.023, 0.01589),
+    "turning.draco.wz_rms": ceiling(0.018, 0.01237),
+    "terrain.g1_slope.vx_rms": ceiling(0.055, 0.0401),
+    "terrain.g1_slope.invariant_ekf.vx_rms": ceiling(0.071, 0.0642),
     "terrain.cassie_slope.vx_rms": ceiling(0.0125, 0.0086),
     # Cassie on its slope on the invariant EKF: whether one step lands within a centimetre of the
     # ramp-plateau seam, is moved 13 cm onto the plateau and leaves the CoM behind the stance foot
@@ -242,9 +242,13 @@ BOUNDS: dict[str, Bound] = {
     "via_lcm.g1.steps": floor(7, 8),
     "via_lcm.g1.vx_rms": ceiling(0.018, 0.0125),
     # 1 m/s under the joint limits (test_draco_walks_at_one_metre_a_second_...): the robot trails the
-    # 0.5 and 1.0 m/s steps of the staircase by 12 % and 11 %.
+    # 0.5 and 1.0 m/s steps of the staircase by 12 % and 9 % (11 % at 1.0 without the velocity trim,
+    # which learns within the 1.6 s steps).
     "vimpc.draco.fast.segment1.mean_error": ceiling(0.18, 0.12),
-    "vimpc.draco.fast.segment3.mean_error": ceiling(0.17, 0.1142),
+    "vimpc.draco.fast.segment3.mean_error": ceiling(0.13, 0.0908),
+    # DRACO held at 0.5 m/s for 8 s from rest (test_draco_under_the_vimpc_walks_its_command_...):
+    # 0.049 without the trim, above this bound.
+    "velocity_trim.draco.vx_rms": ceiling(0.04, 0.0275),
     "vimpc.draco.steps": floor(9, 11),
     "vimpc.draco.vx_rms": ceiling(0.0052, 0.0035),
     "vimpc.draco.vy_rms": ceiling(0.03, 0.0202),

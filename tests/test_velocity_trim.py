@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 import yaml
+from closed_loop_bounds import check
 
 from romoco_drake.errors import ConfigError
 from romoco_drake.modes import Mode
@@ -126,10 +127,11 @@ def test_a_ramping_command_and_standing_teach_nothing(bolt):
 
 @pytest.mark.parametrize(("planner", "words"), [
     ({"name": "alip", "velocity_trim": {"enabled": True, "gain": 2.0}}, ("velocity_trim.gain", "at most 1")),
-    ({"name": "vimpc", "velocity_trim": {"enabled": True}}, ("velocity_trim",)),
+    ({"name": "vimpc", "velocity_trim": {"enabled": True, "limit": 0.9}},
+     ("velocity_trim.limit", "[0, 0.5]")),
 ])
-def test_trim_settings_are_range_checked_and_only_for_foot_placement_planners(tmp_path, planner, words):
-    """A gain outside (0, 1] and a trim asked of the VI-MPC (which has none) fail at load, in one line."""
+def test_trim_settings_are_range_checked(tmp_path, planner, words):
+    """A gain outside (0, 1] or a limit past 0.5 fails at load, in one line, on either kind of planner."""
     robot = "bolt" if planner["name"] == "alip" else "draco"
     path = tmp_path / "trim.yaml"
     path.write_text(yaml.safe_dump({"robot": robot, "planner": planner}))
@@ -146,3 +148,14 @@ def test_the_shipped_trims_are_reported_in_the_run_summary():
     summary = run_scenario(scenario, duration=2.5)
     trim = summary["velocity_trim"]
     assert not summary["fell"] and trim["updates"] >= 1 and trim["vx"] != 0.0 and trim["vy"] == 0.0
+
+
+def test_draco_under_the_vimpc_walks_its_command_with_the_trim():
+    """DRACO's VI-MPC trails a steady 0.5 m/s by about a tenth (eq. 14's velocity feedback is
+    proportional only); the shipped trim learns it: 8 s from rest, vx rms 0.0275 with it, 0.049 without."""
+    scenario = with_overrides(load_scenario("draco_walk"), command="0:0,0,0;0.5:0.5,0,0")
+    assert scenario.planner.velocity_trim.enabled
+    summary = run_scenario(scenario, duration=8.0)
+    trim = summary["velocity_trim"]
+    assert not summary["fell"] and trim["updates"] >= 5 and trim["vx"] > 0.05 and trim["gated"] == 0
+    check("velocity_trim.draco.vx_rms", summary["velocity_rms_error"][0])

@@ -52,11 +52,11 @@ declare_ranges(StepAdaptationConfig, step_weight=Range(1e-6, 1e6),
 
 @dataclass
 class VelocityTrimConfig:
-    """A foot-placement planner's ``velocity_trim:`` section, integral action on the walking
-    speed (:mod:`~romoco_drake.planners.velocity_trim`). Off by default: each robot's scenarios
-    turn it on where it was measured to help. ``gain``: the share of a stride's relative
-    error corrected per stride; ``limit``: the largest trim, relative to the command; ``gate``: the
-    largest relative stride error learned from; ``min_speed``: m/s."""
+    """A walking planner's ``velocity_trim:`` section (the foot-placement laws and the VI-MPC),
+    integral action on the walking speed (:mod:`~romoco_drake.planners.velocity_trim`). Off by
+    default: each robot's scenarios turn it on where it was measured to help. ``gain``: the share
+    of a stride's relative error corrected per stride; ``limit``: the largest trim, relative to
+    the command; ``gate``: the largest relative stride error learned from; ``min_speed``: m/s."""
 
     enabled: bool = False
     gain: float = 0.5

@@ -4,7 +4,8 @@ A foot-placement law walks its ROM's orbit for the commanded velocity; the robot
 move the orbit it actually settles on, so it walks a steady few per cent off its command. H1 at
 0.6 m/s walks 0.50: its narrow sole has no ankle roll, and at that speed the right stance foot
 rolls onto its edge, the centre of pressure 1-4 cm ahead of and beside the sole centre the LIP
-pivots on. Bolt's point feet walk 0.235 on 0.2, XO 0.19 on a +0.225 m/s sideways command.
+pivots on. Bolt's point feet walk 0.235 on 0.2, XO 0.19 on a +0.225 m/s sideways command, and
+DRACO under the VI-MPC 0.82 on a held 1.0 m/s (eq. 14's velocity feedback is proportional only).
 Integral action on the commanded velocity removes such a steady error, as integral action on
 the DCM does for model error in Griffin, Leonessa & Asbeck, "Disturbance compensation and step
 optimization for push recovery", IROS 2016. Here it is a relative trim per axis,
