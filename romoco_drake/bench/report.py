@@ -97,6 +97,11 @@ NOTES = {
         "d/dt(I ω), no longer zero once I varies (inertia/ccinn.py notes it).",
         "Fig. 6: draco_walk's VI-MPC (network) on a circle commanded up to 0.9 m/s with 0.9 rad/s; the "
         "WBO is the fitted map of models/draco/wbo.*.",
+        "Beyond the paper's loop, in every inertia mode: the wbc keeps the knees and hip_fe off their stops "
+        "(controller.joint_limits), and the planner's command passes a velocity trim (planners/"
+        "velocity_trim.py: integral action on vx, vy, learned per stride at a steady command; eq. 14's "
+        "speed feedback is proportional only). The trim learns nothing from a ramp, so it moves the held "
+        "rows and Fig. 6, not the settled ones.",
     ],
 }
 
