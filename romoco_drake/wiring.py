@@ -376,9 +376,9 @@ def _add_walking_loop(builder: DiagramBuilder, scenario: Scenario, robot: RobotM
 def _add_velocity_trim(builder: DiagramBuilder, scenario: Scenario, robot: RobotModel, state, heading,
                        machine) -> VelocityTrim | None:
     """The planner's velocity trim between the heading hold and the planner, when its settings
-    turn it on (the foot-placement laws and the VI-MPC have one)."""
-    config = getattr(scenario.planner, "velocity_trim", None)
-    if config is None or not config.enabled:
+    turn it on."""
+    config = scenario.planner.velocity_trim
+    if not config.enabled:
         return None
     trim = builder.AddNamedSystem("velocity_trim", VelocityTrim(
         robot, config, 1.0 / scenario.controller.rate_hz, LINK_TICK_OFFSET))

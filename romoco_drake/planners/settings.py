@@ -15,6 +15,25 @@ from romoco_drake.config import Range, declare_ranges
 
 
 @dataclass
+class VelocityTrimConfig:
+    """A walking planner's ``velocity_trim:`` section (the foot-placement laws and the VI-MPC),
+    integral action on the walking speed (:mod:`~romoco_drake.planners.velocity_trim`). Off by
+    default: each robot's scenarios turn it on where it was measured to help. ``gain``: the share
+    of a stride's relative error corrected per stride; ``limit``: the largest trim, relative to
+    the command; ``gate``: the largest relative stride error learned from; ``min_speed``: m/s."""
+
+    enabled: bool = False
+    gain: float = 0.5
+    limit: float = 0.3
+    gate: float = 0.3
+    min_speed: float = 0.05
+
+
+declare_ranges(VelocityTrimConfig, gain=Range(0.0, 1.0, lo_open=True), limit=Range(0.0, 0.5),
+               gate=Range(0.0, 1.0, lo_open=True), min_speed=Range(0.0, 1.0, "m/s", lo_open=True))
+
+
+@dataclass
 class PlannerSettings:
     """``name``: the registry entry (``romoco list``). ``step_in_place``: the gait starts and keeps
     stepping under a zero command instead of standing (the RoMoCo paper's Fig. 9 steps G1 in
@@ -23,11 +42,14 @@ class PlannerSettings:
     that the first step starts on the lateral orbit (``EmbeddingCore.start_shift``); G1's first
     sideways CoM speed falls from 0.49 to 0.20 m/s (H1 0.54 → 0.36, Cassie 0.57 → 0.42). Off
     by default: on, every walk starts 0.1-0.15 s later and the slow suite's bounds moved in 17
-    tests (among them G1 fell on g1_stairs' climb and XO's arc widened), not yet re-measured."""
+    tests (among them G1 fell on g1_stairs' climb and XO's arc widened), not yet re-measured.
+    ``velocity_trim``: integral action on the planner's (vx, vy) command (:class:`VelocityTrimConfig`),
+    between the heading hold and the planner, whatever the planner."""
 
     name: str = "hlip"
     step_in_place: bool = False
     weight_shift: bool = False
+    velocity_trim: VelocityTrimConfig = dataclasses.field(default_factory=VelocityTrimConfig)
 
 
 @dataclass
@@ -51,41 +73,22 @@ declare_ranges(StepAdaptationConfig, step_weight=Range(1e-6, 1e6),
 
 
 @dataclass
-class VelocityTrimConfig:
-    """A walking planner's ``velocity_trim:`` section (the foot-placement laws and the VI-MPC),
-    integral action on the walking speed (:mod:`~romoco_drake.planners.velocity_trim`). Off by
-    default: each robot's scenarios turn it on where it was measured to help. ``gain``: the share
-    of a stride's relative error corrected per stride; ``limit``: the largest trim, relative to
-    the command; ``gate``: the largest relative stride error learned from; ``min_speed``: m/s."""
-
-    enabled: bool = False
-    gain: float = 0.5
-    limit: float = 0.3
-    gate: float = 0.3
-    min_speed: float = 0.05
-
-
-declare_ranges(VelocityTrimConfig, gain=Range(0.0, 1.0, lo_open=True), limit=Range(0.0, 0.5),
-               gate=Range(0.0, 1.0, lo_open=True), min_speed=Range(0.0, 1.0, "m/s", lo_open=True))
-
-
-@dataclass
 class FootPlacementConfig(PlannerSettings):
-    """A foot-placement law (alip, hlip, mlip, dcm, alip_general), its feedback gain, step
-    adaptation and velocity trim. ``t_ds``: double-support time (s) of the laws whose ROM has
-    one; None: the robot's ``walking.t_ds`` (the RoMoCo paper's planner comparison, Fig. 8, runs
-    every law at 0, ALIP's only gait). ``footstep_mpc``: on terrain, each step and its timing
-    from a footstep sequence over the supported surfaces and a step-to-step MPC over its regions
-    (planners/foothold_mpc.py) instead of the law and the step adapter; it needs the step
-    adapter's reach. Off by default: on, G1 fell on g1_stairs at 7.55 s (off: 20.63 s) and on
-    g1_slope tracked worse (vx rms 0.044, off 0.032); h1_stepping_stones turns it on."""
+    """A foot-placement law (alip, hlip, mlip, dcm, alip_general), its feedback gain and step
+    adaptation (the velocity trim is every planner's, :class:`PlannerSettings`). ``t_ds``:
+    double-support time (s) of the laws whose ROM has one; None: the robot's ``walking.t_ds`` (the
+    RoMoCo paper's planner comparison, Fig. 8, runs every law at 0, ALIP's only gait).
+    ``footstep_mpc``: on terrain, each step and its timing from a footstep sequence over the
+    supported surfaces and a step-to-step MPC over its regions (planners/foothold_mpc.py) instead
+    of the law and the step adapter; it needs the step adapter's reach. Off by default: on, G1
+    fell on g1_stairs at 7.55 s (off: 20.63 s) and on g1_slope tracked worse (vx rms 0.044, off
+    0.032); h1_stepping_stones turns it on."""
 
     gain: Literal["deadbeat", "converging", "lqr"] = "deadbeat"
     alpha: float = 0.5
     t_ds: float | None = None
     footstep_mpc: bool = False
     step_adaptation: StepAdaptationConfig = dataclasses.field(default_factory=StepAdaptationConfig)
-    velocity_trim: VelocityTrimConfig = dataclasses.field(default_factory=VelocityTrimConfig)
 
 
 # The converging gain's contraction factor per step (0: deadbeat; 1 would never converge).

@@ -54,7 +54,7 @@ from romoco_drake.inertia.ccinn import load_ccinn, predict_inertia_horizon, rpy_
 from romoco_drake.inertia.wbo import load_wbo
 from romoco_drake.modes import Mode, MpcStats
 from romoco_drake.planners.mpc_worker import MpcWorker
-from romoco_drake.planners.settings import PlannerSettings, VelocityTrimConfig
+from romoco_drake.planners.settings import PlannerSettings
 from romoco_drake.robots.centroidal import centroidal_inertia
 from romoco_drake.robots.kinematics import RobotKinematics, kinematics_model_value
 from romoco_drake.robots.model import RobotModel
@@ -89,10 +89,9 @@ class VimpcConfig(PlannerSettings):
     waiting for it; ``process`` solves in a worker process beside the controller
     (:mod:`~romoco_drake.planners.mpc_worker`), the controller going on with the newest
     finished solution, as on the robot (its age is in the run summary; not deterministic).
-    ``velocity_trim``: integral action on the walking speed (:mod:`~romoco_drake.planners.velocity_trim`)
-    between the heading hold and this planner, as for the foot-placement laws; eq. 14's k1 term is
-    proportional only, and DRACO trails a steady command by 10-20 %. Off by default; the draco_*
-    scenarios turn it on.
+    ``velocity_trim`` (every planner's, :class:`~romoco_drake.planners.settings.PlannerSettings`):
+    eq. 14's k1 term is proportional only, and DRACO trails a steady command by 8-20 % without
+    it; the draco_* scenarios turn it on.
     """
 
     name: str = "vimpc"
@@ -123,7 +122,6 @@ class VimpcConfig(PlannerSettings):
     f_max: float = 800.0
     max_age: float = 0.02
     execution: Literal["inline", "process"] = "inline"
-    velocity_trim: VelocityTrimConfig = field(default_factory=VelocityTrimConfig)
 
 
 # The MPC replans at up to 1 kHz over up to 30 knots of 1-200 ms (defaults: 10 knots of 50 ms at
