@@ -358,9 +358,12 @@ def test_vimpc_hold_rows_score_the_speed_maintained_with_no_tolerance():
              hold("updated", 2.3, None), hold("nominal", 2.0, None), hold("nominal", 2.3, None)]
     maintains, beats = vimpc_claims(rows)[3:5]
     assert maintains.holds and maintains.ours == "2.27"  # the 2.3 hold maintained 2.27 ≥ 2.0
-    assert beats.holds and "updated 1.99, nominal 0.00" in beats.ours
+    assert beats.holds and "updated 1.99, nominal fell at every hold" in beats.ours
     assert "Stood: network 2, 2.3; updated 2; nominal none." in beats.note
     rows[4] = hold("network", 2.3, None)  # only the 2.0 hold stood: 1.98 < 2.0, no allowance
     maintains, beats = vimpc_claims(rows)[3:5]
     assert not maintains.holds and not beats.holds  # 1.98 < updated's 1.99
+    rows[3] = hold("network", 2.0, None)  # every network hold fell: said so, not scored as 0.00
+    maintains, beats = vimpc_claims(rows)[3:5]
+    assert not maintains.holds and maintains.ours == "fell at every hold" and maintains.ratio == ""
     assert len(vimpc_claims(rows[:3])) == 3  # no holds ran (--quick): no held rows

@@ -315,15 +315,17 @@ def _hold_claims(motion: str, holds: list[dict]) -> list[Claim]:
     held = ", ".join(f"{c:g}" for c in commands)
     stood = {m: [f"{r['command']:g}" for r in mine if r["inertia"] == m and r["stood"]] for m in best}
     speed = {m: best[m]["maintained_best"] for m in best}
-    listed = ", ".join(f"{m} {speed[m]:.2f}" for m in ("network", "updated", "nominal"))
+    shown = {m: f"{speed[m]:.2f}" if stood[m] else "fell at every hold" for m in best}
+    listed = ", ".join(f"{m} {shown[m]}" for m in ("network", "updated", "nominal"))
     stood_text = "; ".join(f"{m} {', '.join(stood[m]) or 'none'}" for m in ("network", "updated", "nominal"))
     note = (f"Holds of {held} {unit} after a {mine[0]['rate']:g} ({unit})/s ramp, {HOLD_S:g} s each; the "
             f"speed is the robot's mean over the hold's last {WINDOW_S:g} s; a hold that fell scores "
             f"nothing. Stood: {stood_text}.")
     src = f"agility table, {motion}"
     return [Claim("vimpc", src, f"CCINN maintains {paper_net} {unit} without losing balance (held, the "
-                  "robot's own speed)", f"{paper_net}", f"{speed['network']:.2f}",
-                  f"{speed['network'] / paper_net:.2f}×", speed["network"] >= paper_net, note),
+                  "robot's own speed)", f"{paper_net}", shown["network"],
+                  f"{speed['network'] / paper_net:.2f}×" if stood["network"] else "",
+                  speed["network"] >= paper_net, note),
             Claim("vimpc", src, "CCINN beats both baselines (held, the same commands)",
                   f"{paper_net} vs {paper_base}", listed,
                   f"{speed['network'] - max(speed['updated'], speed['nominal']):+.2f} {unit}",
