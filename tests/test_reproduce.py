@@ -366,4 +366,5 @@ def test_vimpc_hold_rows_score_the_speed_maintained_with_no_tolerance():
     rows[3] = hold("network", 2.0, None)  # every network hold fell: said so, not scored as 0.00
     maintains, beats = vimpc_claims(rows)[3:5]
     assert not maintains.holds and maintains.ours == "fell at every hold" and maintains.ratio == ""
+    assert not beats.holds and beats.ratio == "" and beats.ours.startswith("network fell at every hold")
     assert len(vimpc_claims(rows[:3])) == 3  # no holds ran (--quick): no held rows

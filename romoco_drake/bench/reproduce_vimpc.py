@@ -328,7 +328,8 @@ def _hold_claims(motion: str, holds: list[dict]) -> list[Claim]:
                   speed["network"] >= paper_net, note),
             Claim("vimpc", src, "CCINN beats both baselines (held, the same commands)",
                   f"{paper_net} vs {paper_base}", listed,
-                  f"{speed['network'] - max(speed['updated'], speed['nominal']):+.2f} {unit}",
+                  f"{speed['network'] - max(speed['updated'], speed['nominal']):+.2f} {unit}"
+                  if stood["network"] else "",
                   speed["network"] > max(speed["updated"], speed["nominal"]), note)]
 
 
