@@ -165,15 +165,15 @@ BOUNDS: dict[str, Bound] = {
     "iekf.h1.segment2.rms": ceiling(0.04, 0.02716),
     "iekf.h1.steps": floor(18, 21),
     "iekf.h1.velocity_estimate_rms": ceiling(0.015, 0.0107),
-    "iekf_wrong_start.g1.position_drift_per_m": ceiling(0.025, 0.01776),
+    "iekf_wrong_start.g1.position_drift_per_m": ceiling(0.025, 0.01778),
     "iekf_wrong_start.g1.segment0.rms": ceiling(0.12, 0.08822),
-    "iekf_wrong_start.g1.segment1.rms": ceiling(0.13, 0.09296),
-    "iekf_wrong_start.g1.segment2.rms": ceiling(0.16, 0.1091),
-    "iekf_wrong_start.g1.segment3.rms": ceiling(0.076, 0.05284),
+    "iekf_wrong_start.g1.segment1.rms": ceiling(0.13, 0.09305),
+    "iekf_wrong_start.g1.segment2.rms": ceiling(0.16, 0.1093),
+    "iekf_wrong_start.g1.segment3.rms": ceiling(0.076, 0.05326),
     "iekf_wrong_start.g1.tilt_converged_s": ceiling(0.15, 0.1),
-    "iekf_wrong_start.g1.tilt_error_rad": ceiling(0.04, 0.02678),
+    "iekf_wrong_start.g1.tilt_error_rad": ceiling(0.039, 0.02643),
     "iekf_wrong_start.g1.velocity_error": ceiling(0.0075, 0.005058),
-    "iekf_wrong_start.g1.yaw_drift_rad": ceiling(0.06, 0.04762),  # 0.04032 before it
+    "iekf_wrong_start.g1.yaw_drift_rad": ceiling(0.06, 0.04765),  # 0.04032 before it
     "kalman.g1.steps": floor(7, 8),
     "kalman.g1.velocity_estimate_rms": ceiling(0.016, 0.0116),
     "kalman.g1.vx_rms": ceiling(0.025, 0.01704),
@@ -205,7 +205,7 @@ BOUNDS: dict[str, Bound] = {
     "turning.draco.vy_rms": ceiling(0.023, 0.01589),
     "turning.draco.wz_rms": ceiling(0.018, 0.01237),
     "terrain.g1_slope.vx_rms": ceiling(0.055, 0.0401),
-    "terrain.g1_slope.invariant_ekf.vx_rms": ceiling(0.071, 0.0642),
+    "terrain.g1_slope.invariant_ekf.vx_rms": ceiling(0.067, 0.045),
     "terrain.cassie_slope.vx_rms": ceiling(0.0125, 0.0086),
     # Cassie on its slope on the invariant EKF: whether one step lands within a centimetre of the
     # ramp-plateau seam, is moved 13 cm onto the plateau and leaves the CoM behind the stance foot

@@ -164,9 +164,10 @@ def test_swing_reference_is_the_latched_swing_of_this_step_only():
 
 
 def test_a_step_ends_its_sideways_swing_early_from_the_tick_it_is_bounded():
-    """G1's ``swing_lateral_end`` (0.85) applies to a step from the tick the step adapter bounds it,
-    at its start (a push's recovery step) or mid-swing (the step a push interrupts), and stays with
-    it; an unbounded step keeps the sideways motion to touchdown (README: push recovery)."""
+    """G1's ``swing_lateral_end`` (0.85) applies to a step from the tick the step adapter bounds it
+    sideways, at its start (a push's recovery step) or mid-swing (the step a push interrupts), and
+    stays with it; an unbounded step, or one bounded fore-aft only (G1 up a slope at its forward
+    reach), keeps the sideways motion to touchdown (README: push recovery)."""
     from romoco_drake.embedding.references import EmbeddingCore
 
     robot = load_robot("g1")
@@ -176,7 +177,7 @@ def test_a_step_ends_its_sideways_swing_early_from_the_tick_it_is_bounded():
     cmd = WalkCommand(vx=0.3, step_width=walk.step_width, com_height=walk.z0, step_time=walk.t_ss)
     plan = make_planner("hlip", PlannerParams(mass=robot.total_mass)).plan(
         [0.0, -0.05, walk.z0, 0.0, 0.0, 0.0], "left", 0.0, cmd)
-    bounded = dataclasses.replace(plan, step_bounded=True)
+    bounded = dataclasses.replace(plan, step_bounded=True, step_bounded_sideways=True)
     assert walk.swing_lateral_end == 0.85
     assert core.start_step(kin, "left", 0.0, plan).trajectory.lateral_end == 1.0
     recovery = core.start_step(kin, "left", 0.0, bounded)
@@ -187,3 +188,6 @@ def test_a_step_ends_its_sideways_swing_early_from_the_tick_it_is_bounded():
     pushed_mid_swing = core.update_swing(core.start_step(kin, "left", 0.0, plan), 0.1, bounded)
     assert pushed_mid_swing.trajectory.lateral_end == 0.85
     assert core.update_swing(pushed_mid_swing, 0.15, plan).trajectory.lateral_end == 0.85  # bound lifted
+    fore_aft = dataclasses.replace(plan, step_bounded=True)
+    assert core.start_step(kin, "left", 0.0, fore_aft).trajectory.lateral_end == 1.0
+    assert core.update_swing(unpushed, 0.15, fore_aft).trajectory.lateral_end == 1.0

@@ -78,6 +78,17 @@ def test_outward_push_lands_earlier_at_the_bound(law_name):
     assert adapted.swing_target[1] == pytest.approx(-BOUNDS.lateral_max)
     assert adapted.t_ss < plan.t_ss - 0.03
     assert adapted.step_bounded and not adapted.step_across  # bounded, but toward the push
+    assert adapted.step_bounded_sideways  # the swing's sideways path may end early (embedding)
+
+
+@pytest.mark.parametrize("law_name", foot_placement_laws())
+def test_a_step_bounded_fore_aft_only_is_not_bounded_sideways(law_name):
+    """Left stance, running forward (G1 up a slope, its steps at their forward reach): the step is
+    bounded, its lateral part is the law's own, so the swing keeps its sideways path to touchdown."""
+    plan, adapted = _plan_and_adapt(law_name, rom_state((0.0, -0.06), (1.3, -0.15)), "left", 0.05)
+    assert plan.swing_target[0] > BOUNDS.forward  # the law asks beyond the forward reach
+    assert BOUNDS.box("left")[1][0] <= plan.swing_target[1] <= BOUNDS.box("left")[1][1]
+    assert adapted.step_bounded and not adapted.step_bounded_sideways
 
 
 def test_inward_push_never_crosses_and_steps_early():

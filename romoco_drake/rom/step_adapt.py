@@ -179,11 +179,12 @@ class StepAdapter:
         # A push: the law's step is out of reach or leaves an offset the next steps cannot catch.
         pushed = not (offset_n == implied and b.t_ss_min <= plan.t_ss <= b.t_ss_max and reach_ok)
         across = u_n[1] > -b.lateral_min if plan.stance_side == "left" else u_n[1] < b.lateral_min
+        flags = dict(timing_adapted=True, step_bounded=pushed, step_across=across, step_bounded_sideways=(
+            pushed and not (offset_n[1] == implied[1] and reach[1][0] <= u_n[1] <= reach[1][1])))
         unsupported = not all(lo <= u <= hi for u, (lo, hi) in zip(u_n, box, strict=True))
         if t_in_step >= t_commit:
-            # Committed: the state machine and the swing no longer follow the plan's time or target;
-            # the push (the hip strategy's cue) lasts to the touchdown.
-            return replace(plan, timing_adapted=True, step_bounded=pushed, step_across=across)
+            # Committed: the plan's time and target no longer move the swing; its push flags last.
+            return replace(plan, **flags)
         if not pushed and not unsupported and (window is None or window.contains(u_n, plan.t_ss)):
             # The law's own step is reachable and viable: the QP's minimum (zero), at any phase.
             return replace(plan, timing_adapted=True)
@@ -196,9 +197,8 @@ class StepAdapter:
         shifts = None if cop is None else CopShift(*cop, self.weights.cop, decay)
         sigma, u, shift = solve_step_qp(u_n, sigma_n, dcm0, box, sigmas, self.weights, nxt, window, shifts)
         t_ss = math.log(sigma) / lam
-        target = np.array([u[0], u[1], float(plan.swing_target[2])])
-        return replace(plan, swing_target=target, t_ss=t_ss, time_to_touchdown=max(t_ss - t_in_step, 0.0),
-                       timing_adapted=True, step_bounded=pushed, step_across=across, cop_shift=shift)
+        return replace(plan, swing_target=np.array([u[0], u[1], float(plan.swing_target[2])]), t_ss=t_ss,
+                       time_to_touchdown=max(t_ss - t_in_step, 0.0), cop_shift=shift, **flags)
 
     def _window(self, swing_foot: Sequence[float] | None, t_in_step: float, lam: float) -> SwingWindow | None:
         """Where the swing can still land (None: no swing state, or no speed limit)."""

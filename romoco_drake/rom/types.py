@@ -120,6 +120,9 @@ class PlannerOutput(SharedValue):
     # offset the next steps cannot catch (not merely a swing foot lagging its path), which is when
     # the controller's hip strategy may help (``angular_momentum.when: recovering``).
     step_bounded: bool = False
+    # ... and it is bounded sideways: the law's lateral step is out of reach or its lateral offset
+    # not viable (a fore-aft bound alone, as up a slope, leaves the swing's sideways path alone).
+    step_bounded_sideways: bool = False
     # The law's step lay across the stance foot, beyond the adapter's no-crossing band: this step
     # cannot go toward the push (the embedding's upper-body recovery, TaskReferences.upper_body).
     step_across: bool = False
