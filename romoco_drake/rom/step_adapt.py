@@ -172,15 +172,15 @@ class StepAdapter:
         implied = tuple(d * sigma_n - u for d, u in zip(dcm0, u_n, strict=True))
         offset_n = self.viable_offset(implied, plan.stance_side, sigma_n)
         reach = b.box(plan.stance_side)
-        reach_ok = all(lo <= u <= hi for u, (lo, hi) in zip(u_n, reach, strict=True))
+        in_reach = [lo <= u <= hi for u, (lo, hi) in zip(u_n, reach, strict=True)]
         box = _within(reach, region)
         t_commit = SWING_COMMIT_FRACTION * (plan.t_ss if step_t_ss is None or not math.isfinite(step_t_ss)
                                             else step_t_ss)
         # A push: the law's step is out of reach or leaves an offset the next steps cannot catch.
-        pushed = not (offset_n == implied and b.t_ss_min <= plan.t_ss <= b.t_ss_max and reach_ok)
+        pushed = not (offset_n == implied and b.t_ss_min <= plan.t_ss <= b.t_ss_max and all(in_reach))
         across = u_n[1] > -b.lateral_min if plan.stance_side == "left" else u_n[1] < b.lateral_min
-        flags = dict(timing_adapted=True, step_bounded=pushed, step_across=across, step_bounded_sideways=(
-            pushed and not (offset_n[1] == implied[1] and reach[1][0] <= u_n[1] <= reach[1][1])))
+        flags = dict(timing_adapted=True, step_bounded=pushed, step_across=across,
+                     step_bounded_sideways=pushed and not (offset_n[1] == implied[1] and in_reach[1]))
         unsupported = not all(lo <= u <= hi for u, (lo, hi) in zip(u_n, box, strict=True))
         if t_in_step >= t_commit:
             # Committed: the plan's time and target no longer move the swing; its push flags last.
